@@ -1,0 +1,117 @@
+// vox::FixedPoint<Word, Frac>: the fixed-point numbers of the paper's DDA.
+//
+// A value x is stored as the integer round(x * 2^Frac) in a signed Word
+// (int32_t, int64_t or __int128). Only what the DDA needs is defined: exact
+// conversion from integers, rounding conversion from floating point, floor,
+// and an exactly rounded quotient of two doubles (the inverse slopes).
+// Stateless; thread-safe.
+#ifndef VOX_CORE_FIXED_POINT_H_
+#define VOX_CORE_FIXED_POINT_H_
+
+#include <cmath>
+#include <cstdint>
+#include <type_traits>
+
+namespace vox {
+
+template <typename WordT, int kFracBits>
+struct FixedPoint {
+  using Word = WordT;
+  static constexpr int kBits = int(sizeof(Word) * 8);
+  static constexpr int kFrac = kFracBits;
+  static_assert(kFrac >= 0 && kFrac < kBits - 2, "fractional bits must leave room for an integer part");
+
+  // Largest magnitude of integer part the word holds: 2^(kBits - 1 - kFrac).
+  static constexpr int kIntBits = kBits - 1 - kFrac;
+
+  static constexpr Word FromInt(int64_t i) { return Word(i) * (Word(1) << kFrac); }
+  static constexpr int64_t Floor(Word w) { return int64_t(w >> kFrac); }
+
+  // round(x * 2^Frac). REQUIRES: |x| < 2^(kIntBits - 1), finite.
+  template <typename Real>
+  static Word FromReal(Real x) {
+    Real ip = std::floor(x);
+    Real frac = x - ip;  // exact, in [0, 1)
+    // Split the fraction into 60-bit chunks so a 128-bit word gets all the
+    // precision that `Real` has.
+    Word w = Word(int64_t(ip)) * (Word(1) << kFrac);
+    int done = 0;
+    while (done < kFrac && frac != Real(0)) {
+      int chunk = kFrac - done < 60 ? kFrac - done : 60;
+      frac = std::ldexp(frac, chunk);
+      Real part = (done + chunk == kFrac) ? std::nearbyint(frac) : std::floor(frac);
+      frac -= part;
+      done += chunk;
+      w += Word(int64_t(part)) * (Word(1) << (kFrac - done));
+    }
+    return w;
+  }
+
+  template <typename Real>
+  static Real ToReal(Word w) {
+    // Two halves, so a 128-bit word converts without losing its high bits.
+    int64_t ip = Floor(w);
+    Word frac = w - FromInt(ip);
+    Real f = 0;
+    if constexpr (kFrac > 62) {
+      f = std::ldexp(Real(int64_t(frac >> (kFrac - 62))), -62);
+    } else {
+      f = std::ldexp(Real(int64_t(frac)), -kFrac);
+    }
+    return Real(ip) + f;
+  }
+
+  // round(|num / den| * 2^Frac), exactly, or `sat` if that is >= sat or den
+  // is zero. Used for the inverse slopes q = |D_d / D_j|, so their only error
+  // is the final rounding, whatever floating-point type the rest uses.
+  static Word Ratio(double num, double den, Word sat) {
+    num = std::fabs(num);
+    den = std::fabs(den);
+    if (den == 0.0 || !(num / den < std::ldexp(1.0, kIntBits - 2))) {
+      if (den == 0.0) return sat;
+      // num/den may overflow to inf for subnormal den: saturate.
+      if (!(num / den < std::ldexp(1.0, kIntBits - 2))) return sat;
+    }
+    if (num == 0.0) return 0;
+    int en = 0, ed = 0;
+    // num = mn * 2^(en - 53), den = md * 2^(ed - 53), mn, md 53-bit integers.
+    uint64_t mn = uint64_t(std::ldexp(std::frexp(num, &en), 53));
+    uint64_t md = uint64_t(std::ldexp(std::frexp(den, &ed), 53));
+    // Quotient = (mn / md) * 2^(en - ed); we want it * 2^Frac, plus one more
+    // bit for rounding: long division, one quotient bit per step.
+    int shift = kFrac + 1 + (en - ed);  // total power of two applied to mn / md
+    if (shift < -64) return 0;
+    unsigned __int128 q = 0;
+    unsigned __int128 rem = mn;
+    // Integer part of mn / md (mn, md in [2^52, 2^53)): 0 or 1.
+    unsigned __int128 ipart = rem / md;
+    rem -= ipart * md;
+    q = ipart;
+    if (shift >= 0) {
+      for (int i = 0; i < shift; ++i) {
+        rem <<= 1;
+        q <<= 1;
+        if (rem >= md) {
+          rem -= md;
+          q |= 1;
+        }
+      }
+    } else {
+      q >>= -shift;
+    }
+    q = (q + 1) >> 1;  // round half up on the extra bit
+    Word w = Word(q);
+    return w >= sat ? sat : w;
+  }
+};
+
+// The word sizes of the accuracy study. Frac is chosen so that a step of up
+// to 20 levels fits (oriented coordinates and saturated slopes stay below
+// 2^23 in magnitude; see tracer.h).
+using Fixed32 = FixedPoint<int32_t, 7>;
+using Fixed64 = FixedPoint<int64_t, 39>;
+using Fixed128 = FixedPoint<__int128, 103>;
+
+}  // namespace vox
+
+#endif  // VOX_CORE_FIXED_POINT_H_
