@@ -1,0 +1,124 @@
+// vox::Store and vox::StoreWriter: the disk-backed octree that vox-ingest
+// writes and every reader opens. The resident top (levels above the brick
+// level) is loaded at open; each brick (the subtree under one occupied octant
+// of the brick level, with its voxels' attributes) is a zstd frame in a
+// memory-mapped file, decompressed on demand into a byte-budgeted cache.
+// The format is specified in storage/FORMAT.md.
+//
+// Coordinates: grid coordinates g in [0, 2^levels)^3 are what the octree and
+// the tracer see. OpenVDB index coordinates are ijk = g + origin. World
+// placement is OpenVDB's: voxel ijk covers index_to_world([ijk - 0.5,
+// ijk + 0.5)^3). The probe's index space is VDB's shifted by one half (voxel
+// ijk is [ijk, ijk + 1)^3), so a probe point P is the grid point P - origin.
+//
+// Thread safety: a Store is thread-safe (FetchBrick, Attributes, stats).
+// A StoreWriter is used by one thread at a time.
+#ifndef VOX_STORAGE_STORE_H_
+#define VOX_STORAGE_STORE_H_
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+
+#include "core/octree.h"
+#include "core/status.h"
+
+namespace vox {
+
+enum class GridClass : uint8_t { kLevelSet = 1, kFogVolume = 2 };
+
+struct StoreMeta {
+  std::string source_file;   // as given to vox-ingest
+  std::string grid_name;
+  GridClass grid_class = GridClass::kLevelSet;
+  int levels = 0;            // N: the octree covers [0, 2^N)^3 grid voxels
+  int brick_level = 0;       // levels above it are resident; a brick holds levels - brick_level
+  glm::i64vec3 origin{0};    // VDB index coordinate of grid voxel (0,0,0)
+  glm::i64vec3 bbox_min{0};  // VDB index bounds of the occupied voxels, inclusive
+  glm::i64vec3 bbox_max{-1};
+  glm::dmat4 index_to_world{1.0};  // OpenVDB's linear affine map (GLM column-major: world = M * (ijk, 1))
+  double voxel_size = 1.0;         // uniform voxel size (max axis of the map's scale)
+  uint64_t voxel_count = 0;        // occupied voxels
+  uint64_t brick_count = 0;
+  uint64_t top_cells = 0;
+  bool has_normal = false;   // level sets: a quantised normal per voxel
+  bool has_density = false;  // fog volumes: the density per voxel
+  bool has_color = false;    // an RGB colour per voxel (from a vec3 grid)
+  double isovalue = 0.0;     // level sets: occupied when active and value <= isovalue
+  double threshold = 0.0;    // fog volumes: occupied when active and density > threshold
+  std::string build_options; // the ingest command's options, for the record
+};
+
+// What a brick keeps per occupied voxel. Fields the store does not have are
+// zero (normal), 1 (density) or 1,1,1 (colour).
+struct VoxelAttributes {
+  glm::vec3 normal{0.0f};    // unit, in index space (the gradient of the distance field)
+  float density = 1.0f;
+  glm::vec3 color{1.0f};
+};
+
+// One occupied voxel handed to the writer, in brick-local coordinates
+// (each < 2^(levels - brick_level)).
+struct BrickVoxel {
+  uint32_t x = 0, y = 0, z = 0;
+  VoxelAttributes attr;
+};
+
+struct WriteOptions {
+  int zstd_level = 3;
+  bool force = false;  // replace an existing store at the target
+};
+
+class StoreWriter {
+ public:
+  // Prepares a store at `dir`: builds in a temporary directory beside it,
+  // which Finish() fsyncs and renames into place. Refuses an existing target
+  // unless options.force. `meta` gives everything but the counts, which the
+  // writer fills in.
+  static StatusOr<std::unique_ptr<StoreWriter>> Create(const std::string& dir,
+                                                       const StoreMeta& meta,
+                                                       const WriteOptions& options);
+  virtual ~StoreWriter() = default;  // without Finish(): removes the temporary directory
+  // Adds the brick of the brick-level octant `brick_coord` (grid coordinates
+  // >> (levels - brick_level)). Bricks come in any order, each octant once,
+  // each with at least one voxel; voxels in any order, no duplicates.
+  virtual Status AddBrick(const glm::u64vec3& brick_coord, std::vector<BrickVoxel> voxels) = 0;
+  // Writes the top and the index, fsyncs and renames into place.
+  virtual Status Finish() = 0;
+};
+
+struct OpenOptions {
+  size_t cache_bytes = size_t(256) << 20;  // decompressed-brick budget
+  bool verify_checksums = true;
+};
+
+struct CacheStats {
+  uint64_t hits = 0, misses = 0, evictions = 0;
+  uint64_t bytes_mapped = 0;        // size of the mapped brick file
+  uint64_t bytes_decompressed = 0;  // total decompressed since open
+  uint64_t bytes_resident = 0;      // decompressed bytes held now
+  uint64_t capacity = 0;
+};
+
+class Store : public BrickSource {
+ public:
+  static StatusOr<std::unique_ptr<Store>> Open(const std::string& dir, const OpenOptions& options);
+  ~Store() override = default;
+
+  virtual const StoreMeta& meta() const = 0;
+  // The octree to trace; valid as long as the Store.
+  virtual OctreeView view() = 0;
+  // Attributes of a voxel hit in brick `brick` (kNoBrick: the top) at `payload`.
+  virtual StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) = 0;
+  virtual CacheStats cache_stats() const = 0;
+  // Bytes of the resident top (cells and top payloads).
+  virtual uint64_t resident_bytes() const = 0;
+};
+
+}  // namespace vox
+
+#endif  // VOX_STORAGE_STORE_H_
