@@ -19,7 +19,7 @@ struct FixedPoint {
   using Word = WordT;
   static constexpr int kBits = int(sizeof(Word) * 8);
   static constexpr int kFrac = kFracBits;
-  static_assert(kFrac >= 0 && kFrac < kBits - 2, "fractional bits must leave room for an integer part");
+  static_assert(kFrac >= 0 && kFrac < kBits - 2 && (kBits <= 64 || kFrac >= 62), "fractional bits must leave room for an integer part");
 
   // Largest magnitude of integer part the word holds: 2^(kBits - 1 - kFrac).
   static constexpr int kIntBits = kBits - 1 - kFrac;
@@ -30,21 +30,18 @@ struct FixedPoint {
   // round(x * 2^Frac). REQUIRES: |x| < 2^(kIntBits - 1), finite.
   template <typename Real>
   static Word FromReal(Real x) {
-    Real ip = std::floor(x);
-    Real frac = x - ip;  // exact, in [0, 1)
-    // Split the fraction into 60-bit chunks so a 128-bit word gets all the
-    // precision that `Real` has.
-    Word w = Word(int64_t(ip)) * (Word(1) << kFrac);
-    int done = 0;
-    while (done < kFrac && frac != Real(0)) {
-      int chunk = kFrac - done < 60 ? kFrac - done : 60;
-      frac = std::ldexp(frac, chunk);
-      Real part = (done + chunk == kFrac) ? std::nearbyint(frac) : std::floor(frac);
-      frac -= part;
-      done += chunk;
-      w += Word(int64_t(part)) * (Word(1) << (kFrac - done));
+    if constexpr (kBits <= 64) {
+      // x * 2^Frac is exact (a power of two) and fits in 63 bits.
+      Real y = x * Real(uint64_t(1) << kFrac);
+      return Word(int64_t(y >= 0 ? y + Real(0.5) : y - Real(0.5)));
+    } else {
+      // Integer part and fraction separately, so a 128-bit word gets all the
+      // precision that `Real` has.
+      Real ip = std::floor(x);
+      Real frac = (x - ip) * Real(uint64_t(1) << 62);  // exact
+      Word w = Word(int64_t(ip)) * (Word(1) << kFrac);
+      return w + Word(int64_t(frac + Real(0.5))) * (Word(1) << (kFrac - 62));
     }
-    return w;
   }
 
   template <typename Real>
@@ -82,22 +79,25 @@ struct FixedPoint {
     int shift = kFrac + 1 + (en - ed);  // total power of two applied to mn / md
     if (shift < -64) return 0;
     unsigned __int128 q = 0;
-    unsigned __int128 rem = mn;
-    // Integer part of mn / md (mn, md in [2^52, 2^53)): 0 or 1.
-    unsigned __int128 ipart = rem / md;
-    rem -= ipart * md;
-    q = ipart;
-    if (shift >= 0) {
-      for (int i = 0; i < shift; ++i) {
-        rem <<= 1;
-        q <<= 1;
-        if (rem >= md) {
-          rem -= md;
-          q |= 1;
-        }
-      }
+    if (shift >= 0 && shift <= 127 - 53) {
+      q = (static_cast<unsigned __int128>(mn) << shift) / md;  // one 128-bit division
     } else {
-      q >>= -shift;
+      // Long division, one quotient bit per step (128-bit words).
+      unsigned __int128 rem = mn;
+      q = rem / md;  // 0 or 1: mn, md are both in [2^52, 2^53)
+      rem -= q * md;
+      if (shift >= 0) {
+        for (int i = 0; i < shift; ++i) {
+          rem <<= 1;
+          q <<= 1;
+          if (rem >= md) {
+            rem -= md;
+            q |= 1;
+          }
+        }
+      } else {
+        q >>= -shift;
+      }
     }
     q = (q + 1) >> 1;  // round half up on the extra bit
     Word w = Word(q);

@@ -59,6 +59,10 @@ class Tracer {
     t.n1_ = n1;
     t.n2_ = n2;
     t.sat_ = Fixed::FromInt(int64_t(1) << (nmax + 2));
+    t.sat_real_ = Fixed::template ToReal<Real>(t.sat_);
+    t.down2_ = std::ldexp(Real(1), -n2);
+    t.up2_ = std::ldexp(Real(1), n2);
+    t.grid_size_ = std::ldexp(Real(1), tree.levels);
     return t;
   }
 
@@ -79,7 +83,7 @@ class Tracer {
     ++cx.counters->rays;
     if (!Setup(ray, &cx)) return OkStatus();
     Real p1[3];
-    for (int a = 0; a < 3; ++a) p1[a] = std::ldexp(cx.p[a], -n2_);
+    for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * down2_;
     Step st = InitStep(cx, p1, n1_);
     int64_t base[3] = {0, 0, 0};
     Flow f = Walk<true>(cx, st, n1_, tree_.top, tree_.top, visit, base);
@@ -155,7 +159,7 @@ class Tracer {
 
     // Clip to [0, G]^3 (closed; the half-open voxel rule is applied by the
     // start-voxel choice). t is in units of the scaled direction.
-    const Real G = std::ldexp(Real(1), tree_.levels);
+    const Real G = grid_size_;
     Real o[3] = {Real(ray.origin.x), Real(ray.origin.y), Real(ray.origin.z)};
     Real t0 = 0, t1 = std::numeric_limits<Real>::infinity();
     int entry = -1;
@@ -187,10 +191,11 @@ class Tracer {
 
   // Start voxel on one axis: the voxel the ray is in just after leaving p.
   static int64_t StartVoxel(Real p, int s, int64_t size) {
-    Real v = s > 0 ? std::floor(p) : std::ceil(p) - 1;
-    if (!(v >= 0)) return 0;
-    if (v > Real(size - 1)) return size - 1;
-    return int64_t(v);
+    if (!(p > 0)) return 0;            // also clamps p < 0 and catches NaN
+    if (!(p < Real(size))) return size - 1;
+    int64_t f = int64_t(p);            // floor, as p > 0
+    int64_t v = s > 0 ? f : (Real(f) == p ? f - 1 : f);  // ceil(p) - 1 for s < 0
+    return v < 0 ? 0 : v;
   }
 
   // Distance from p to the next boundary of voxel v in the direction of travel.
@@ -203,7 +208,7 @@ class Tracer {
   Word LValue(Real ud, Real h, Word q, Real qr) const {
     if (q >= sat_) return sat_;
     Real l = ud + h * qr;
-    if (!(l < Fixed::template ToReal<Real>(sat_))) return sat_;
+    if (!(l < sat_real_)) return sat_;
     return Fixed::FromReal(l);
   }
 
@@ -249,15 +254,15 @@ class Tracer {
       cx.ratios_ready = true;
     }
     Real p1[3];
-    for (int a = 0; a < 3; ++a) p1[a] = std::ldexp(cx.p[a], -n2);
+    for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * down2_;
     int moved = (diff & field_mask(w1, 0)) ? 0 : (diff & field_mask(w1, 1)) ? 1 : 2;
     if (moved == d) {
       // Case B: entry through the face perpendicular to d.
       Real face = Real(C[d] + (s_d > 0 ? 0 : 1));
       Real dd = face - p1[d];
       p2[d] = s_d > 0 ? Real(0) : Real(size2);
-      p2[cx.i1] = std::ldexp(p1[cx.i1] + dd * cx.r1 - Real(C[cx.i1]), n2);
-      p2[cx.i2] = std::ldexp(p1[cx.i2] + dd * cx.r2 - Real(C[cx.i2]), n2);
+      p2[cx.i1] = (p1[cx.i1] + dd * cx.r1 - Real(C[cx.i1])) * up2_;
+      p2[cx.i2] = (p1[cx.i2] + dd * cx.r2 - Real(C[cx.i2])) * up2_;
       return InitStep(cx, p2, n2);
     }
     // Case C: entry through the face perpendicular to passive axis c, where
@@ -273,7 +278,7 @@ class Tracer {
     v[d] = s_d > 0 ? st.dprime : -st.dprime - 1;
     v[c] = cx.s[c] > 0 ? 0 : size2 - 1;
     Real xd1 = s_d * Fixed::template ToReal<Real>(lc_old);  // entry d, first-step units
-    Real p_o = std::ldexp(p1[o] + (xd1 - p1[d]) * (c_is_1 ? cx.r2 : cx.r1) - Real(C[o]), n2);
+    Real p_o = (p1[o] + (xd1 - p1[d]) * (c_is_1 ? cx.r2 : cx.r1) - Real(C[o])) * up2_;
     v[o] = StartVoxel(p_o, cx.s[o], size2);
     const Word qc = c_is_1 ? cx.q1 : cx.q2;
     const Word lc = qc >= sat_ ? sat_ : u2 + qc;
@@ -450,6 +455,9 @@ class Tracer {
   OctreeView tree_;
   int n1_ = 0, n2_ = 0;
   Word sat_ = 0;
+  Real sat_real_ = 0;
+  Real down2_ = 1, up2_ = 1;  // 2^-n2, 2^n2: first-step <-> second-step units
+  Real grid_size_ = 0;        // 2^levels
 };
 
 // The tracer vox uses unless told otherwise.
