@@ -460,6 +460,16 @@ class Tracer {
   Real grid_size_ = 0;        // 2^levels
 };
 
+// The first-step levels vox uses unless told otherwise: the paper's best
+// split has 6 first-step levels; grids of up to 2^6 are traced in one step,
+// and each step keeps at most 20 levels.
+inline int DefaultFirstStepLevels(int levels) {
+  return std::max(levels - kMaxStepLevels, std::min(6, levels));
+}
+
+// Parses "N1+N2" (which must add up to `levels`) or "N1" into first-step levels.
+StatusOr<int> ParseSplit(const std::string& text, int levels);
+
 // The tracer vox uses unless told otherwise.
 using DefaultTracer = Tracer<Fixed64, long double>;
 

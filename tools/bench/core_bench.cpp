@@ -2,8 +2,8 @@
 // passive moves, empty-space skips, whole first-hit queries, and single step
 // against two steps. Rates are DDA moves (or rays) per second on one thread.
 //
-//   build/tools/bench/vox-core-bench --benchmark_repetitions=5 \
-//       --benchmark_report_aggregates_only=true
+//   build/tools/bench/vox-core-bench --benchmark_repetitions=5
+//     --benchmark_report_aggregates_only=true   (one line)
 #include <benchmark/benchmark.h>
 
 #include <cmath>

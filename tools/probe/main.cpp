@@ -1,0 +1,161 @@
+// vox-probe: first hits of rays read from stdin, one "ox oy oz dx dy dz" per
+// line (decimal or C99 hex floats, index space: voxel (i,j,k) is
+// [i,i+1)x[j,j+1)x[k,k+1)); prints "hit i j k t" or "miss" per line, in order.
+//
+//   vox-probe --generate sphere:1024 [--brick-level L] [options] < rays.txt
+//   vox-probe store/ [options] < rays.txt
+// Options: --split N1+N2|N1, --single-step, --cache-mb M, --fixed 64|128, --stats
+#include <cstdio>
+#include <cstring>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "core/core.h"
+#include "core/ray_text.h"
+#include "core/shapes.h"
+#include "storage/store.h"
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: vox-probe (--generate SHAPE | STORE_DIR) [--split N1+N2|N1] [--single-step]\n"
+    "                 [--brick-level L] [--cache-mb M] [--fixed 64|128] [--stats] < rays.txt\n"
+    "  SHAPE: sphere:N, torus:N, cubes:N, noise:N (N voxels per axis), corner:L (2^L grid)\n";
+
+struct Options {
+  std::string generate, store, split;
+  bool single_step = false, stats = false;
+  int brick_level = -1;
+  size_t cache_mb = 256;
+  int fixed = 64;
+};
+
+int Fail(const std::string& msg) {
+  std::fprintf(stderr, "vox-probe: %s\n", msg.c_str());
+  return 2;
+}
+
+template <class TracerT>
+int Run(const TracerT& tracer, const glm::i64vec3& origin, bool stats) {
+  vox::TraceCounters counters;
+  std::string line;
+  long lineno = 0;
+  int bad = 0;
+  const glm::dvec3 shift(origin);
+  while (std::getline(std::cin, line)) {
+    ++lineno;
+    auto ray = vox::ParseRayLine(line);
+    vox::Status st = ray.status();
+    std::optional<vox::Hit> hit;
+    if (st.ok()) {
+      vox::Ray r = *ray;
+      r.origin -= shift;  // index space -> grid space
+      auto h = tracer.FirstHit(r, &counters);
+      st = h.status();
+      if (st.ok()) hit = *h;
+    }
+    if (!st.ok()) {
+      std::fprintf(stderr, "vox-probe: stdin line %ld: %s: %s\n", lineno, st.message().c_str(),
+                   line.c_str());
+      std::puts("error");
+      ++bad;
+      continue;
+    }
+    if (hit) {
+      glm::i64vec3 v = hit->voxel + origin;
+      std::puts(vox::FormatHitLine(&v, hit->t).c_str());
+    } else {
+      std::puts("miss");
+    }
+  }
+  if (stats) std::fprintf(stderr, "vox-probe: %s\n", counters.ToString().c_str());
+  if (bad) std::fprintf(stderr, "vox-probe: %d of %ld lines refused\n", bad, lineno);
+  return bad ? 1 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    auto value = [&](const char* name) -> std::optional<std::string> {
+      if (i + 1 >= argc) return std::nullopt;
+      (void)name;
+      return std::string(argv[++i]);
+    };
+    std::optional<std::string> v;
+    if (a == "--help" || a == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else if (a == "--generate") {
+      if (!(v = value("--generate"))) return Fail("--generate needs a shape\n" + std::string(kUsage));
+      opt.generate = *v;
+    } else if (a == "--split") {
+      if (!(v = value("--split"))) return Fail("--split needs N1+N2 or N1");
+      opt.split = *v;
+    } else if (a == "--single-step") {
+      opt.single_step = true;
+    } else if (a == "--stats") {
+      opt.stats = true;
+    } else if (a == "--brick-level" || a == "--cache-mb" || a == "--fixed") {
+      if (!(v = value(a.c_str()))) return Fail(a + " needs a number");
+      char* end = nullptr;
+      long n = std::strtol(v->c_str(), &end, 10);
+      if (*end != '\0' || n < 0) return Fail(a + ": '" + *v + "' is not a non-negative integer");
+      if (a == "--brick-level") opt.brick_level = int(n);
+      if (a == "--cache-mb") opt.cache_mb = size_t(n);
+      if (a == "--fixed") opt.fixed = int(n);
+    } else if (!a.empty() && a[0] == '-') {
+      return Fail("unknown option " + a + "\n" + kUsage);
+    } else if (opt.store.empty()) {
+      opt.store = a;
+    } else {
+      return Fail("more than one store given\n" + std::string(kUsage));
+    }
+  }
+  if (opt.generate.empty() == opt.store.empty())
+    return Fail("give either --generate SHAPE or a store directory\n" + std::string(kUsage));
+  if (opt.fixed != 64 && opt.fixed != 128) return Fail("--fixed takes 64 or 128");
+
+  std::unique_ptr<vox::MemoryOctree> memory;
+  std::unique_ptr<vox::Store> store;
+  vox::OctreeView view;
+  glm::i64vec3 origin(0);
+  if (!opt.generate.empty()) {
+    auto vol = vox::GenerateShape(opt.generate);
+    if (!vol.ok()) return Fail(vol.status().message());
+    int bl = opt.brick_level >= 0 ? opt.brick_level : std::max(1, vol->levels - 5);
+    auto tree = vox::MemoryOctree::Build(std::move(vol->voxels), vol->levels, bl);
+    if (!tree.ok()) return Fail(tree.status().message());
+    memory = std::move(tree).value();
+    view = memory->view();
+  } else {
+    vox::OpenOptions oo;
+    oo.cache_bytes = opt.cache_mb << 20;
+    auto s = vox::Store::Open(opt.store, oo);
+    if (!s.ok()) return Fail(s.status().ToString());
+    store = std::move(s).value();
+    view = store->view();
+    origin = store->meta().origin;
+  }
+  int n1 = vox::DefaultFirstStepLevels(view.levels);
+  if (opt.single_step) {
+    n1 = view.levels;
+    if (!opt.split.empty()) return Fail("--single-step and --split exclude each other");
+  } else if (!opt.split.empty()) {
+    auto s = vox::ParseSplit(opt.split, view.levels);
+    if (!s.ok()) return Fail(s.status().message());
+    n1 = *s;
+  }
+  if (opt.fixed == 128) {
+    auto tr = vox::Tracer<vox::Fixed128, long double>::Create(view, n1);
+    if (!tr.ok()) return Fail(tr.status().message());
+    return Run(*tr, origin, opt.stats);
+  }
+  auto tr = vox::DefaultTracer::Create(view, n1);
+  if (!tr.ok()) return Fail(tr.status().message());
+  return Run(*tr, origin, opt.stats);
+}
