@@ -1,0 +1,248 @@
+#include "storage/file.h"
+
+#include <fcntl.h>
+#include <setjmp.h>
+#include <signal.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+
+namespace vox {
+namespace {
+
+// SIGBUS guard. A thread copying out of a mapping sets tls_bus_jmp; the
+// handler jumps back to it. A SIGBUS anywhere else goes to the previous
+// disposition, so the guard changes nothing outside storage's copies.
+thread_local sigjmp_buf* tls_bus_jmp = nullptr;
+struct sigaction g_previous_bus_action;
+std::once_flag g_bus_handler_once;
+
+void BusHandler(int sig, siginfo_t* info, void* ucontext) {
+  sigjmp_buf* jb = tls_bus_jmp;
+  if (jb != nullptr) {
+    tls_bus_jmp = nullptr;
+    siglongjmp(*jb, 1);
+  }
+  // Not ours: hand over to whatever was installed before.
+  if (g_previous_bus_action.sa_flags & SA_SIGINFO) {
+    if (g_previous_bus_action.sa_sigaction != nullptr) {
+      g_previous_bus_action.sa_sigaction(sig, info, ucontext);
+      return;
+    }
+  } else if (g_previous_bus_action.sa_handler != SIG_DFL &&
+             g_previous_bus_action.sa_handler != SIG_IGN) {
+    g_previous_bus_action.sa_handler(sig);
+    return;
+  }
+  // Default action: restore it and return; the faulting access repeats and
+  // terminates the process as it would have without us.
+  signal(SIGBUS, SIG_DFL);
+}
+
+void InstallBusHandler() {
+  std::call_once(g_bus_handler_once, [] {
+    struct sigaction sa;
+    std::memset(&sa, 0, sizeof(sa));
+    sa.sa_sigaction = BusHandler;
+    sa.sa_flags = SA_SIGINFO | SA_NODEFER;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGBUS, &sa, &g_previous_bus_action);
+  });
+}
+
+// memcpy that returns false instead of dying when the source page is gone.
+// noinline: the setjmp frame must be this function's.
+[[gnu::noinline]] bool GuardedCopy(void* dst, const void* src, size_t n) {
+  sigjmp_buf jb;
+  if (sigsetjmp(jb, 0) != 0) {
+    // SA_NODEFER: SIGBUS is not blocked in this thread after the jump.
+    return false;
+  }
+  tls_bus_jmp = &jb;
+  std::atomic_signal_fence(std::memory_order_seq_cst);
+  std::memcpy(dst, src, n);
+  std::atomic_signal_fence(std::memory_order_seq_cst);
+  tls_bus_jmp = nullptr;
+  return true;
+}
+
+Status RangeError(const std::string& path, uint64_t offset, size_t n, uint64_t size) {
+  return CorruptionError("read of bytes [" + std::to_string(offset) + ", " +
+                         std::to_string(offset + n) + ") past the end of '" + path + "' (" +
+                         std::to_string(size) + " bytes)");
+}
+
+class MmapFile : public RandomAccessFile {
+ public:
+  MmapFile(std::string path, int fd, const uint8_t* base, uint64_t size, bool check)
+      : path_(std::move(path)), fd_(fd), base_(base), size_(size), check_(check) {}
+  ~MmapFile() override {
+    if (base_ != nullptr) munmap(const_cast<uint8_t*>(base_), size_);
+    if (fd_ >= 0) close(fd_);
+  }
+  const std::string& path() const override { return path_; }
+  uint64_t size() const override { return size_; }
+
+  Status Read(uint64_t offset, size_t n, uint8_t* scratch) const override {
+    if (offset > size_ || n > size_ - offset) return RangeError(path_, offset, n, size_);
+    if (n == 0) return OkStatus();
+    if (check_) {
+      VOX_ASSIGN_OR_RETURN(uint64_t now, CurrentSize());
+      if (now < offset + n)
+        return IoError("'" + path_ + "' shrank from " + std::to_string(size_) + " to " +
+                       std::to_string(now) + " bytes while open (needed bytes up to " +
+                       std::to_string(offset + n) + ")");
+    }
+    if (!GuardedCopy(scratch, base_ + offset, n))
+      return IoError("'" + path_ + "': SIGBUS reading mapped bytes [" + std::to_string(offset) +
+                     ", " + std::to_string(offset + n) +
+                     "): the file shrank or its storage failed while open");
+    return OkStatus();
+  }
+
+  StatusOr<uint64_t> CurrentSize() const override {
+    struct stat st;
+    if (fstat(fd_, &st) != 0) return ErrnoError("cannot stat", path_, errno);
+    return uint64_t(st.st_size);
+  }
+
+ private:
+  std::string path_;
+  int fd_;
+  const uint8_t* base_;
+  uint64_t size_;
+  bool check_;
+};
+
+class MemoryFile : public RandomAccessFile {
+ public:
+  MemoryFile(std::string name, std::string contents)
+      : name_(std::move(name)), data_(std::move(contents)) {}
+  const std::string& path() const override { return name_; }
+  uint64_t size() const override { return data_.size(); }
+  Status Read(uint64_t offset, size_t n, uint8_t* scratch) const override {
+    if (offset > data_.size() || n > data_.size() - offset)
+      return RangeError(name_, offset, n, data_.size());
+    if (n > 0) std::memcpy(scratch, data_.data() + offset, n);
+    return OkStatus();
+  }
+
+ private:
+  std::string name_;
+  std::string data_;
+};
+
+}  // namespace
+
+Status ErrnoError(const std::string& what, const std::string& path, int err) {
+  std::string m = what + " '" + path + "': " + std::strerror(err);
+  if (err == ENOSPC || err == EDQUOT || err == EFBIG) return ResourceExhaustedError(m);
+  if (err == ENOENT) return NotFoundError(m);
+  return IoError(m);
+}
+
+StatusOr<std::unique_ptr<RandomAccessFile>> OpenMmapFile(const std::string& path,
+                                                         bool check_size_each_read) {
+  int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return ErrnoError("cannot open", path, errno);
+  struct stat st;
+  if (fstat(fd, &st) != 0) {
+    int err = errno;
+    close(fd);
+    return ErrnoError("cannot stat", path, err);
+  }
+  if (!S_ISREG(st.st_mode)) {
+    close(fd);
+    return IoError("'" + path + "' is not a regular file");
+  }
+  const uint8_t* base = nullptr;
+  if (st.st_size > 0) {
+    void* p = mmap(nullptr, size_t(st.st_size), PROT_READ, MAP_SHARED, fd, 0);
+    if (p == MAP_FAILED) {
+      int err = errno;
+      close(fd);
+      return ErrnoError("cannot mmap", path, err);
+    }
+    base = static_cast<const uint8_t*>(p);
+  }
+  InstallBusHandler();
+  return std::unique_ptr<RandomAccessFile>(
+      new MmapFile(path, fd, base, uint64_t(st.st_size), check_size_each_read));
+}
+
+std::unique_ptr<RandomAccessFile> NewMemoryFile(std::string name, std::string contents) {
+  return std::make_unique<MemoryFile>(std::move(name), std::move(contents));
+}
+
+Status FaultInjectionFile::Read(uint64_t offset, size_t n, uint8_t* scratch) const {
+  int64_t left = fail_after_.load();
+  if (left == 0) return IoError("'" + path() + "': injected read error");
+  if (left > 0) fail_after_.fetch_sub(1);
+  ++reads_;
+  VOX_RETURN_IF_ERROR(base_->Read(offset, n, scratch));
+  if (flip_offset_ >= offset && flip_offset_ < offset + n) scratch[flip_offset_ - offset] ^= flip_mask_;
+  return OkStatus();
+}
+
+StatusOr<std::unique_ptr<WritableFile>> WritableFile::Create(const std::string& path) {
+  int fd = open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0) return ErrnoError("cannot create", path, errno);
+  return std::unique_ptr<WritableFile>(new WritableFile(path, fd));
+}
+
+WritableFile::~WritableFile() {
+  if (fd_ >= 0) close(fd_);
+}
+
+Status WritableFile::Append(const void* data, size_t n) {
+  if (fd_ < 0) return InternalError("append to closed file '" + path_ + "'");
+  buf_.append(static_cast<const char*>(data), n);
+  size_ += n;
+  if (buf_.size() >= (size_t(1) << 20)) return Flush();
+  return OkStatus();
+}
+
+Status WritableFile::Flush() {
+  size_t done = 0;
+  while (done < buf_.size()) {
+    ssize_t w = write(fd_, buf_.data() + done, buf_.size() - done);
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      int err = errno;
+      buf_.clear();
+      return ErrnoError("cannot write", path_, err);
+    }
+    done += size_t(w);
+  }
+  buf_.clear();
+  return OkStatus();
+}
+
+Status WritableFile::Sync() {
+  VOX_RETURN_IF_ERROR(Flush());
+  if (fsync(fd_) != 0) return ErrnoError("cannot fsync", path_, errno);
+  return OkStatus();
+}
+
+Status WritableFile::Close() {
+  if (fd_ < 0) return OkStatus();
+  Status s = Flush();
+  if (close(fd_) != 0 && s.ok()) s = ErrnoError("cannot close", path_, errno);
+  fd_ = -1;
+  return s;
+}
+
+Status SyncDir(const std::string& dir) {
+  int fd = open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return ErrnoError("cannot open directory", dir, errno);
+  int r = fsync(fd);
+  int err = errno;
+  close(fd);
+  if (r != 0) return ErrnoError("cannot fsync directory", dir, err);
+  return OkStatus();
+}
+
+}  // namespace vox

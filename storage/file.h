@@ -1,0 +1,108 @@
+// The file layer under vox's store: read-only random access files (memory
+// mapped, in memory, and a fault-injecting wrapper for tests) and an
+// append-only writable file. Every error names the file.
+//
+// Thread safety: RandomAccessFile::Read and CurrentSize are thread-safe.
+// A WritableFile is used by one thread at a time. FaultInjectionFile's
+// setters must not race with reads.
+#ifndef VOX_STORAGE_FILE_H_
+#define VOX_STORAGE_FILE_H_
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "core/status.h"
+
+namespace vox {
+
+class RandomAccessFile {
+ public:
+  virtual ~RandomAccessFile() = default;
+  virtual const std::string& path() const = 0;
+  // Size when opened (what a mapping covers).
+  virtual uint64_t size() const = 0;
+  // Copies bytes [offset, offset + n) into scratch. A range past size() is
+  // Corruption (the caller trusted an index); a file that shrank underneath
+  // is IoError. Both name the file.
+  virtual Status Read(uint64_t offset, size_t n, uint8_t* scratch) const = 0;
+  // The size on disk now (fstat), to notice a file that shrank while open.
+  virtual StatusOr<uint64_t> CurrentSize() const { return size(); }
+};
+
+// Maps `path` read-only. Reads copy out of the mapping under a SIGBUS guard:
+// a file truncated under a running process gives IoError naming the file,
+// never an unexplained SIGBUS. `check_size_each_read` also fstat()s before
+// each read, for a precise message (tests turn it off to reach the guard).
+StatusOr<std::unique_ptr<RandomAccessFile>> OpenMmapFile(const std::string& path,
+                                                         bool check_size_each_read = true);
+
+// A file held in memory, named `name` in messages.
+std::unique_ptr<RandomAccessFile> NewMemoryFile(std::string name, std::string contents);
+
+// Wraps a file and injects faults: failing reads (IoError) after a number
+// of successful ones, or bit flips at one byte offset. For tests.
+class FaultInjectionFile : public RandomAccessFile {
+ public:
+  explicit FaultInjectionFile(std::unique_ptr<RandomAccessFile> base) : base_(std::move(base)) {}
+  const std::string& path() const override { return base_->path(); }
+  uint64_t size() const override { return base_->size(); }
+  Status Read(uint64_t offset, size_t n, uint8_t* scratch) const override;
+  StatusOr<uint64_t> CurrentSize() const override { return base_->CurrentSize(); }
+
+  // Reads after the next `n` successful ones fail; -1 never fails.
+  void FailReadsAfter(int64_t n) { fail_after_ = n; }
+  // Reads covering byte `offset` see it XORed with `mask`.
+  void FlipByte(uint64_t offset, uint8_t mask) {
+    flip_offset_ = offset;
+    flip_mask_ = mask;
+  }
+  uint64_t reads() const { return reads_.load(); }
+
+ private:
+  std::unique_ptr<RandomAccessFile> base_;
+  mutable std::atomic<int64_t> fail_after_{-1};
+  uint64_t flip_offset_ = UINT64_MAX;
+  uint8_t flip_mask_ = 0;
+  mutable std::atomic<uint64_t> reads_{0};
+};
+
+// An append-only file written through a buffer. Errors (disk full, file too
+// large, permission) name the file and the OS error.
+class WritableFile {
+ public:
+  // Creates `path`, failing if it exists.
+  static StatusOr<std::unique_ptr<WritableFile>> Create(const std::string& path);
+  ~WritableFile();
+  WritableFile(const WritableFile&) = delete;
+  WritableFile& operator=(const WritableFile&) = delete;
+
+  Status Append(const void* data, size_t n);
+  Status Append(const std::string& s) { return Append(s.data(), s.size()); }
+  // Flushes the buffer and fsyncs.
+  Status Sync();
+  Status Close();
+  uint64_t size() const { return size_; }
+  const std::string& path() const { return path_; }
+
+ private:
+  WritableFile(std::string path, int fd) : path_(std::move(path)), fd_(fd) {}
+  Status Flush();
+  std::string path_;
+  int fd_ = -1;
+  std::string buf_;
+  uint64_t size_ = 0;
+};
+
+// fsyncs a directory, so that renames and creations in it are durable.
+Status SyncDir(const std::string& dir);
+
+// "<what> '<path>': <strerror(err)>" as an IoError (ResourceExhausted for
+// ENOSPC/EDQUOT/EFBIG, NotFound for ENOENT).
+Status ErrnoError(const std::string& what, const std::string& path, int err);
+
+}  // namespace vox
+
+#endif  // VOX_STORAGE_FILE_H_

@@ -1,0 +1,462 @@
+#include "storage/internal/format.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include <glm/gtc/packing.hpp>
+
+#include "storage/crc32c.h"
+#include "storage/internal/coding.h"
+
+namespace vox::storage_internal {
+namespace {
+
+std::string Hex(uint64_t v) {
+  char b[24];
+  snprintf(b, sizeof(b), "0x%016llx", static_cast<unsigned long long>(v));
+  return b;
+}
+
+Status VersionCheck(uint16_t major, uint16_t minor, const std::string& path) {
+  if (major != kFormatMajor)
+    return UnsupportedError("'" + path + "' has store format " + std::to_string(major) + "." +
+                            std::to_string(minor) + "; this vox reads format " +
+                            std::to_string(kFormatMajor) + ".x");
+  return OkStatus();
+}
+
+}  // namespace
+
+uint8_t AttrFlags(const StoreMeta& m) {
+  return uint8_t((m.has_normal ? kAttrNormal : 0) | (m.has_density ? kAttrDensity : 0) |
+                 (m.has_color ? kAttrColor : 0));
+}
+
+size_t AttrBytesPerVoxel(uint8_t flags) {
+  return ((flags & kAttrNormal) ? 4 : 0) + ((flags & kAttrDensity) ? 4 : 0) +
+         ((flags & kAttrColor) ? 6 : 0);
+}
+
+std::string EncodeFileHeader(uint64_t magic, uint64_t store_id) {
+  uint8_t b[kFileHeaderSize] = {};
+  EncodeFixed64(b, magic);
+  EncodeFixed16(b + 8, kFormatMajor);
+  EncodeFixed16(b + 10, kFormatMinor);
+  EncodeFixed64(b + 16, store_id);
+  EncodeFixed32(b + 28, crc32c::Mask(crc32c::Value(b, 28)));
+  return std::string(reinterpret_cast<char*>(b), sizeof(b));
+}
+
+StatusOr<FileHeader> DecodeFileHeader(const uint8_t* p, uint64_t expected_magic,
+                                      const std::string& path) {
+  FileHeader h;
+  h.magic = DecodeFixed64(p);
+  if (h.magic != expected_magic)
+    return CorruptionError("'" + path + "' is not a vox store file: bad magic " + Hex(h.magic) +
+                           " (expected " + Hex(expected_magic) + ")");
+  if (crc32c::Unmask(DecodeFixed32(p + 28)) != crc32c::Value(p, 28))
+    return CorruptionError("'" + path + "': header checksum mismatch");
+  h.major = DecodeFixed16(p + 8);
+  h.minor = DecodeFixed16(p + 10);
+  VOX_RETURN_IF_ERROR(VersionCheck(h.major, h.minor, path));
+  h.store_id = DecodeFixed64(p + 16);
+  return h;
+}
+
+std::string EncodeFooter(const Footer& f) {
+  uint8_t b[kFooterSize] = {};
+  const BlockHandle* hs[4] = {&f.meta, &f.top, &f.top_attr, &f.table};
+  for (int i = 0; i < 4; ++i) {
+    EncodeFixed64(b + 16 * i, hs[i]->offset);
+    EncodeFixed64(b + 16 * i + 8, hs[i]->size);
+  }
+  EncodeFixed64(b + 64, f.brick_file_size);
+  EncodeFixed64(b + 72, f.store_id);
+  EncodeFixed16(b + 80, f.major);
+  EncodeFixed16(b + 82, f.minor);
+  EncodeFixed64(b + 84, kIndexMagic);
+  EncodeFixed32(b + 92, crc32c::Mask(crc32c::Value(b, 92)));
+  return std::string(reinterpret_cast<char*>(b), sizeof(b));
+}
+
+StatusOr<Footer> DecodeFooter(const uint8_t* b, const std::string& path) {
+  uint64_t magic = DecodeFixed64(b + 84);
+  if (magic != kIndexMagic)
+    return CorruptionError("'" + path + "': bad footer magic " + Hex(magic) +
+                           " (file truncated or not a vox store index)");
+  if (crc32c::Unmask(DecodeFixed32(b + 92)) != crc32c::Value(b, 92))
+    return CorruptionError("'" + path + "': footer checksum mismatch");
+  Footer f;
+  f.major = DecodeFixed16(b + 80);
+  f.minor = DecodeFixed16(b + 82);
+  VOX_RETURN_IF_ERROR(VersionCheck(f.major, f.minor, path));
+  BlockHandle* hs[4] = {&f.meta, &f.top, &f.top_attr, &f.table};
+  for (int i = 0; i < 4; ++i) {
+    hs[i]->offset = DecodeFixed64(b + 16 * i);
+    hs[i]->size = DecodeFixed64(b + 16 * i + 8);
+  }
+  f.brick_file_size = DecodeFixed64(b + 64);
+  f.store_id = DecodeFixed64(b + 72);
+  return f;
+}
+
+std::string BlockTrailer(const void* data, size_t n, uint8_t codec) {
+  uint32_t crc = crc32c::Extend(crc32c::Value(data, n), &codec, 1);
+  uint8_t t[kTrailerSize];
+  t[0] = codec;
+  EncodeFixed32(t + 1, crc32c::Mask(crc));
+  return std::string(reinterpret_cast<char*>(t), kTrailerSize);
+}
+
+StatusOr<uint8_t> CheckTrailer(const uint8_t* data, size_t n, const std::string& what,
+                               const std::string& path, uint64_t offset) {
+  uint8_t codec = data[n];
+  uint32_t crc = crc32c::Extend(crc32c::Value(data, n), &codec, 1);
+  if (crc32c::Unmask(DecodeFixed32(data + n + 1)) != crc)
+    return CorruptionError("'" + path + "': " + what + " checksum mismatch (block at offset " +
+                           std::to_string(offset) + ", " + std::to_string(n) + " bytes)");
+  return codec;
+}
+
+std::string EncodeMeta(const StoreMeta& m) {
+  std::string s;
+  PutString(&s, m.source_file);
+  PutString(&s, m.grid_name);
+  s.push_back(char(m.grid_class));
+  s.push_back(char(m.levels));
+  s.push_back(char(m.brick_level));
+  s.push_back(char(AttrFlags(m)));
+  for (int a = 0; a < 3; ++a) PutFixed64(&s, uint64_t(m.origin[a]));
+  for (int a = 0; a < 3; ++a) PutFixed64(&s, uint64_t(m.bbox_min[a]));
+  for (int a = 0; a < 3; ++a) PutFixed64(&s, uint64_t(m.bbox_max[a]));
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 4; ++r) PutDouble(&s, m.index_to_world[c][r]);
+  PutDouble(&s, m.voxel_size);
+  PutFixed64(&s, m.voxel_count);
+  PutFixed64(&s, m.brick_count);
+  PutFixed64(&s, m.top_cells);
+  PutDouble(&s, m.isovalue);
+  PutDouble(&s, m.threshold);
+  PutString(&s, m.build_options);
+  return s;
+}
+
+StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& path) {
+  Reader r(p, n);
+  StoreMeta m;
+  m.source_file = r.String();
+  m.grid_name = r.String();
+  uint8_t gc = r.U8();
+  m.levels = r.U8();
+  m.brick_level = r.U8();
+  uint8_t flags = r.U8();
+  for (int a = 0; a < 3; ++a) m.origin[a] = r.I64();
+  for (int a = 0; a < 3; ++a) m.bbox_min[a] = r.I64();
+  for (int a = 0; a < 3; ++a) m.bbox_max[a] = r.I64();
+  for (int c = 0; c < 4; ++c)
+    for (int rr = 0; rr < 4; ++rr) m.index_to_world[c][rr] = r.F64();
+  m.voxel_size = r.F64();
+  m.voxel_count = r.U64();
+  m.brick_count = r.U64();
+  m.top_cells = r.U64();
+  m.isovalue = r.F64();
+  m.threshold = r.F64();
+  m.build_options = r.String();
+  // Fields a newer minor version appends are ignored.
+  if (!r.ok()) return CorruptionError("'" + path + "': metadata block too short");
+  auto bad = [&](const std::string& what) {
+    return CorruptionError("'" + path + "': metadata has " + what);
+  };
+  if (gc != uint8_t(GridClass::kLevelSet) && gc != uint8_t(GridClass::kFogVolume))
+    return bad("unknown grid class " + std::to_string(gc));
+  m.grid_class = GridClass(gc);
+  if (m.levels < 1 || m.levels > kMaxLevels) return bad("levels " + std::to_string(m.levels));
+  if (m.brick_level < 1 || m.brick_level > m.levels)
+    return bad("brick level " + std::to_string(m.brick_level) + " outside 1.." +
+               std::to_string(m.levels));
+  if (flags & ~(kAttrNormal | kAttrDensity | kAttrColor))
+    return bad("unknown attribute flags " + std::to_string(flags));
+  m.has_normal = flags & kAttrNormal;
+  m.has_density = flags & kAttrDensity;
+  m.has_color = flags & kAttrColor;
+  if (m.top_cells == 0 || m.top_cells > (uint64_t(1) << 32))
+    return bad("top cell count " + std::to_string(m.top_cells));
+  if (m.brick_count >= kBrickBit) return bad("brick count " + std::to_string(m.brick_count));
+  return m;
+}
+
+void EncodeBrickEntry(const BrickEntry& e, std::string* dst) {
+  uint8_t b[kTableEntrySize] = {};
+  EncodeFixed64(b, e.offset);
+  EncodeFixed64(b + 8, e.x);
+  EncodeFixed64(b + 16, e.y);
+  EncodeFixed64(b + 24, e.z);
+  EncodeFixed32(b + 32, e.stored_size);
+  EncodeFixed32(b + 36, e.raw_size);
+  EncodeFixed32(b + 40, e.num_cells);
+  EncodeFixed32(b + 44, e.voxel_count);
+  EncodeFixed32(b + 48, e.crc);
+  b[52] = e.codec;
+  dst->append(reinterpret_cast<char*>(b), sizeof(b));
+}
+
+BrickEntry DecodeBrickEntry(const uint8_t* b) {
+  BrickEntry e;
+  e.offset = DecodeFixed64(b);
+  e.x = DecodeFixed64(b + 8);
+  e.y = DecodeFixed64(b + 16);
+  e.z = DecodeFixed64(b + 24);
+  e.stored_size = DecodeFixed32(b + 32);
+  e.raw_size = DecodeFixed32(b + 36);
+  e.num_cells = DecodeFixed32(b + 40);
+  e.voxel_count = DecodeFixed32(b + 44);
+  e.crc = DecodeFixed32(b + 48);
+  e.codec = b[52];
+  return e;
+}
+
+uint32_t EncodeOctNormal(const glm::vec3& n) {
+  float s = std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z);
+  float px = 0, py = 0;
+  if (std::isfinite(s) && s > 0) {
+    px = n.x / s;
+    py = n.y / s;
+    if (n.z < 0) {
+      float ox = (1 - std::fabs(py)) * (px >= 0 ? 1.f : -1.f);
+      float oy = (1 - std::fabs(px)) * (py >= 0 ? 1.f : -1.f);
+      px = ox;
+      py = oy;
+    }
+  }
+  auto q = [](float v) {
+    return uint32_t(std::lround(std::clamp(v * 0.5f + 0.5f, 0.f, 1.f) * 65535.f));
+  };
+  return q(px) | (q(py) << 16);
+}
+
+glm::vec3 DecodeOctNormal(uint32_t code) {
+  float px = float(code & 0xffff) / 65535.f * 2 - 1;
+  float py = float(code >> 16) / 65535.f * 2 - 1;
+  glm::vec3 n(px, py, 1 - std::fabs(px) - std::fabs(py));
+  if (n.z < 0) {
+    float ox = (1 - std::fabs(py)) * (px >= 0 ? 1.f : -1.f);
+    float oy = (1 - std::fabs(px)) * (py >= 0 ? 1.f : -1.f);
+    n.x = ox;
+    n.y = oy;
+  }
+  float len = std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+  return n / len;
+}
+
+// Planar layout: for each attribute in flag order, each byte of its encoded
+// value is one plane of `count` bytes (byte 0 of every voxel, then byte 1 ...).
+// Shuffled bytes compress far better than interleaved ones.
+namespace {
+inline uint64_t GatherPlanes(const uint8_t* planes, uint32_t count, uint32_t index, int nbytes) {
+  uint64_t v = 0;
+  for (int b = 0; b < nbytes; ++b) v |= uint64_t(planes[size_t(b) * count + index]) << (8 * b);
+  return v;
+}
+inline void ScatterPlanes(uint8_t* planes, uint32_t count, uint32_t index, int nbytes,
+                          uint64_t v) {
+  for (int b = 0; b < nbytes; ++b) planes[size_t(b) * count + index] = uint8_t(v >> (8 * b));
+}
+}  // namespace
+
+VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
+                               uint32_t index) {
+  VoxelAttributes a;
+  if (flags & kAttrNormal) {
+    a.normal = DecodeOctNormal(uint32_t(GatherPlanes(planes, count, index, 4)));
+    planes += size_t(4) * count;
+  }
+  if (flags & kAttrDensity) {
+    a.density = std::bit_cast<float>(uint32_t(GatherPlanes(planes, count, index, 4)));
+    planes += size_t(4) * count;
+  }
+  if (flags & kAttrColor) {
+    uint64_t c = GatherPlanes(planes, count, index, 6);
+    for (int k = 0; k < 3; ++k) a.color[k] = glm::unpackHalf1x16(uint16_t(c >> (16 * k)));
+  }
+  return a;
+}
+
+void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst) {
+  const uint32_t count = uint32_t(attrs.size());
+  size_t start = dst->size();
+  dst->resize(start + AttrBytesPerVoxel(flags) * count);
+  uint8_t* planes = reinterpret_cast<uint8_t*>(dst->data()) + start;
+  if (flags & kAttrNormal) {
+    for (uint32_t i = 0; i < count; ++i)
+      ScatterPlanes(planes, count, i, 4, EncodeOctNormal(attrs[i].normal));
+    planes += size_t(4) * count;
+  }
+  if (flags & kAttrDensity) {
+    for (uint32_t i = 0; i < count; ++i)
+      ScatterPlanes(planes, count, i, 4, std::bit_cast<uint32_t>(attrs[i].density));
+    planes += size_t(4) * count;
+  }
+  if (flags & kAttrColor) {
+    for (uint32_t i = 0; i < count; ++i) {
+      uint64_t c = 0;
+      for (int k = 0; k < 3; ++k) c |= uint64_t(glm::packHalf1x16(attrs[i].color[k])) << (16 * k);
+      ScatterPlanes(planes, count, i, 6, c);
+    }
+  }
+}
+
+std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
+                           int depth, uint8_t flags) {
+  std::string s;
+  s.reserve(kBrickHeaderSize + cells.size() + attrs.size() * AttrBytesPerVoxel(flags));
+  PutFixed32(&s, uint32_t(cells.size()));
+  PutFixed32(&s, uint32_t(attrs.size()));
+  s.push_back(char(depth));
+  s.push_back(char(flags));
+  s.append(6, '\0');
+  for (const Cell& c : cells) {
+    uint8_t mask = 0;
+    for (int d = 0; d < 8; ++d)
+      if (c.child[d] != kEmptyRef) mask |= uint8_t(1u << d);
+    s.push_back(char(mask));
+  }
+  WriteAttributes(attrs, flags, &s);
+  return s;
+}
+
+namespace {
+
+// Rebuilds a pre-order pool from child masks; refuses anything inconsistent.
+struct MaskDecoder {
+  const uint8_t* masks;
+  uint32_t num_cells, voxel_count;
+  Cell* cells;
+  uint32_t next_cell = 1, next_payload = 0;
+  const char* error = nullptr;
+
+  bool Decode(uint32_t index, int levels_left) {
+    uint8_t m = masks[index];
+    if (m == 0) {
+      error = "a cell with no children";
+      return false;
+    }
+    for (int d = 0; d < 8; ++d) {
+      if (!((m >> d) & 1)) continue;
+      if (levels_left == 1) {
+        if (next_payload >= voxel_count) {
+          error = "more voxels than its table row says";
+          return false;
+        }
+        cells[index].child[d] = MakeLeafRef(next_payload++);
+      } else {
+        if (next_cell >= num_cells) {
+          error = "more cells than its table row says";
+          return false;
+        }
+        uint32_t c = next_cell++;
+        cells[index].child[d] = c;
+        if (!Decode(c, levels_left - 1)) return false;
+      }
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
+StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_t n,
+                                                       const BrickEntry& entry, int depth,
+                                                       uint8_t flags) {
+  if (n < kBrickHeaderSize) return CorruptionError("brick shorter than its header");
+  uint32_t num_cells = DecodeFixed32(raw), voxel_count = DecodeFixed32(raw + 4);
+  int d = raw[8];
+  uint8_t f = raw[9];
+  if (num_cells != entry.num_cells || voxel_count != entry.voxel_count)
+    return CorruptionError("brick header says " + std::to_string(num_cells) + " cells, " +
+                           std::to_string(voxel_count) + " voxels; its table row says " +
+                           std::to_string(entry.num_cells) + ", " +
+                           std::to_string(entry.voxel_count));
+  if (d != depth) return CorruptionError("brick has depth " + std::to_string(d) +
+                                         ", the store's bricks have " + std::to_string(depth));
+  if (f != flags) return CorruptionError("brick attribute flags " + std::to_string(f) +
+                                         " differ from the store's " + std::to_string(flags));
+  uint64_t expect = kBrickHeaderSize + uint64_t(num_cells) +
+                    uint64_t(voxel_count) * AttrBytesPerVoxel(flags);
+  if (expect != n)
+    return CorruptionError("brick is " + std::to_string(n) + " bytes; its header implies " +
+                           std::to_string(expect));
+  if (num_cells == 0 || voxel_count == 0 || uint64_t(num_cells) > uint64_t(voxel_count) * depth)
+    return CorruptionError("brick has " + std::to_string(num_cells) + " cells for " +
+                           std::to_string(voxel_count) + " voxels");
+  auto b = std::make_shared<DecodedBrick>();
+  b->cells.assign(num_cells, Cell{});
+  MaskDecoder dec{raw + kBrickHeaderSize, num_cells, voxel_count, b->cells.data(), 1, 0, nullptr};
+  if (!dec.Decode(0, depth)) return CorruptionError(std::string("brick topology has ") + dec.error);
+  if (dec.next_cell != num_cells || dec.next_payload != voxel_count)
+    return CorruptionError("brick topology reaches " + std::to_string(dec.next_cell) + " cells, " +
+                           std::to_string(dec.next_payload) + " voxels; header says " +
+                           std::to_string(num_cells) + ", " + std::to_string(voxel_count));
+  const uint8_t* planes = raw + kBrickHeaderSize + num_cells;
+  b->attr_planes.assign(planes, raw + n);
+  b->voxel_count = voxel_count;
+  b->flags = flags;
+  return b;
+}
+
+namespace {
+
+struct PoolValidator {
+  const Cell* cells;
+  size_t n;
+  int depth;
+  bool bricks;
+  uint64_t limit;
+  uint64_t next = 1;
+  std::string error;
+
+  bool Visit(uint64_t index, int level) {  // level: 0 for the root
+    for (int d = 0; d < 8; ++d) {
+      NodeRef r = cells[index].child[d];
+      if (r == kEmptyRef) continue;
+      if (level == depth - 1) {
+        if (bricks) {
+          if (!IsBrickRef(r) || (r & kBrickIdMask) >= limit) {
+            error = "cell " + std::to_string(index) + " has ref " + std::to_string(r) +
+                    " where a brick ref below " + std::to_string(limit) + " belongs";
+            return false;
+          }
+        } else if (IsBrickRef(r) || LeafPayload(r) >= limit) {
+          error = "cell " + std::to_string(index) + " has leaf ref " + std::to_string(r) +
+                  " outside " + std::to_string(limit) + " payloads";
+          return false;
+        }
+        continue;
+      }
+      if (IsBrickRef(r) || r != next || next >= n) {
+        error = "cell " + std::to_string(index) + " refers to cell " + std::to_string(r) +
+                " (expected " + std::to_string(next) + " of " + std::to_string(n) + ")";
+        return false;
+      }
+      ++next;
+      if (!Visit(r, level + 1)) return false;
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
+Status ValidatePool(const Cell* cells, size_t n, int depth, bool bricks_at_last_level,
+                    uint64_t limit) {
+  if (n == 0) return CorruptionError("octree pool has no root cell");
+  if (depth < 1 || depth > kMaxLevels) return CorruptionError("octree pool depth out of range");
+  PoolValidator v{cells, n, depth, bricks_at_last_level, limit, 1, {}};
+  if (!v.Visit(0, 0)) return CorruptionError("octree " + v.error);
+  if (v.next != n)
+    return CorruptionError("octree has " + std::to_string(n) + " cells but only " +
+                           std::to_string(v.next) + " are reachable");
+  return OkStatus();
+}
+
+}  // namespace vox::storage_internal

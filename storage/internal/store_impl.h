@@ -1,0 +1,28 @@
+// Opening a store from already-open files, so tests can wrap them in
+// FaultInjectionFile. Private to storage and its tests. Thread-safe.
+#ifndef VOX_STORAGE_INTERNAL_STORE_IMPL_H_
+#define VOX_STORAGE_INTERNAL_STORE_IMPL_H_
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "storage/file.h"
+#include "storage/internal/format.h"
+#include "storage/store.h"
+
+namespace vox::storage_internal {
+
+// Opens the store `dir` whose index and brick files are given. The index
+// file is read fully at open; the brick file is read on each cache miss.
+StatusOr<std::unique_ptr<Store>> OpenStoreFromFiles(const std::string& dir,
+                                                    std::unique_ptr<RandomAccessFile> index,
+                                                    std::unique_ptr<RandomAccessFile> bricks,
+                                                    const OpenOptions& options);
+
+// The brick table of an open store (for vox-info and tests).
+const std::vector<BrickEntry>& BrickTable(const Store& store);
+
+}  // namespace vox::storage_internal
+
+#endif  // VOX_STORAGE_INTERNAL_STORE_IMPL_H_

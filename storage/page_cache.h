@@ -1,0 +1,164 @@
+// vox::PageCache<V>: a thread-safe LRU cache of immutable values charged in
+// bytes against a capacity, with single-flight loading: concurrent askers of
+// a missing key wait for one load instead of each loading it. A returned
+// shared_ptr pins its value: eviction drops only the cache's reference, so
+// a pinned value stays valid (and outside the budget) until released.
+//
+// Thread safety: every member is thread-safe. The loader runs without the
+// cache's lock held and must not call back into the same key.
+#ifndef VOX_STORAGE_PAGE_CACHE_H_
+#define VOX_STORAGE_PAGE_CACHE_H_
+
+#include <condition_variable>
+#include <cstdint>
+#include <list>
+#include <memory>
+#include <mutex>
+#include <unordered_map>
+#include <utility>
+
+#include "core/status.h"
+
+namespace vox {
+
+struct PageCacheCounters {
+  uint64_t hits = 0;       // found cached, or joined another thread's load
+  uint64_t misses = 0;     // loads run (one per miss, whatever the number of askers)
+  uint64_t joined = 0;     // asks that waited for another thread's load (also in hits)
+  uint64_t evictions = 0;
+  uint64_t charge = 0;     // bytes held now
+  uint64_t capacity = 0;
+  uint64_t entries = 0;
+};
+
+template <class V>
+class PageCache {
+ public:
+  using Value = std::shared_ptr<const V>;
+
+  explicit PageCache(size_t capacity) : capacity_(capacity) {}
+  PageCache(const PageCache&) = delete;
+  PageCache& operator=(const PageCache&) = delete;
+
+  // The value for `key`: cached, or produced by `load()` -> StatusOr<std::pair<
+  // Value, size_t charge>>, run once however many threads ask at once. A
+  // failed load is not cached; every waiter gets its Status.
+  template <class Loader>
+  StatusOr<Value> GetOrLoad(uint64_t key, Loader&& load) {
+    std::unique_lock<std::mutex> lock(mu_);
+    if (Value v = LookupLocked(key)) return v;
+    auto fit = flights_.find(key);
+    if (fit != flights_.end()) {
+      std::shared_ptr<Flight> f = fit->second;
+      ++counters_.hits;
+      ++counters_.joined;
+      cv_.wait(lock, [&] { return f->done; });
+      if (!f->status.ok()) return f->status;
+      return f->value;
+    }
+    ++counters_.misses;
+    auto flight = std::make_shared<Flight>();
+    flights_.emplace(key, flight);
+    lock.unlock();
+    auto loaded = load();
+    lock.lock();
+    flight->done = true;
+    flights_.erase(key);
+    if (!loaded.ok()) {
+      flight->status = loaded.status();
+      cv_.notify_all();
+      return loaded.status();
+    }
+    flight->value = loaded->first;
+    InsertLocked(key, loaded->first, loaded->second);
+    cv_.notify_all();
+    return flight->value;
+  }
+
+  // The cached value, or null. Counts a hit or a miss.
+  Value Lookup(uint64_t key) {
+    std::lock_guard<std::mutex> lock(mu_);
+    Value v = LookupLocked(key);
+    if (!v) ++counters_.misses;
+    return v;
+  }
+
+  // Caches `value` (replacing any entry for `key`) and evicts least recently
+  // used entries until the total charge is within capacity.
+  void Insert(uint64_t key, Value value, size_t charge) {
+    std::lock_guard<std::mutex> lock(mu_);
+    InsertLocked(key, std::move(value), charge);
+  }
+
+  void Erase(uint64_t key) {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = map_.find(key);
+    if (it != map_.end()) RemoveLocked(it);
+  }
+
+  size_t TotalCharge() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return usage_;
+  }
+  size_t capacity() const { return capacity_; }
+
+  PageCacheCounters counters() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    PageCacheCounters c = counters_;
+    c.charge = usage_;
+    c.capacity = capacity_;
+    c.entries = map_.size();
+    return c;
+  }
+
+ private:
+  struct Entry {
+    Value value;
+    size_t charge = 0;
+    std::list<uint64_t>::iterator lru;
+  };
+  struct Flight {
+    bool done = false;
+    Status status;
+    Value value;
+  };
+
+  Value LookupLocked(uint64_t key) {
+    auto it = map_.find(key);
+    if (it == map_.end()) return nullptr;
+    lru_.splice(lru_.begin(), lru_, it->second.lru);
+    ++counters_.hits;
+    return it->second.value;
+  }
+
+  void RemoveLocked(typename std::unordered_map<uint64_t, Entry>::iterator it) {
+    usage_ -= it->second.charge;
+    lru_.erase(it->second.lru);
+    map_.erase(it);
+  }
+
+  void InsertLocked(uint64_t key, Value value, size_t charge) {
+    auto it = map_.find(key);
+    if (it != map_.end()) RemoveLocked(it);
+    lru_.push_front(key);
+    map_.emplace(key, Entry{std::move(value), charge, lru_.begin()});
+    usage_ += charge;
+    while (usage_ > capacity_ && !lru_.empty()) {
+      RemoveLocked(map_.find(lru_.back()));
+      ++counters_.evictions;
+    }
+  }
+
+  const size_t capacity_;
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  std::unordered_map<uint64_t, Entry> map_;
+  std::list<uint64_t> lru_;  // front: most recently used
+  std::unordered_map<uint64_t, std::shared_ptr<Flight>> flights_;
+  size_t usage_ = 0;
+  PageCacheCounters counters_;
+};
+
+}  // namespace vox
+
+#endif  // VOX_STORAGE_PAGE_CACHE_H_

@@ -1,0 +1,321 @@
+// Store::Open and the store reader: checks every block of the index at open,
+// then serves bricks from the mapped brick file through the page cache.
+#include <sys/stat.h>
+
+#include <atomic>
+#include <cstring>
+
+#include <zstd.h>
+
+#include "storage/internal/coding.h"
+#include "storage/internal/format.h"
+#include "storage/internal/store_impl.h"
+#include "storage/page_cache.h"
+#include "storage/store.h"
+
+namespace vox {
+namespace storage_internal {
+namespace {
+
+// One decompression context per thread.
+struct DCtxDeleter {
+  void operator()(ZSTD_DCtx* d) const { ZSTD_freeDCtx(d); }
+};
+ZSTD_DCtx* ThreadDCtx() {
+  thread_local std::unique_ptr<ZSTD_DCtx, DCtxDeleter> dctx(ZSTD_createDCtx());
+  return dctx.get();
+}
+
+class StoreImpl : public Store {
+ public:
+  StoreImpl(std::string dir, const OpenOptions& options)
+      : dir_(std::move(dir)), options_(options), cache_(options.cache_bytes) {}
+
+  Status Load(std::unique_ptr<RandomAccessFile> index, std::unique_ptr<RandomAccessFile> bricks);
+
+  const StoreMeta& meta() const override { return meta_; }
+  OctreeView view() override {
+    return {meta_.levels, top_.data(), uint32_t(top_.size()), this};
+  }
+
+  StatusOr<BrickView> FetchBrick(uint32_t id) override {
+    VOX_ASSIGN_OR_RETURN(auto b, Get(id));
+    return BrickView{b->cells.data(), uint32_t(b->cells.size()), b};
+  }
+
+  StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) override {
+    if (brick == kNoBrick) {
+      if (meta_.brick_level != meta_.levels || payload >= meta_.voxel_count)
+        return InvalidArgumentError("payload " + std::to_string(payload) +
+                                    " is not a voxel of the top of store '" + dir_ + "'");
+      return ReadAttributes(top_attr_.data(), uint32_t(meta_.voxel_count), flags_, payload);
+    }
+    VOX_ASSIGN_OR_RETURN(auto b, Get(brick));
+    if (payload >= b->voxel_count)
+      return InvalidArgumentError("payload " + std::to_string(payload) + " outside brick " +
+                                  std::to_string(brick) + " (" + std::to_string(b->voxel_count) +
+                                  " voxels) of store '" + dir_ + "'");
+    return ReadAttributes(b->attr_planes.data(), b->voxel_count, b->flags, payload);
+  }
+
+  CacheStats cache_stats() const override {
+    PageCacheCounters c = cache_.counters();
+    CacheStats s;
+    s.hits = c.hits;
+    s.misses = c.misses;
+    s.evictions = c.evictions;
+    s.bytes_mapped = bricks_ ? bricks_->size() : 0;
+    s.bytes_decompressed = bytes_decompressed_.load(std::memory_order_relaxed);
+    s.bytes_resident = c.charge;
+    s.capacity = c.capacity;
+    return s;
+  }
+
+  uint64_t resident_bytes() const override {
+    return top_.size() * sizeof(Cell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
+  }
+
+  const std::vector<BrickEntry>& table() const { return table_; }
+
+ private:
+  StatusOr<std::shared_ptr<const DecodedBrick>> Get(uint32_t id) {
+    if (id >= table_.size())
+      return InvalidArgumentError("brick " + std::to_string(id) + " does not exist (store '" +
+                                  dir_ + "' has " + std::to_string(table_.size()) + " bricks)");
+    return cache_.GetOrLoad(id, [&]() -> StatusOr<std::pair<std::shared_ptr<const DecodedBrick>,
+                                                            size_t>> {
+      auto b = LoadBrick(id);
+      if (!b.ok()) return b.status();
+      size_t charge = (*b)->charge();
+      return std::make_pair(std::shared_ptr<const DecodedBrick>(std::move(*b)), charge);
+    });
+  }
+
+  StatusOr<std::shared_ptr<DecodedBrick>> LoadBrick(uint32_t id);
+
+  const std::string dir_;
+  const OpenOptions options_;
+  StoreMeta meta_;
+  int depth_ = 0;
+  uint8_t flags_ = 0;
+  std::vector<Cell> top_;
+  std::vector<uint8_t> top_attr_;
+  std::vector<BrickEntry> table_;
+  std::unique_ptr<RandomAccessFile> bricks_;
+  PageCache<DecodedBrick> cache_;
+  std::atomic<uint64_t> bytes_decompressed_{0};
+};
+
+StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
+  const BrickEntry& e = table_[id];
+  const std::string& path = bricks_->path();
+  auto where = [&] {
+    return "brick " + std::to_string(id) + " (offset " + std::to_string(e.offset) + ") in '" +
+           path + "'";
+  };
+  // Copy the record out of the mapping (guarded against SIGBUS), then check it.
+  thread_local std::vector<uint8_t> record, raw;
+  record.resize(size_t(e.stored_size) + kTrailerSize);
+  Status rs = bricks_->Read(e.offset, record.size(), record.data());
+  if (!rs.ok()) return rs.WithContext("reading " + where());
+  if (options_.verify_checksums) {
+    auto codec = CheckTrailer(record.data(), e.stored_size, "brick " + std::to_string(id), path,
+                              e.offset);
+    if (!codec.ok()) return codec.status();
+    if (DecodeFixed32(record.data() + e.stored_size + 1) != e.crc)
+      return CorruptionError(where() + ": record checksum differs from the brick table's");
+  }
+  uint8_t codec = record[e.stored_size];
+  if (codec != e.codec)
+    return CorruptionError(where() + ": codec " + std::to_string(codec) +
+                           " differs from the brick table's " + std::to_string(e.codec));
+  const uint8_t* bytes = record.data();
+  if (codec == kCodecZstd) {
+    unsigned long long content = ZSTD_getFrameContentSize(record.data(), e.stored_size);
+    if (content == ZSTD_CONTENTSIZE_ERROR || content == ZSTD_CONTENTSIZE_UNKNOWN ||
+        content != e.raw_size)
+      return CorruptionError(where() + ": zstd frame content size " +
+                             (content == ZSTD_CONTENTSIZE_ERROR     ? std::string("unreadable")
+                              : content == ZSTD_CONTENTSIZE_UNKNOWN ? std::string("missing")
+                                                                    : std::to_string(content)) +
+                             ", the brick table says " + std::to_string(e.raw_size));
+    ZSTD_DCtx* dctx = ThreadDCtx();
+    if (dctx == nullptr) return ResourceExhaustedError("cannot allocate a zstd context");
+    raw.resize(e.raw_size);
+    size_t n = ZSTD_decompressDCtx(dctx, raw.data(), raw.size(), record.data(), e.stored_size);
+    if (ZSTD_isError(n))
+      return CorruptionError(where() + ": zstd: " + ZSTD_getErrorName(n));
+    if (n != e.raw_size)
+      return CorruptionError(where() + ": decompressed to " + std::to_string(n) +
+                             " bytes, the brick table says " + std::to_string(e.raw_size));
+    bytes = raw.data();
+  } else if (codec == kCodecRaw) {
+    if (e.stored_size != e.raw_size)
+      return CorruptionError(where() + ": raw brick of " + std::to_string(e.stored_size) +
+                             " bytes, the brick table says " + std::to_string(e.raw_size));
+  } else {
+    return CorruptionError(where() + ": unknown codec " + std::to_string(codec));
+  }
+  auto b = DecodeBrickRaw(bytes, e.raw_size, e, depth_, flags_);
+  if (!b.ok()) return b.status().WithContext(where());
+  bytes_decompressed_.fetch_add(e.raw_size, std::memory_order_relaxed);
+  return b;
+}
+
+Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
+                       std::unique_ptr<RandomAccessFile> bricks) {
+  const std::string& ipath = index->path();
+  const uint64_t isize = index->size();
+  if (isize < kFileHeaderSize + kFooterSize)
+    return CorruptionError("'" + ipath + "' is " + std::to_string(isize) +
+                           " bytes: truncated (a store index has at least " +
+                           std::to_string(kFileHeaderSize + kFooterSize) + ")");
+  uint8_t head[kFileHeaderSize], foot[kFooterSize];
+  VOX_RETURN_IF_ERROR(index->Read(0, kFileHeaderSize, head));
+  VOX_ASSIGN_OR_RETURN(FileHeader ih, DecodeFileHeader(head, kIndexMagic, ipath));
+  VOX_RETURN_IF_ERROR(index->Read(isize - kFooterSize, kFooterSize, foot));
+  auto footer_or = DecodeFooter(foot, ipath);
+  if (!footer_or.ok()) {
+    if (footer_or.status().code() == StatusCode::kCorruption)
+      return footer_or.status().WithContext("(index is " + std::to_string(isize) +
+                                            " bytes; truncated or overwritten?)");
+    return footer_or.status();
+  }
+  const Footer f = *footer_or;
+  if (f.store_id != ih.store_id)
+    return CorruptionError("'" + ipath + "': header and footer belong to different stores");
+
+  // Each block: in bounds, checksum, raw codec.
+  const uint64_t blocks_end = isize - kFooterSize;
+  auto read_block = [&](const BlockHandle& h, const char* what,
+                        std::vector<uint8_t>* out) -> Status {
+    if (h.offset < kFileHeaderSize || h.offset > blocks_end || h.size > blocks_end - h.offset ||
+        kTrailerSize > blocks_end - h.offset - h.size)
+      return CorruptionError("'" + ipath + "': " + what + " block [" + std::to_string(h.offset) +
+                             ", +" + std::to_string(h.size) + ") lies outside the file (" +
+                             std::to_string(isize) + " bytes)");
+    out->resize(h.size + kTrailerSize);
+    VOX_RETURN_IF_ERROR(index->Read(h.offset, out->size(), out->data()));
+    {  // the index is small: always verified
+      VOX_ASSIGN_OR_RETURN(uint8_t codec, CheckTrailer(out->data(), h.size, what, ipath, h.offset));
+      if (codec != kCodecRaw)
+        return CorruptionError("'" + ipath + "': " + what + " block has unknown codec " +
+                               std::to_string(codec));
+    }
+    out->resize(h.size);
+    return OkStatus();
+  };
+  std::vector<uint8_t> meta_b, top_b, attr_b, table_b;
+  VOX_RETURN_IF_ERROR(read_block(f.meta, "metadata", &meta_b));
+  VOX_RETURN_IF_ERROR(read_block(f.top, "top octree", &top_b));
+  VOX_RETURN_IF_ERROR(read_block(f.top_attr, "top attributes", &attr_b));
+  VOX_RETURN_IF_ERROR(read_block(f.table, "brick table", &table_b));
+  VOX_ASSIGN_OR_RETURN(meta_, DecodeMeta(meta_b.data(), meta_b.size(), ipath));
+  depth_ = meta_.levels - meta_.brick_level;
+  flags_ = AttrFlags(meta_);
+  auto bad = [&](const std::string& m) { return CorruptionError("'" + ipath + "': " + m); };
+
+  // The top: size, then structure (every ref in range, bricks only at the brick level).
+  if (top_b.size() != meta_.top_cells * sizeof(Cell))
+    return bad("top octree block is " + std::to_string(top_b.size()) + " bytes for " +
+               std::to_string(meta_.top_cells) + " cells");
+  top_.resize(meta_.top_cells);
+  std::memcpy(top_.data(), top_b.data(), top_b.size());
+  const bool top_only = depth_ == 0;
+  if (top_only) {
+    if (meta_.brick_count != 0 || !table_b.empty()) return bad("a top-only store has bricks");
+    if (meta_.voxel_count >= kBrickBit) return bad("too many voxels for a top-only store");
+    if (attr_b.size() != meta_.voxel_count * AttrBytesPerVoxel(flags_))
+      return bad("top attribute block is " + std::to_string(attr_b.size()) + " bytes for " +
+                 std::to_string(meta_.voxel_count) + " voxels");
+    top_attr_ = std::move(attr_b);
+  } else if (!attr_b.empty()) {
+    return bad("a store with bricks has top attributes");
+  }
+  Status vs = ValidatePool(top_.data(), top_.size(), meta_.brick_level, !top_only,
+                           top_only ? meta_.voxel_count : meta_.brick_count);
+  if (!vs.ok()) return vs.WithContext("'" + ipath + "': top");
+
+  // The bricks file: header, size, same store.
+  const std::string& bpath = bricks->path();
+  if (bricks->size() < kFileHeaderSize)
+    return CorruptionError("'" + bpath + "' is " + std::to_string(bricks->size()) +
+                           " bytes: truncated (the index expects " +
+                           std::to_string(f.brick_file_size) + ")");
+  VOX_RETURN_IF_ERROR(bricks->Read(0, kFileHeaderSize, head));
+  VOX_ASSIGN_OR_RETURN(FileHeader bh, DecodeFileHeader(head, kBrickMagic, bpath));
+  if (bh.store_id != ih.store_id)
+    return CorruptionError("'" + bpath + "' belongs to a different store than '" + ipath + "'");
+  if (bricks->size() != f.brick_file_size)
+    return CorruptionError("'" + bpath + "' is " + std::to_string(bricks->size()) +
+                           " bytes; the index expects " + std::to_string(f.brick_file_size) +
+                           (bricks->size() < f.brick_file_size ? " (truncated)" : ""));
+
+  // The brick table: every record inside the brick file, sizes consistent.
+  if (table_b.size() != meta_.brick_count * kTableEntrySize)
+    return bad("brick table is " + std::to_string(table_b.size()) + " bytes for " +
+               std::to_string(meta_.brick_count) + " bricks");
+  table_.resize(meta_.brick_count);
+  uint64_t voxels = 0;
+  const uint64_t bsize = f.brick_file_size;
+  const uint64_t brick_grid = uint64_t(1) << meta_.brick_level;
+  const size_t attr_bytes = AttrBytesPerVoxel(flags_);
+  for (size_t i = 0; i < table_.size(); ++i) {
+    BrickEntry e = DecodeBrickEntry(table_b.data() + i * kTableEntrySize);
+    auto row = [&](const std::string& m) { return bad("brick " + std::to_string(i) + " " + m); };
+    if (e.offset < kFileHeaderSize || e.offset > bsize ||
+        uint64_t(e.stored_size) + kTrailerSize > bsize - e.offset)
+      return row("record [" + std::to_string(e.offset) + ", +" + std::to_string(e.stored_size) +
+                 ") lies outside '" + bpath + "' (" + std::to_string(bsize) + " bytes)");
+    if (e.codec != kCodecZstd && e.codec != kCodecRaw)
+      return row("has unknown codec " + std::to_string(e.codec));
+    if (e.raw_size > kMaxBrickRawBytes ||
+        e.raw_size != kBrickHeaderSize + uint64_t(e.num_cells) + uint64_t(e.voxel_count) * attr_bytes)
+      return row("sizes are inconsistent (" + std::to_string(e.raw_size) + " bytes, " +
+                 std::to_string(e.num_cells) + " cells, " + std::to_string(e.voxel_count) +
+                 " voxels)");
+    if (e.x >= brick_grid || e.y >= brick_grid || e.z >= brick_grid)
+      return row("coordinate lies outside the brick grid");
+    voxels += e.voxel_count;
+    table_[i] = e;
+  }
+  if (!top_only && voxels != meta_.voxel_count)
+    return bad("bricks hold " + std::to_string(voxels) + " voxels, the metadata says " +
+               std::to_string(meta_.voxel_count));
+  bricks_ = std::move(bricks);
+  return OkStatus();
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<Store>> OpenStoreFromFiles(const std::string& dir,
+                                                    std::unique_ptr<RandomAccessFile> index,
+                                                    std::unique_ptr<RandomAccessFile> bricks,
+                                                    const OpenOptions& options) {
+  auto store = std::make_unique<StoreImpl>(dir, options);
+  VOX_RETURN_IF_ERROR(store->Load(std::move(index), std::move(bricks)));
+  return std::unique_ptr<Store>(std::move(store));
+}
+
+const std::vector<BrickEntry>& BrickTable(const Store& store) {
+  return static_cast<const StoreImpl&>(store).table();
+}
+
+}  // namespace storage_internal
+
+StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir, const OpenOptions& options) {
+  struct stat st;
+  if (stat(dir.c_str(), &st) != 0)
+    return NotFoundError("store '" + dir + "' does not exist");
+  if (!S_ISDIR(st.st_mode))
+    return InvalidArgumentError("'" + dir + "' is not a store directory");
+  std::string base = dir;
+  while (base.size() > 1 && base.back() == '/') base.pop_back();
+  VOX_ASSIGN_OR_RETURN(auto index,
+                       OpenMmapFile(base + "/" + storage_internal::kIndexFileName));
+  VOX_ASSIGN_OR_RETURN(auto bricks,
+                       OpenMmapFile(base + "/" + storage_internal::kBrickFileName));
+  return storage_internal::OpenStoreFromFiles(base, std::move(index), std::move(bricks), options);
+}
+
+}  // namespace vox

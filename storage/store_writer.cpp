@@ -1,0 +1,333 @@
+// StoreWriter: streams bricks into a temporary directory beside the target,
+// then writes the index, fsyncs and renames into place (FORMAT.md).
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <stdio.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <random>
+#include <cstring>
+#include <unordered_set>
+
+#include <zstd.h>
+
+#include "storage/file.h"
+#include "storage/internal/format.h"
+#include "storage/store.h"
+
+namespace vox {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace storage_internal;
+
+std::string CoordString(const glm::u64vec3& c) {
+  return "(" + std::to_string(c.x) + "," + std::to_string(c.y) + "," + std::to_string(c.z) + ")";
+}
+
+struct CoordHash {
+  size_t operator()(const glm::u64vec3& c) const {
+    uint64_t h = c.x * 0x9E3779B97F4A7C15ull ^ (c.y + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full ^
+                 (c.z + 0x165667B19E3779F9ull) * 0x27D4EB2F165667C5ull;
+    return size_t(h ^ (h >> 29));
+  }
+};
+
+Status ValidateMeta(const StoreMeta& m) {
+  if (m.levels < 1 || m.levels > kMaxLevels)
+    return InvalidArgumentError("store levels " + std::to_string(m.levels) + " outside 1..40");
+  if (m.brick_level < 1 || m.brick_level > m.levels)
+    return InvalidArgumentError("brick level " + std::to_string(m.brick_level) + " outside 1.." +
+                                std::to_string(m.levels));
+  if (m.grid_class != GridClass::kLevelSet && m.grid_class != GridClass::kFogVolume)
+    return InvalidArgumentError("unknown grid class " + std::to_string(int(m.grid_class)));
+  return OkStatus();
+}
+
+class StoreWriterImpl : public StoreWriter {
+ public:
+  StoreWriterImpl(std::string target, std::string temp, bool replace, StoreMeta meta,
+                  WriteOptions options, uint64_t store_id)
+      : target_(std::move(target)),
+        temp_(std::move(temp)),
+        replace_(replace),
+        meta_(std::move(meta)),
+        options_(options),
+        store_id_(store_id),
+        depth_(meta_.levels - meta_.brick_level),
+        flags_(AttrFlags(meta_)),
+        cctx_(ZSTD_createCCtx()) {}
+
+  ~StoreWriterImpl() override {
+    ZSTD_freeCCtx(cctx_);
+    if (!finished_) {
+      bricks_.reset();
+      std::error_code ec;
+      fs::remove_all(temp_, ec);
+    }
+  }
+
+  Status Init() {
+    if (cctx_ == nullptr) return ResourceExhaustedError("cannot allocate a zstd context");
+    VOX_ASSIGN_OR_RETURN(bricks_, WritableFile::Create(temp_ + "/" + kBrickFileName));
+    return bricks_->Append(EncodeFileHeader(kBrickMagic, store_id_));
+  }
+
+  Status AddBrick(const glm::u64vec3& c, std::vector<BrickVoxel> voxels) override {
+    if (!status_.ok()) return status_;
+    if (finished_) return InvalidArgumentError("AddBrick after Finish");
+    const uint64_t top_size = uint64_t(1) << meta_.brick_level;
+    if (c.x >= top_size || c.y >= top_size || c.z >= top_size)
+      return InvalidArgumentError("brick " + CoordString(c) + " outside the 2^" +
+                                  std::to_string(meta_.brick_level) + " brick grid");
+    if (voxels.empty()) return InvalidArgumentError("brick " + CoordString(c) + " has no voxels");
+    if (!seen_.insert(c).second)
+      return InvalidArgumentError("brick " + CoordString(c) + " added twice");
+    const uint64_t local = uint64_t(1) << depth_;
+    for (const BrickVoxel& v : voxels)
+      if (v.x >= local || v.y >= local || v.z >= local)
+        return InvalidArgumentError("voxel (" + std::to_string(v.x) + "," + std::to_string(v.y) +
+                                    "," + std::to_string(v.z) + ") of brick " + CoordString(c) +
+                                    " outside the brick's 2^" + std::to_string(depth_) +
+                                    " voxels");
+    // Track the occupied bounds in grid coordinates.
+    for (const BrickVoxel& v : voxels) {
+      glm::u64vec3 g{(c.x << depth_) + v.x, (c.y << depth_) + v.y, (c.z << depth_) + v.z};
+      if (!have_bounds_) {
+        gmin_ = gmax_ = g;
+        have_bounds_ = true;
+      }
+      gmin_ = glm::min(gmin_, g);
+      gmax_ = glm::max(gmax_, g);
+    }
+    if (depth_ == 0) {
+      // Top-only store: each "brick" is one voxel, kept in the top's payloads.
+      if (voxels.size() != 1) return InvalidArgumentError("brick " + CoordString(c) + " repeats its voxel");
+      top_voxels_.push_back({{c.x, c.y, c.z, kEmptyRef}, voxels[0].attr});
+      ++voxel_count_;
+      return OkStatus();
+    }
+    if (voxels.size() >= kBrickBit)
+      return InvalidArgumentError("brick " + CoordString(c) + " has too many voxels");
+
+    // Morton order; payload k is the k-th voxel in that order.
+    std::vector<LeafPoint> pts(voxels.size());
+    for (size_t i = 0; i < voxels.size(); ++i)
+      pts[i] = {voxels[i].x, voxels[i].y, voxels[i].z, NodeRef(i)};
+    std::sort(pts.begin(), pts.end(), MortonLess);
+    std::vector<VoxelAttributes> attrs(pts.size());
+    for (size_t k = 0; k < pts.size(); ++k) {
+      if (k > 0 && pts[k].x == pts[k - 1].x && pts[k].y == pts[k - 1].y && pts[k].z == pts[k - 1].z)
+        return InvalidArgumentError("brick " + CoordString(c) + " has voxel (" +
+                                    std::to_string(pts[k].x) + "," + std::to_string(pts[k].y) +
+                                    "," + std::to_string(pts[k].z) + ") twice");
+      attrs[k] = voxels[pts[k].ref].attr;
+      pts[k].ref = MakeLeafRef(uint32_t(k));
+    }
+    std::vector<Cell> cells = BuildCells(pts, depth_);
+    std::string raw = EncodeBrickRaw(cells, attrs, depth_, flags_);
+    if (raw.size() > kMaxBrickRawBytes)
+      return InvalidArgumentError("brick " + CoordString(c) + " is " + std::to_string(raw.size()) +
+                                  " bytes; the limit is " + std::to_string(kMaxBrickRawBytes) +
+                                  " (choose a deeper brick level)");
+    frame_.resize(ZSTD_compressBound(raw.size()));
+    size_t z = ZSTD_compressCCtx(cctx_, frame_.data(), frame_.size(), raw.data(), raw.size(),
+                                 options_.zstd_level);
+    if (ZSTD_isError(z))
+      return Fail(InternalError(std::string("zstd compression failed: ") + ZSTD_getErrorName(z)));
+    frame_.resize(z);
+    std::string trailer = BlockTrailer(frame_.data(), frame_.size(), kCodecZstd);
+    BrickEntry e;
+    e.offset = bricks_->size();
+    e.x = c.x;
+    e.y = c.y;
+    e.z = c.z;
+    e.stored_size = uint32_t(z);
+    e.raw_size = uint32_t(raw.size());
+    e.num_cells = uint32_t(cells.size());
+    e.voxel_count = uint32_t(attrs.size());
+    e.crc = DecodeFixed32Trailer(trailer);
+    e.codec = kCodecZstd;
+    Status s = bricks_->Append(frame_);
+    if (s.ok()) s = bricks_->Append(trailer);
+    if (!s.ok()) return Fail(s);
+    entries_.push_back(e);
+    voxel_count_ += attrs.size();
+    return OkStatus();
+  }
+
+  Status Finish() override {
+    if (!status_.ok()) return status_;
+    if (finished_) return InvalidArgumentError("Finish called twice");
+    Status s = DoFinish();
+    if (!s.ok()) return Fail(s);
+    finished_ = true;
+    return OkStatus();
+  }
+
+ private:
+  static uint32_t DecodeFixed32Trailer(const std::string& t) {
+    uint32_t v;
+    std::memcpy(&v, t.data() + 1, 4);
+    return v;
+  }
+
+  Status Fail(Status s) {
+    status_ = s;
+    return s;
+  }
+
+  Status DoFinish() {
+    // Bricks are numbered in Morton order of their coordinates.
+    std::vector<LeafPoint> pts;
+    std::string top_attr;
+    if (depth_ == 0) {
+      std::sort(top_voxels_.begin(), top_voxels_.end(),
+                [](const auto& a, const auto& b) { return MortonLess(a.first, b.first); });
+      std::vector<VoxelAttributes> attrs;
+      for (size_t k = 0; k < top_voxels_.size(); ++k) {
+        LeafPoint p = top_voxels_[k].first;
+        p.ref = MakeLeafRef(uint32_t(k));
+        pts.push_back(p);
+        attrs.push_back(top_voxels_[k].second);
+      }
+      WriteAttributes(attrs, flags_, &top_attr);
+    } else {
+      std::vector<LeafPoint> order(entries_.size());
+      for (size_t i = 0; i < entries_.size(); ++i)
+        order[i] = {entries_[i].x, entries_[i].y, entries_[i].z, NodeRef(i)};
+      std::sort(order.begin(), order.end(), MortonLess);
+      std::vector<BrickEntry> sorted(entries_.size());
+      for (size_t id = 0; id < order.size(); ++id) {
+        sorted[id] = entries_[order[id].ref];
+        order[id].ref = MakeBrickRef(uint32_t(id));
+      }
+      entries_ = std::move(sorted);
+      pts = std::move(order);
+    }
+    std::vector<Cell> top = BuildCells(pts, meta_.brick_level);
+
+    meta_.voxel_count = voxel_count_;
+    meta_.brick_count = entries_.size();
+    meta_.top_cells = top.size();
+    if (voxel_count_ > 0) {
+      meta_.bbox_min = meta_.origin + glm::i64vec3(gmin_);
+      meta_.bbox_max = meta_.origin + glm::i64vec3(gmax_);
+    } else {
+      meta_.bbox_min = glm::i64vec3(0);
+      meta_.bbox_max = glm::i64vec3(-1);
+    }
+
+    // The index file: header, blocks with trailers, footer.
+    VOX_ASSIGN_OR_RETURN(auto index, WritableFile::Create(temp_ + "/" + kIndexFileName));
+    VOX_RETURN_IF_ERROR(index->Append(EncodeFileHeader(kIndexMagic, store_id_)));
+    Footer f;
+    auto put_block = [&](const std::string& block, BlockHandle* h) -> Status {
+      h->offset = index->size();
+      h->size = block.size();
+      VOX_RETURN_IF_ERROR(index->Append(block));
+      return index->Append(BlockTrailer(block.data(), block.size(), kCodecRaw));
+    };
+    VOX_RETURN_IF_ERROR(put_block(EncodeMeta(meta_), &f.meta));
+    std::string top_bytes(reinterpret_cast<const char*>(top.data()), top.size() * sizeof(Cell));
+    VOX_RETURN_IF_ERROR(put_block(top_bytes, &f.top));
+    VOX_RETURN_IF_ERROR(put_block(top_attr, &f.top_attr));
+    std::string table;
+    table.reserve(entries_.size() * kTableEntrySize);
+    for (const BrickEntry& e : entries_) EncodeBrickEntry(e, &table);
+    VOX_RETURN_IF_ERROR(put_block(table, &f.table));
+    f.brick_file_size = bricks_->size();
+    f.store_id = store_id_;
+    VOX_RETURN_IF_ERROR(index->Append(EncodeFooter(f)));
+
+    VOX_RETURN_IF_ERROR(bricks_->Sync());
+    VOX_RETURN_IF_ERROR(bricks_->Close());
+    VOX_RETURN_IF_ERROR(index->Sync());
+    VOX_RETURN_IF_ERROR(index->Close());
+    VOX_RETURN_IF_ERROR(SyncDir(temp_));
+
+    // Into place: swap atomically with an existing store, or rename.
+    std::error_code ec;
+    if (replace_ && fs::exists(target_, ec)) {
+      if (renameat2(AT_FDCWD, temp_.c_str(), AT_FDCWD, target_.c_str(), RENAME_EXCHANGE) != 0)
+        return ErrnoError("cannot replace store", target_, errno);
+      fs::remove_all(temp_, ec);  // now the old store
+      if (ec) return IoError("cannot remove the replaced store at '" + temp_ + "': " + ec.message());
+    } else if (rename(temp_.c_str(), target_.c_str()) != 0) {
+      return ErrnoError("cannot rename '" + temp_ + "' to", target_, errno);
+    }
+    fs::path parent = fs::path(target_).parent_path();
+    return SyncDir(parent.empty() ? "." : parent.string());
+  }
+
+  const std::string target_, temp_;
+  const bool replace_;
+  StoreMeta meta_;
+  const WriteOptions options_;
+  const uint64_t store_id_;
+  const int depth_;
+  const uint8_t flags_;
+  ZSTD_CCtx* cctx_;
+  std::unique_ptr<WritableFile> bricks_;
+  std::vector<BrickEntry> entries_;
+  std::unordered_set<glm::u64vec3, CoordHash> seen_;
+  std::vector<std::pair<LeafPoint, VoxelAttributes>> top_voxels_;
+  std::string frame_;
+  uint64_t voxel_count_ = 0;
+  glm::u64vec3 gmin_{0}, gmax_{0};
+  bool have_bounds_ = false;
+  Status status_;
+  bool finished_ = false;
+};
+
+}  // namespace
+
+StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& dir,
+                                                           const StoreMeta& meta,
+                                                           const WriteOptions& options) {
+  VOX_RETURN_IF_ERROR(ValidateMeta(meta));
+  if (options.zstd_level < ZSTD_minCLevel() || options.zstd_level > ZSTD_maxCLevel())
+    return InvalidArgumentError("zstd level " + std::to_string(options.zstd_level) + " outside " +
+                                std::to_string(ZSTD_minCLevel()) + ".." +
+                                std::to_string(ZSTD_maxCLevel()));
+  std::string target = dir;
+  while (target.size() > 1 && target.back() == '/') target.pop_back();
+  if (target.empty()) return InvalidArgumentError("empty store path");
+  fs::path tp(target);
+  std::error_code ec;
+  bool replace = false;
+  auto st = fs::symlink_status(tp, ec);
+  if (!ec && fs::exists(st)) {
+    if (!options.force)
+      return InvalidArgumentError("'" + target + "' already exists (use --force to replace it)");
+    // Replace only a store or an empty directory, never arbitrary data.
+    bool is_store = fs::is_directory(st) && (fs::exists(tp / kIndexFileName, ec) ||
+                                             fs::exists(tp / kBrickFileName, ec));
+    bool empty_dir = fs::is_directory(st) && fs::is_empty(tp, ec);
+    if (!is_store && !empty_dir)
+      return InvalidArgumentError("'" + target +
+                                  "' exists and is not a vox store; refusing to replace it");
+    replace = true;
+  }
+  fs::path parent = tp.parent_path();
+  if (parent.empty()) parent = ".";
+  if (!fs::is_directory(parent, ec))
+    return NotFoundError("cannot create store '" + target + "': directory '" + parent.string() +
+                         "' does not exist");
+  std::random_device rd;
+  uint64_t id = (uint64_t(rd()) << 32) ^ rd() ^
+                uint64_t(std::chrono::steady_clock::now().time_since_epoch().count());
+  char suffix[40];
+  snprintf(suffix, sizeof(suffix), ".tmp-%d-%08x", int(getpid()), unsigned(id));
+  std::string temp = (parent / ("." + tp.filename().string() + suffix)).string();
+  if (mkdir(temp.c_str(), 0755) != 0)
+    return ErrnoError("cannot create temporary directory for store", temp, errno);
+  auto w = std::make_unique<StoreWriterImpl>(target, temp, replace, meta, options, id);
+  VOX_RETURN_IF_ERROR(w->Init());
+  return std::unique_ptr<StoreWriter>(std::move(w));
+}
+
+}  // namespace vox

@@ -1,0 +1,256 @@
+// Round trip: stores written from generated shapes reopen with every voxel,
+// attribute and metadata field intact, and trace exactly like MemoryOctree.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <set>
+
+#include "core/tracer.h"
+#include "storage/crc32c.h"
+#include "storage/internal/format.h"
+#include "storage/store.h"
+#include "tests/storage/test_util.h"
+
+namespace vox {
+namespace {
+
+using testing::TempDir;
+
+TEST(Crc32c, KnownValues) {
+  // RFC 3720 B.4 test vectors and the classic check value.
+  EXPECT_EQ(crc32c::Value("123456789", 9), 0xE3069283u);
+  std::string zeros(32, '\0'), ones(32, '\xff');
+  EXPECT_EQ(crc32c::Value(zeros.data(), 32), 0x8A9136AAu);
+  EXPECT_EQ(crc32c::Value(ones.data(), 32), 0x62A8AB43u);
+  std::string inc(32, 0);
+  for (int i = 0; i < 32; ++i) inc[i] = char(i);
+  EXPECT_EQ(crc32c::Value(inc.data(), 32), 0x46DD794Eu);
+  // Extend over pieces equals the whole, at every alignment.
+  std::string s = "The quick brown fox jumps over the lazy dog, twice over.";
+  for (size_t k = 0; k <= s.size(); ++k)
+    EXPECT_EQ(crc32c::Extend(crc32c::Value(s.data(), k), s.data() + k, s.size() - k),
+              crc32c::Value(s.data(), s.size()));
+  uint32_t c = crc32c::Value(s.data(), s.size());
+  EXPECT_NE(crc32c::Mask(c), c);
+  EXPECT_EQ(crc32c::Unmask(crc32c::Mask(c)), c);
+}
+
+TEST(OctNormal, RoundTripWithinQuantisation) {
+  std::mt19937 rng(5);
+  std::normal_distribution<float> g;
+  for (int i = 0; i < 10000; ++i) {
+    glm::vec3 n(g(rng), g(rng), g(rng));
+    n /= std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+    glm::vec3 d = storage_internal::DecodeOctNormal(storage_internal::EncodeOctNormal(n));
+    EXPECT_GT(n.x * d.x + n.y * d.y + n.z * d.z, std::cos(0.01f * 3.14159f / 180 * 10));
+  }
+}
+
+struct Case {
+  std::string shape;
+  int brick_level;
+  GridClass gc;
+  bool color;
+};
+
+class RoundTrip : public ::testing::TestWithParam<Case> {};
+
+TEST_P(RoundTrip, EveryVoxelAndAttribute) {
+  const Case& c = GetParam();
+  auto vol = GenerateShape(c.shape);
+  ASSERT_TRUE(vol.ok());
+  StoreMeta meta = testing::MetaFor(vol->levels, std::min(c.brick_level, vol->levels), c.gc, c.color);
+  TempDir tmp;
+  std::string dir = tmp / "store";
+  Status ws = testing::WriteVoxels(dir, vol->voxels, meta);
+  ASSERT_TRUE(ws.ok()) << ws.ToString();
+  auto store = Store::Open(dir, OpenOptions{});
+  ASSERT_TRUE(store.ok()) << store.status().ToString();
+  Store& s = **store;
+  const StoreMeta& m = s.meta();
+
+  // Metadata.
+  EXPECT_EQ(m.source_file, meta.source_file);
+  EXPECT_EQ(m.grid_name, meta.grid_name);
+  EXPECT_EQ(m.grid_class, meta.grid_class);
+  EXPECT_EQ(m.levels, meta.levels);
+  EXPECT_EQ(m.brick_level, meta.brick_level);
+  EXPECT_EQ(m.origin, meta.origin);
+  EXPECT_EQ(m.index_to_world, meta.index_to_world);
+  EXPECT_EQ(m.voxel_size, meta.voxel_size);
+  EXPECT_EQ(m.has_normal, meta.has_normal);
+  EXPECT_EQ(m.has_density, meta.has_density);
+  EXPECT_EQ(m.has_color, meta.has_color);
+  EXPECT_EQ(m.isovalue, meta.isovalue);
+  EXPECT_EQ(m.threshold, meta.threshold);
+  EXPECT_EQ(m.build_options, meta.build_options);
+  EXPECT_EQ(m.voxel_count, vol->voxels.size());
+  glm::i64vec3 lo(INT64_MAX), hi(INT64_MIN);
+  std::set<std::tuple<uint64_t, uint64_t, uint64_t>> bricks;
+  const int sub = m.levels - m.brick_level;
+  for (const LeafPoint& p : vol->voxels) {
+    lo = glm::min(lo, glm::i64vec3(p.x, p.y, p.z));
+    hi = glm::max(hi, glm::i64vec3(p.x, p.y, p.z));
+    bricks.insert({p.x >> sub, p.y >> sub, p.z >> sub});
+  }
+  EXPECT_EQ(m.bbox_min, lo + meta.origin);
+  EXPECT_EQ(m.bbox_max, hi + meta.origin);
+  EXPECT_EQ(m.brick_count, sub == 0 ? 0 : bricks.size());
+  EXPECT_EQ(m.top_cells, s.view().top_cells);
+
+  // Every voxel is found with its attributes; payloads are distinct.
+  std::set<std::pair<uint32_t, uint32_t>> seen;
+  for (const LeafPoint& p : vol->voxels) {
+    auto loc = testing::Locate(s, p.x, p.y, p.z);
+    ASSERT_TRUE(loc.ok()) << loc.status().ToString();
+    ASSERT_TRUE(loc->has_value()) << p.x << "," << p.y << "," << p.z;
+    EXPECT_TRUE(seen.insert({(*loc)->brick, (*loc)->payload}).second);
+    auto a = s.Attributes((*loc)->brick, (*loc)->payload);
+    ASSERT_TRUE(a.ok()) << a.status().ToString();
+    VoxelAttributes e = testing::AttrFor(p.x, p.y, p.z, meta);
+    if (m.has_normal) {
+      EXPECT_NEAR(a->normal.x, e.normal.x, 1e-3);
+      EXPECT_NEAR(a->normal.y, e.normal.y, 1e-3);
+      EXPECT_NEAR(a->normal.z, e.normal.z, 1e-3);
+    } else {
+      EXPECT_EQ(a->normal, glm::vec3(0));
+    }
+    EXPECT_EQ(a->density, e.density);
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(a->color[k], e.color[k], 2e-3);
+  }
+  // No voxel more than those written: count the leaves of the whole tree.
+  uint64_t leaves = 0;
+  std::function<void(const Cell*, const Cell*, int)> count = [&](const Cell* pool, const Cell* cell,
+                                                                 int levels_left) {
+    for (NodeRef r : cell->child) {
+      if (r == kEmptyRef) continue;
+      if (levels_left == 1) {
+        ++leaves;
+      } else if (IsBrickRef(r)) {
+        auto b = s.FetchBrick(r & kBrickIdMask);
+        ASSERT_TRUE(b.ok());
+        count(b->cells, b->cells, levels_left - 1);
+      } else {
+        count(pool, pool + r, levels_left - 1);
+      }
+    }
+  };
+  count(s.view().top, s.view().top, m.levels);
+  EXPECT_EQ(leaves, vol->voxels.size());
+}
+
+TEST_P(RoundTrip, TracesLikeMemoryOctree) {
+  const Case& c = GetParam();
+  auto vol = GenerateShape(c.shape);
+  ASSERT_TRUE(vol.ok());
+  const int levels = vol->levels;
+  StoreMeta meta = testing::MetaFor(levels, std::min(c.brick_level, levels), c.gc, c.color);
+  TempDir tmp;
+  std::string dir = tmp / "store";
+  ASSERT_TRUE(testing::WriteVoxels(dir, vol->voxels, meta).ok());
+  OpenOptions oo;
+  oo.cache_bytes = 64 << 10;  // small: eviction while tracing
+  auto store = Store::Open(dir, oo);
+  ASSERT_TRUE(store.ok()) << store.status().ToString();
+  auto mem = MemoryOctree::Build(vol->voxels, levels, levels);
+  ASSERT_TRUE(mem.ok());
+  std::mt19937_64 rng(99);
+  std::uniform_real_distribution<double> u(-0.3, 1.3), dd(-1, 1);
+  const double n = double(int64_t(1) << levels);
+  std::vector<Ray> rays;
+  for (int i = 0; i < 300; ++i) {
+    Ray r;
+    r.origin = glm::dvec3(u(rng), u(rng), u(rng)) * n;
+    r.dir = glm::dvec3(dd(rng), dd(rng), dd(rng));
+    if (i % 10 == 0) r.dir = glm::dvec3(0, 0, i % 20 == 0 ? 1 : -1);  // axis-aligned
+    if (i % 2 == 1) {  // aimed at a voxel's centre
+      const LeafPoint& p = vol->voxels[rng() % vol->voxels.size()];
+      r.dir = glm::dvec3(p.x + 0.5, p.y + 0.5, p.z + 0.5) - r.origin;
+    }
+    rays.push_back(r);
+  }
+  std::set<int> splits = {1, std::max(1, meta.brick_level - 1), meta.brick_level,
+                          std::min(levels, meta.brick_level + 1), levels};
+  uint64_t total_hits = 0;
+  for (int n1 : splits) {
+    if (n1 > 20 || levels - n1 > 20) continue;
+    auto ts = Tracer<>::Create((*store)->view(), n1);
+    auto tm = Tracer<>::Create((*mem)->view(), n1);
+    ASSERT_TRUE(ts.ok() && tm.ok()) << ts.status().ToString();
+    for (const Ray& r : rays) {
+      std::vector<Hit> hs, hm;
+      ASSERT_TRUE(ts->Traverse(r, [&](const Hit& h) { hs.push_back(h); return hs.size() < 8; }).ok());
+      ASSERT_TRUE(tm->Traverse(r, [&](const Hit& h) { hm.push_back(h); return hm.size() < 8; }).ok());
+      ASSERT_EQ(hs.size(), hm.size()) << "split " << n1;
+      total_hits += hs.size();
+      for (size_t k = 0; k < hs.size(); ++k) {
+        EXPECT_EQ(hs[k].voxel, hm[k].voxel) << "split " << n1;
+        EXPECT_EQ(hs[k].t, hm[k].t);
+        auto a = (*store)->Attributes(hs[k].brick, hs[k].payload);
+        ASSERT_TRUE(a.ok()) << a.status().ToString();
+        VoxelAttributes e = testing::AttrFor(hs[k].voxel.x, hs[k].voxel.y, hs[k].voxel.z, meta);
+        EXPECT_NEAR(a->normal.x, e.normal.x, 1e-3);
+        EXPECT_EQ(a->density, e.density);
+      }
+    }
+  }
+  EXPECT_GT(total_hits, 300u);  // the comparison saw hits in every split
+  CacheStats cs = (*store)->cache_stats();
+  EXPECT_LE(cs.bytes_resident, cs.capacity);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Shapes, RoundTrip,
+    ::testing::Values(Case{"sphere:64", 3, GridClass::kLevelSet, false},
+                      Case{"sphere:64", 1, GridClass::kLevelSet, true},
+                      Case{"sphere:64", 5, GridClass::kFogVolume, false},
+                      Case{"sphere:64", 6, GridClass::kLevelSet, false},  // top only
+                      Case{"torus:32", 2, GridClass::kFogVolume, true},
+                      Case{"cubes:64", 4, GridClass::kLevelSet, true},
+                      Case{"noise:32", 3, GridClass::kFogVolume, false},
+                      Case{"corner:12", 6, GridClass::kLevelSet, false},
+                      Case{"corner:24", 10, GridClass::kLevelSet, true}),
+    [](const auto& info) {
+      std::string s = info.param.shape + "_bl" + std::to_string(info.param.brick_level) +
+                      (info.param.gc == GridClass::kLevelSet ? "_ls" : "_fog") +
+                      (info.param.color ? "_rgb" : "");
+      for (char& ch : s)
+        if (!isalnum(ch)) ch = '_';
+      return s;
+    });
+
+TEST(Writer, EmptyStoreOpens) {
+  TempDir tmp;
+  StoreMeta meta = testing::MetaFor(5, 3, GridClass::kLevelSet, false);
+  auto w = StoreWriter::Create(tmp / "s", meta, {});
+  ASSERT_TRUE(w.ok());
+  ASSERT_TRUE((*w)->Finish().ok());
+  auto s = Store::Open(tmp / "s", {});
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  EXPECT_EQ((*s)->meta().voxel_count, 0u);
+  EXPECT_EQ((*s)->meta().brick_count, 0u);
+  auto t = Tracer<>::Create((*s)->view(), 3);
+  ASSERT_TRUE(t.ok());
+  auto h = t->FirstHit(Ray{{1, 1, -1}, {0.1, 0.2, 1}});
+  ASSERT_TRUE(h.ok());
+  EXPECT_FALSE(h->has_value());
+}
+
+TEST(Writer, RejectsBadBricks) {
+  TempDir tmp;
+  StoreMeta meta = testing::MetaFor(5, 3, GridClass::kLevelSet, false);
+  auto w = StoreWriter::Create(tmp / "s", meta, {});
+  ASSERT_TRUE(w.ok());
+  EXPECT_EQ((*w)->AddBrick({8, 0, 0}, {BrickVoxel{}}).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ((*w)->AddBrick({1, 0, 0}, {}).code(), StatusCode::kInvalidArgument);
+  BrickVoxel far;
+  far.x = 4;
+  EXPECT_EQ((*w)->AddBrick({1, 0, 0}, {far}).code(), StatusCode::kInvalidArgument);
+  BrickVoxel a;
+  EXPECT_EQ((*w)->AddBrick({2, 0, 0}, {a, a}).code(), StatusCode::kInvalidArgument);
+  EXPECT_TRUE((*w)->AddBrick({3, 0, 0}, {a}).ok());
+  EXPECT_EQ((*w)->AddBrick({3, 0, 0}, {a}).code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace vox
