@@ -154,8 +154,14 @@ class Tracer {
     cx->i2 = d == 2 ? 1 : 2;
     cx->q1 = Fixed::Ratio(D[d], D[cx->i1], sat_);
     cx->q2 = Fixed::Ratio(D[d], D[cx->i2], sat_);
-    cx->q1r = Fixed::template ToReal<Real>(cx->q1);
-    cx->q2r = Fixed::template ToReal<Real>(cx->q2);
+    // The first boundary crossing of a passive axis, l = d + h * q, needs the
+    // true slope even when q saturates: h can be small enough to bring a
+    // crossing with q >= sat inside the grid. Later crossings (l += q) are
+    // one whole voxel apart and lie beyond the grid once q saturates.
+    cx->q1r = cx->q1 < sat_ ? Fixed::template ToReal<Real>(cx->q1)
+                            : std::fabs(Real(D[d]) / Real(D[cx->i1]));  // inf if D_i1 == 0
+    cx->q2r = cx->q2 < sat_ ? Fixed::template ToReal<Real>(cx->q2)
+                            : std::fabs(Real(D[d]) / Real(D[cx->i2]));
 
     // Clip to [0, G]^3 (closed; the half-open voxel rule is applied by the
     // start-voxel choice). t is in units of the scaled direction.
@@ -205,8 +211,8 @@ class Tracer {
   }
 
   // ud + h * q in fixed point, saturated.
-  Word LValue(Real ud, Real h, Word q, Real qr) const {
-    if (q >= sat_) return sat_;
+  // `qr` is the unsaturated slope; h * qr may be NaN (0 * inf): saturated.
+  Word LValue(Real ud, Real h, Word /*q*/, Real qr) const {
     Real l = ud + h * qr;
     if (!(l < sat_real_)) return sat_;
     return Fixed::FromReal(l);

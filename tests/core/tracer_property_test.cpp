@@ -1,0 +1,264 @@
+// Property tests of the tracer against the exact Reference: random rays with
+// fixed seeds, from outside and inside, on grids 2^6 to 2^40, sparse and
+// dense, at several brick levels and splits (single step where the grid has
+// at most 20 levels; two steps with n1 below, at and above the brick level,
+// so second steps fetch bricks and first steps walk through them).
+//
+// Rays per configuration: VOX_CORE_RAYS (10^5 in the "long" registration),
+// else a small default. A failure prints the ray in C99 hex floats.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdio>
+#include <functional>
+
+#include "tests/core/reference.h"
+#include "tests/core/test_util.h"
+
+namespace vox::testing {
+namespace {
+
+struct Config {
+  std::string name;
+  int levels = 0;
+  std::vector<Voxel> voxels;
+  std::vector<int> brick_levels, n1s;
+  int default_rays = 1000;
+  uint64_t seed = 1;
+  // Every `traverse_every`-th ray also checks Traverse (0: never).
+  int traverse_every = 0;
+  std::function<Ray(Rng&, const Config&)> make_ray;
+};
+
+// A mix: towards an occupied voxel from outside, towards any point from
+// outside, from inside near an occupied voxel (sometimes inside it), and
+// from a random point inside the grid.
+Ray MixedRay(Rng& rng, const Config& cfg) {
+  const double n = std::ldexp(1.0, cfg.levels);
+  const Voxel& v = cfg.voxels[size_t(rng.Int(0, int64_t(cfg.voxels.size()) - 1))];
+  const double kind = rng.Uniform(0, 1);
+  if (kind < 0.4) {
+    glm::dvec3 target = rng.PointIn(v);
+    return RayFromOutside(rng, cfg.levels, target, n * rng.Uniform(0.9, 3));
+  }
+  if (kind < 0.55) {
+    glm::dvec3 target(rng.Uniform(0, n), rng.Uniform(0, n), rng.Uniform(0, n));
+    return RayFromOutside(rng, cfg.levels, target, n * rng.Uniform(0.9, 3));
+  }
+  if (kind < 0.85) {
+    glm::dvec3 o = rng.PointIn(v);
+    if (rng.Chance(0.7)) {
+      double r = std::ldexp(1.0, int(rng.Int(0, std::min(cfg.levels, 6))));
+      o += glm::dvec3(rng.Uniform(-r, r), rng.Uniform(-r, r), rng.Uniform(-r, r));
+    }
+    return RayFrom(rng, o);
+  }
+  return RayFrom(rng, glm::dvec3(rng.Uniform(0, n), rng.Uniform(0, n), rng.Uniform(0, n)));
+}
+
+// For huge grids: origins near an occupied voxel (within 2^8), aimed at
+// another occupied voxel nearby, so rays stay short; one in 50 from far
+// outside towards an occupied voxel.
+Ray NearRay(Rng& rng, const Config& cfg) {
+  const Voxel& v = cfg.voxels[size_t(rng.Int(0, int64_t(cfg.voxels.size()) - 1))];
+  glm::dvec3 target = rng.PointIn(v);
+  if (rng.Chance(0.02))
+    return RayFromOutside(rng, cfg.levels, target, std::ldexp(1.0, cfg.levels) * rng.Uniform(0.9, 2));
+  glm::dvec3 o = target;
+  double r = std::ldexp(1.0, int(rng.Int(0, 8)));
+  o += glm::dvec3(rng.Uniform(-r, r), rng.Uniform(-r, r), rng.Uniform(-r, r));
+  Ray ray;
+  ray.origin = o;
+  ray.dir = rng.Chance(0.8) ? (target - o) * std::ldexp(1.0, int(rng.Int(-10, 10)))
+                            : rng.Direction();
+  if (ray.dir.x == 0 && ray.dir.y == 0 && ray.dir.z == 0) ray.dir = rng.Direction();
+  return ray;
+}
+
+template <class TracerT>
+struct Result {
+  uint64_t rays = 0, hits = 0, ambiguous = 0;
+  std::vector<uint64_t> failures;
+  double seconds = 0;
+};
+
+// Runs `cfg` with tracers of type TracerT; returns per-tracer failure counts.
+template <class TracerT = DefaultTracer>
+Result<TracerT> RunConfig(const Config& cfg, bool expect_pass = true) {
+  Result<TracerT> res;
+  auto t0 = std::chrono::steady_clock::now();
+  Reference ref(cfg.voxels, cfg.levels);
+  auto tracers = MakeTracers<TracerT>(cfg.voxels, cfg.levels, cfg.brick_levels, cfg.n1s);
+  EXPECT_TRUE(tracers.ok()) << tracers.status().ToString();
+  if (!tracers.ok()) return res;
+  res.failures.assign(tracers->size(), 0);
+  Rng rng(cfg.seed);
+  const int rays = RayCount(cfg.default_rays);
+  int printed = 0;
+  for (int i = 0; i < rays; ++i) {
+    const Ray ray = cfg.make_ray(rng, cfg);
+    const ExactRay er(ray);
+    const RefHit expected = ref.FirstHit(er);
+    ++res.rays;
+    res.hits += expected.hit;
+    res.ambiguous += expected.ambiguous;
+    const bool traverse = cfg.traverse_every > 0 && i % cfg.traverse_every == 0;
+    for (size_t k = 0; k < tracers->size(); ++k) {
+      const auto& t = (*tracers)[k];
+      std::string msg = TraceAndCheck(t.tracer, ref, er, expected);
+      if (msg.empty() && traverse) {
+        std::vector<Hit> visits;
+        Status s = t.tracer.Traverse(ray, [&](const Hit& h) {
+          visits.push_back(h);
+          return true;
+        });
+        msg = s.ok() ? CheckTraversal(ref, er, visits) : "Traverse: " + s.ToString();
+        if (!msg.empty()) msg = "Traverse " + msg;
+      }
+      if (msg.empty()) continue;
+      ++res.failures[k];
+      if (expect_pass && printed < 8) {
+        ++printed;
+        ADD_FAILURE() << cfg.name << " [" << t.name << "] ray " << i << ": " << msg;
+      }
+    }
+  }
+  res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("%s: %zu voxels, %llu rays (%llu hit, %llu ambiguous), %.1f s\n", cfg.name.c_str(),
+              ref.size(), (unsigned long long)res.rays, (unsigned long long)res.hits,
+              (unsigned long long)res.ambiguous, res.seconds);
+  for (size_t k = 0; k < tracers->size(); ++k)
+    std::printf("  %-12s failures %llu\n", (*tracers)[k].name.c_str(),
+                (unsigned long long)res.failures[k]);
+  return res;
+}
+
+Config Make(std::string name, int levels, std::vector<Voxel> voxels, std::vector<int> bls,
+            std::vector<int> n1s, int default_rays, uint64_t seed) {
+  Config c;
+  c.name = std::move(name);
+  c.levels = levels;
+  c.voxels = std::move(voxels);
+  c.brick_levels = std::move(bls);
+  c.n1s = std::move(n1s);
+  c.default_rays = default_rays;
+  c.seed = seed;
+  c.make_ray = MixedRay;
+  return c;
+}
+
+// ---------------------------------------------------------------- 2^6
+
+TEST(TracerProperty, Grid64DenseRandom) {
+  Rng rng(11);
+  Config c = Make("2^6 dense 30%", 6, DenseVoxels(rng, 0.3, {0, 0, 0}, 64), {6, 3}, {6, 5, 3, 1},
+                  1500, 101);
+  c.traverse_every = 10;
+  RunConfig(c);
+}
+
+TEST(TracerProperty, Grid64SparseRandom) {
+  Rng rng(12);
+  Config c = Make("2^6 sparse 0.3%", 6, DenseVoxels(rng, 0.003, {0, 0, 0}, 64), {6, 2},
+                  {6, 4, 2, 1}, 1500, 102);
+  c.traverse_every = 5;
+  RunConfig(c);
+}
+
+TEST(TracerProperty, Grid64Sphere) {
+  int levels = 0;
+  Config c = Make("sphere:64", 6, ShapeVoxels("sphere:64", {0, 0, 0}, &levels), {6, 4},
+                  {6, 3, 2, 5}, 1500, 103);
+  ASSERT_EQ(levels, 6);
+  c.traverse_every = 10;
+  RunConfig(c);
+}
+
+// ---------------------------------------------------------------- 2^8 .. 2^10
+
+TEST(TracerProperty, Grid256Cubes) {
+  int levels = 0;
+  Config c = Make("cubes:256", 8, ShapeVoxels("cubes:256", {0, 0, 0}, &levels), {8, 4},
+                  {8, 4, 2, 6}, 1000, 104);
+  ASSERT_EQ(levels, 8);
+  c.traverse_every = 20;
+  RunConfig(c);
+}
+
+TEST(TracerProperty, Grid256Torus) {
+  int levels = 0;
+  Config c = Make("torus:256", 8, ShapeVoxels("torus:256", {0, 0, 0}, &levels), {8, 3},
+                  {8, 5, 3}, 1000, 105);
+  ASSERT_EQ(levels, 8);
+  RunConfig(c);
+}
+
+TEST(TracerProperty, Grid1024Noise) {
+  int levels = 0;
+  Config c = Make("noise:1024", 10, ShapeVoxels("noise:1024", {0, 0, 0}, &levels), {10, 5},
+                  {10, 5, 3, 7}, 600, 106);
+  ASSERT_EQ(levels, 10);
+  RunConfig(c);
+}
+
+// ---------------------------------------------------------------- 2^16, 2^20
+
+// Dense blobs and a sparse scatter, placed across octant boundaries.
+std::vector<Voxel> Blobs(Rng& rng, int levels, int blobs, int64_t extent, double density,
+                         size_t scatter) {
+  const int64_t n = int64_t(1) << levels;
+  std::vector<Voxel> out;
+  for (int b = 0; b < blobs; ++b) {
+    Voxel lo;
+    for (int a = 0; a < 3; ++a) {
+      // Half the blobs straddle a power-of-two boundary.
+      if (b % 2 == 0) {
+        const int k = int(rng.Int(1, std::min(levels, 12)));
+        const int64_t boundary = (n >> k) * (2 * rng.Int(0, (int64_t(1) << (k - 1)) - 1) + 1);
+        lo[a] = std::clamp<int64_t>(boundary - extent / 2, 0, n - extent);
+      } else {
+        lo[a] = rng.Int(0, n - extent);
+      }
+    }
+    std::vector<Voxel> blob = DenseVoxels(rng, density, lo, extent);
+    out.insert(out.end(), blob.begin(), blob.end());
+  }
+  std::vector<Voxel> sc = RandomVoxels(rng, scatter, {0, 0, 0}, n);
+  out.insert(out.end(), sc.begin(), sc.end());
+  return out;
+}
+
+TEST(TracerProperty, Grid2p16Blobs) {
+  Rng rng(16);
+  Config c = Make("2^16 blobs", 16, Blobs(rng, 16, 12, 16, 0.4, 3000), {16, 9},
+                  {16, 9, 5, 12}, 300, 116);
+  RunConfig(c);
+}
+
+TEST(TracerProperty, Grid2p20Blobs) {
+  Rng rng(20);
+  Config c = Make("2^20 blobs", 20, Blobs(rng, 20, 12, 16, 0.4, 3000), {20, 11},
+                  {20, 11, 6, 14}, 200, 120);
+  c.make_ray = NearRay;
+  RunConfig(c);
+}
+
+// ---------------------------------------------------------------- 2^30, 2^40
+
+TEST(TracerProperty, Grid2p30Blobs) {
+  Rng rng(30);
+  Config c = Make("2^30 blobs", 30, Blobs(rng, 30, 10, 16, 0.4, 200), {12, 25},
+                  {10, 15, 20}, 200, 130);
+  c.make_ray = NearRay;
+  RunConfig(c);
+}
+
+TEST(TracerProperty, Grid2p40Blobs) {
+  Rng rng(40);
+  Config c = Make("2^40 blobs", 40, Blobs(rng, 40, 10, 16, 0.4, 100), {12, 30}, {20}, 200, 140);
+  c.make_ray = NearRay;
+  RunConfig(c);
+}
+
+}  // namespace
+}  // namespace vox::testing
