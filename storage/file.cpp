@@ -37,9 +37,10 @@ void BusHandler(int sig, siginfo_t* info, void* ucontext) {
     g_previous_bus_action.sa_handler(sig);
     return;
   }
-  // Default action: restore it and return; the faulting access repeats and
-  // terminates the process as it would have without us.
+  // Default action: restore it and re-raise, terminating the process as it
+  // would have without us (a faulting access would also repeat on return).
   signal(SIGBUS, SIG_DFL);
+  raise(SIGBUS);
 }
 
 void InstallBusHandler() {

@@ -175,12 +175,7 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   VOX_ASSIGN_OR_RETURN(FileHeader ih, DecodeFileHeader(head, kIndexMagic, ipath));
   VOX_RETURN_IF_ERROR(index->Read(isize - kFooterSize, kFooterSize, foot));
   auto footer_or = DecodeFooter(foot, ipath);
-  if (!footer_or.ok()) {
-    if (footer_or.status().code() == StatusCode::kCorruption)
-      return footer_or.status().WithContext("(index is " + std::to_string(isize) +
-                                            " bytes; truncated or overwritten?)");
-    return footer_or.status();
-  }
+  if (!footer_or.ok()) return footer_or.status();
   const Footer f = *footer_or;
   if (f.store_id != ih.store_id)
     return CorruptionError("'" + ipath + "': header and footer belong to different stores");

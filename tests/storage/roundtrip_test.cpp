@@ -14,7 +14,7 @@
 namespace vox {
 namespace {
 
-using testing::TempDir;
+using storage_test::TempDir;
 
 TEST(Crc32c, KnownValues) {
   // RFC 3720 B.4 test vectors and the classic check value.
@@ -59,10 +59,10 @@ TEST_P(RoundTrip, EveryVoxelAndAttribute) {
   const Case& c = GetParam();
   auto vol = GenerateShape(c.shape);
   ASSERT_TRUE(vol.ok());
-  StoreMeta meta = testing::MetaFor(vol->levels, std::min(c.brick_level, vol->levels), c.gc, c.color);
+  StoreMeta meta = storage_test::MetaFor(vol->levels, std::min(c.brick_level, vol->levels), c.gc, c.color);
   TempDir tmp;
   std::string dir = tmp / "store";
-  Status ws = testing::WriteVoxels(dir, vol->voxels, meta);
+  Status ws = storage_test::WriteVoxels(dir, vol->voxels, meta);
   ASSERT_TRUE(ws.ok()) << ws.ToString();
   auto store = Store::Open(dir, OpenOptions{});
   ASSERT_TRUE(store.ok()) << store.status().ToString();
@@ -101,13 +101,13 @@ TEST_P(RoundTrip, EveryVoxelAndAttribute) {
   // Every voxel is found with its attributes; payloads are distinct.
   std::set<std::pair<uint32_t, uint32_t>> seen;
   for (const LeafPoint& p : vol->voxels) {
-    auto loc = testing::Locate(s, p.x, p.y, p.z);
+    auto loc = storage_test::Locate(s, p.x, p.y, p.z);
     ASSERT_TRUE(loc.ok()) << loc.status().ToString();
     ASSERT_TRUE(loc->has_value()) << p.x << "," << p.y << "," << p.z;
     EXPECT_TRUE(seen.insert({(*loc)->brick, (*loc)->payload}).second);
     auto a = s.Attributes((*loc)->brick, (*loc)->payload);
     ASSERT_TRUE(a.ok()) << a.status().ToString();
-    VoxelAttributes e = testing::AttrFor(p.x, p.y, p.z, meta);
+    VoxelAttributes e = storage_test::AttrFor(p.x, p.y, p.z, meta);
     if (m.has_normal) {
       EXPECT_NEAR(a->normal.x, e.normal.x, 1e-3);
       EXPECT_NEAR(a->normal.y, e.normal.y, 1e-3);
@@ -144,10 +144,10 @@ TEST_P(RoundTrip, TracesLikeMemoryOctree) {
   auto vol = GenerateShape(c.shape);
   ASSERT_TRUE(vol.ok());
   const int levels = vol->levels;
-  StoreMeta meta = testing::MetaFor(levels, std::min(c.brick_level, levels), c.gc, c.color);
+  StoreMeta meta = storage_test::MetaFor(levels, std::min(c.brick_level, levels), c.gc, c.color);
   TempDir tmp;
   std::string dir = tmp / "store";
-  ASSERT_TRUE(testing::WriteVoxels(dir, vol->voxels, meta).ok());
+  ASSERT_TRUE(storage_test::WriteVoxels(dir, vol->voxels, meta).ok());
   OpenOptions oo;
   oo.cache_bytes = 64 << 10;  // small: eviction while tracing
   auto store = Store::Open(dir, oo);
@@ -188,7 +188,7 @@ TEST_P(RoundTrip, TracesLikeMemoryOctree) {
         EXPECT_EQ(hs[k].t, hm[k].t);
         auto a = (*store)->Attributes(hs[k].brick, hs[k].payload);
         ASSERT_TRUE(a.ok()) << a.status().ToString();
-        VoxelAttributes e = testing::AttrFor(hs[k].voxel.x, hs[k].voxel.y, hs[k].voxel.z, meta);
+        VoxelAttributes e = storage_test::AttrFor(hs[k].voxel.x, hs[k].voxel.y, hs[k].voxel.z, meta);
         EXPECT_NEAR(a->normal.x, e.normal.x, 1e-3);
         EXPECT_EQ(a->density, e.density);
       }
@@ -221,7 +221,7 @@ INSTANTIATE_TEST_SUITE_P(
 
 TEST(Writer, EmptyStoreOpens) {
   TempDir tmp;
-  StoreMeta meta = testing::MetaFor(5, 3, GridClass::kLevelSet, false);
+  StoreMeta meta = storage_test::MetaFor(5, 3, GridClass::kLevelSet, false);
   auto w = StoreWriter::Create(tmp / "s", meta, {});
   ASSERT_TRUE(w.ok());
   ASSERT_TRUE((*w)->Finish().ok());
@@ -238,7 +238,7 @@ TEST(Writer, EmptyStoreOpens) {
 
 TEST(Writer, RejectsBadBricks) {
   TempDir tmp;
-  StoreMeta meta = testing::MetaFor(5, 3, GridClass::kLevelSet, false);
+  StoreMeta meta = storage_test::MetaFor(5, 3, GridClass::kLevelSet, false);
   auto w = StoreWriter::Create(tmp / "s", meta, {});
   ASSERT_TRUE(w.ok());
   EXPECT_EQ((*w)->AddBrick({8, 0, 0}, {BrickVoxel{}}).code(), StatusCode::kInvalidArgument);

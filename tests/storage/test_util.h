@@ -19,7 +19,7 @@
 #include "core/shapes.h"
 #include "storage/store.h"
 
-namespace vox::testing {
+namespace vox::storage_test {
 
 // A fresh directory under the test temp dir, removed on destruction.
 class TempDir {
@@ -146,6 +146,6 @@ inline void WriteFile(const std::string& path, const std::string& data) {
   f.write(data.data(), std::streamsize(data.size()));
 }
 
-}  // namespace vox::testing
+}  // namespace vox::storage_test
 
 #endif  // VOX_TESTS_STORAGE_TEST_UTIL_H_

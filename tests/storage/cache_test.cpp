@@ -1,0 +1,195 @@
+// The page cache and the store's brick cache: budget, LRU eviction, pins
+// surviving eviction, and single-flight loading under many threads.
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstring>
+#include <thread>
+
+#include "storage/page_cache.h"
+#include "storage/store.h"
+#include "tests/storage/test_util.h"
+
+namespace vox {
+namespace {
+
+using Cache = PageCache<int>;
+
+StatusOr<std::pair<Cache::Value, size_t>> Make(int v, size_t charge) {
+  return std::make_pair(std::make_shared<const int>(v), charge);
+}
+
+TEST(PageCache, LruEvictionWithinBudget) {
+  Cache c(100);
+  for (int k = 0; k < 4; ++k) ASSERT_TRUE(c.GetOrLoad(k, [&] { return Make(k, 30); }).ok());
+  // 4 x 30 > 100: key 0 (least recently used) went.
+  EXPECT_EQ(c.TotalCharge(), 90u);
+  EXPECT_EQ(c.counters().evictions, 1u);
+  EXPECT_EQ(c.Lookup(0), nullptr);
+  // Touch 1, insert 4: now 2 is the oldest and goes.
+  EXPECT_NE(c.Lookup(1), nullptr);
+  ASSERT_TRUE(c.GetOrLoad(4, [&] { return Make(4, 30); }).ok());
+  EXPECT_EQ(c.Lookup(2), nullptr);
+  EXPECT_NE(c.Lookup(1), nullptr);
+  EXPECT_NE(c.Lookup(3), nullptr);
+  EXPECT_NE(c.Lookup(4), nullptr);
+  EXPECT_LE(c.TotalCharge(), 100u);
+  EXPECT_EQ(c.counters().evictions, 2u);
+}
+
+TEST(PageCache, PinnedValueSurvivesEviction) {
+  Cache c(10);
+  auto v = c.GetOrLoad(7, [] { return Make(77, 8); });
+  ASSERT_TRUE(v.ok());
+  Cache::Value pin = *v;
+  ASSERT_TRUE(c.GetOrLoad(8, [] { return Make(88, 8); }).ok());  // evicts 7
+  EXPECT_EQ(c.Lookup(7), nullptr);
+  EXPECT_EQ(*pin, 77);  // still valid
+  // An entry larger than the whole budget is returned, then not kept.
+  auto big = c.GetOrLoad(9, [] { return Make(99, 1000); });
+  ASSERT_TRUE(big.ok());
+  EXPECT_EQ(**big, 99);
+  EXPECT_LE(c.TotalCharge(), 10u);
+}
+
+TEST(PageCache, FailedLoadIsNotCachedAndReachesWaiters) {
+  Cache c(100);
+  int calls = 0;
+  auto r = c.GetOrLoad(1, [&]() -> StatusOr<std::pair<Cache::Value, size_t>> {
+    ++calls;
+    return IoError("boom");
+  });
+  EXPECT_EQ(r.status().code(), StatusCode::kIoError);
+  auto r2 = c.GetOrLoad(1, [&] {
+    ++calls;
+    return Make(1, 1);
+  });
+  EXPECT_TRUE(r2.ok());
+  EXPECT_EQ(calls, 2);
+}
+
+TEST(PageCache, SingleFlightUnderManyThreads) {
+  Cache c(1 << 20);
+  std::atomic<int> loads{0};
+  constexpr int kKeys = 16;
+  std::vector<std::thread> threads;
+  std::atomic<bool> go{false};
+  std::atomic<int> bad{0};
+  for (int t = 0; t < 32; ++t)
+    threads.emplace_back([&, t] {
+      while (!go) std::this_thread::yield();
+      for (int i = 0; i < kKeys; ++i) {
+        int k = (i + t) % kKeys;
+        auto v = c.GetOrLoad(k, [&] {
+          ++loads;
+          std::this_thread::sleep_for(std::chrono::milliseconds(5));  // widen the race
+          return Make(k * 10, 100);
+        });
+        if (!v.ok() || **v != k * 10) ++bad;
+      }
+    });
+  go = true;
+  for (auto& th : threads) th.join();
+  EXPECT_EQ(bad.load(), 0);
+  EXPECT_EQ(loads.load(), kKeys);
+  PageCacheCounters cc = c.counters();
+  EXPECT_EQ(cc.misses, uint64_t(kKeys));
+  EXPECT_EQ(cc.hits, uint64_t(32 * kKeys - kKeys));
+  EXPECT_GT(cc.joined, 0u);
+}
+
+class StoreCache : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto vol = GenerateShape("sphere:128");
+    ASSERT_TRUE(vol.ok());
+    voxels_ = vol->voxels;
+    meta_ = storage_test::MetaFor(vol->levels, 4, GridClass::kLevelSet, true);
+    ASSERT_TRUE(storage_test::WriteVoxels(dir_ / "s", voxels_, meta_).ok());
+  }
+  storage_test::TempDir dir_;
+  std::vector<LeafPoint> voxels_;
+  StoreMeta meta_;
+};
+
+TEST_F(StoreCache, BudgetRespectedAndEvictionsCounted) {
+  auto probe = Store::Open(dir_ / "s", {});
+  ASSERT_TRUE(probe.ok());
+  const uint32_t bricks = uint32_t((*probe)->meta().brick_count);
+  ASSERT_GT(bricks, 40u);
+  // All bricks in the cache, then a budget of a quarter of that.
+  for (uint32_t id = 0; id < bricks; ++id) ASSERT_TRUE((*probe)->FetchBrick(id).ok());
+  const uint64_t all = (*probe)->cache_stats().bytes_resident;
+  ASSERT_GT(all, 0u);
+
+  OpenOptions oo;
+  oo.cache_bytes = all / 4;
+  auto s = Store::Open(dir_ / "s", oo);
+  ASSERT_TRUE(s.ok());
+  uint64_t max_resident = 0;
+  for (int pass = 0; pass < 2; ++pass)
+    for (uint32_t id = 0; id < bricks; ++id) {
+      auto b = (*s)->FetchBrick(id);
+      ASSERT_TRUE(b.ok()) << b.status().ToString();
+      max_resident = std::max(max_resident, (*s)->cache_stats().bytes_resident);
+    }
+  CacheStats cs = (*s)->cache_stats();
+  EXPECT_LE(max_resident, oo.cache_bytes);
+  EXPECT_EQ(cs.capacity, oo.cache_bytes);
+  // A cyclic scan larger than the cache misses every time under LRU.
+  EXPECT_EQ(cs.misses, 2u * bricks);
+  EXPECT_EQ(cs.hits, 0u);
+  EXPECT_GE(cs.evictions, 2u * bricks - bricks / 2);
+  EXPECT_GT(cs.bytes_decompressed, 0u);
+  EXPECT_GT(cs.bytes_mapped, 0u);
+
+  // Repeated fetches of one brick hit.
+  ASSERT_TRUE((*s)->FetchBrick(3).ok());
+  ASSERT_TRUE((*s)->FetchBrick(3).ok());
+  EXPECT_EQ((*s)->cache_stats().hits, 1u);
+}
+
+TEST_F(StoreCache, PinsSurviveEviction) {
+  OpenOptions oo;
+  oo.cache_bytes = 1;  // everything is evicted at once
+  auto s = Store::Open(dir_ / "s", oo);
+  ASSERT_TRUE(s.ok());
+  auto ref = Store::Open(dir_ / "s", {});
+  ASSERT_TRUE(ref.ok());
+  auto b0 = (*s)->FetchBrick(0);
+  ASSERT_TRUE(b0.ok());
+  for (uint32_t id = 1; id < 20; ++id) ASSERT_TRUE((*s)->FetchBrick(id).ok());
+  EXPECT_EQ((*s)->cache_stats().bytes_resident, 0u);
+  auto r0 = (*ref)->FetchBrick(0);
+  ASSERT_TRUE(r0.ok());
+  ASSERT_EQ(b0->num_cells, r0->num_cells);
+  EXPECT_EQ(0, std::memcmp(b0->cells, r0->cells, sizeof(Cell) * b0->num_cells));
+}
+
+TEST_F(StoreCache, SingleFlightUnderParallelFor) {
+  tbb::global_control gc(tbb::global_control::max_allowed_parallelism, 16);
+  auto s = Store::Open(dir_ / "s", {});
+  ASSERT_TRUE(s.ok());
+  const uint32_t bricks = uint32_t((*s)->meta().brick_count);
+  auto ref = Store::Open(dir_ / "s", {});
+  ASSERT_TRUE(ref.ok());
+  std::atomic<int> bad{0};
+  // Many tasks ask for the same few bricks at once, then all of them.
+  tbb::parallel_for(0, 4000, [&](int i) {
+    uint32_t id = i < 2000 ? uint32_t(i % 4) : uint32_t(i % bricks);
+    auto b = (*s)->FetchBrick(id);
+    auto a = (*s)->Attributes(id, 0);
+    if (!b.ok() || !a.ok() || b->num_cells == 0) ++bad;
+  });
+  EXPECT_EQ(bad.load(), 0);
+  CacheStats cs = (*s)->cache_stats();
+  EXPECT_EQ(cs.misses, bricks);  // one decompression per brick
+  EXPECT_EQ(cs.hits + cs.misses, 8000u);
+  EXPECT_EQ(cs.evictions, 0u);
+}
+
+}  // namespace
+}  // namespace vox
