@@ -1,0 +1,161 @@
+#include "render/camera.h"
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include <glm/geometric.hpp>
+#include <nlohmann/json.hpp>
+
+#include "render/internal/json_fields.h"
+
+namespace vox {
+namespace {
+
+bool Finite(const glm::dvec3& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+}  // namespace
+
+Status Camera::Finalize(std::string_view source) {
+  auto err = [&](const std::string& field, const std::string& what) {
+    return json_fields::FieldError(source, field, what);
+  };
+  if (!Finite(position)) return err("position", "must be finite");
+  if (!Finite(look_at)) return err("look_at", "must be finite");
+  if (!Finite(up)) return err("up", "must be finite");
+  if (width < 1 || width > kMaxImageSide)
+    return err("width", "is " + std::to_string(width) + "; it must be in 1.." + std::to_string(kMaxImageSide));
+  if (height < 1 || height > kMaxImageSide)
+    return err("height", "is " + std::to_string(height) + "; it must be in 1.." + std::to_string(kMaxImageSide));
+  glm::dvec3 f = look_at - position;
+  double flen = glm::length(f);
+  if (!(flen > 0) || !std::isfinite(flen))
+    return err("look_at", "equals position: the view direction is undefined");
+  f /= flen;
+  double ulen = glm::length(up);
+  if (!(ulen > 0)) return err("up", "is the zero vector");
+  glm::dvec3 r = glm::cross(f, up / ulen);
+  double rlen = glm::length(r);
+  if (!(rlen > 1e-9)) return err("up", "is parallel to the view direction (look_at - position)");
+  r /= rlen;
+  forward_ = f;
+  right_ = r;
+  true_up_ = glm::cross(r, f);
+  if (projection == Projection::kPerspective) {
+    if (!std::isfinite(fov_deg) || !(fov_deg > 0) || !(fov_deg < 180))
+      return err("fov_deg", "must be in (0, 180) degrees");
+    scale_x_ = std::tan(fov_deg * M_PI / 360.0);
+  } else {
+    if (!std::isfinite(ortho_width) || !(ortho_width > 0)) return err("ortho_width", "must be positive");
+    scale_x_ = 0.5 * ortho_width;
+  }
+  scale_y_ = scale_x_ * double(height) / double(width);
+  return OkStatus();
+}
+
+WorldRay Camera::PixelRay(double x, double y) const {
+  const double sx = (2.0 * x / double(width) - 1.0) * scale_x_;
+  const double sy = (1.0 - 2.0 * y / double(height)) * scale_y_;
+  WorldRay ray;
+  if (projection == Projection::kPerspective) {
+    ray.origin = position;
+    ray.dir = glm::normalize(forward_ + sx * right_ + sy * true_up_);
+  } else {
+    ray.origin = position + sx * right_ + sy * true_up_;
+    ray.dir = forward_;
+  }
+  return ray;
+}
+
+std::string Camera::ToJson() const {
+  nlohmann::json j;
+  j["position"] = {position.x, position.y, position.z};
+  j["look_at"] = {look_at.x, look_at.y, look_at.z};
+  j["up"] = {up.x, up.y, up.z};
+  j["width"] = width;
+  j["height"] = height;
+  if (projection == Projection::kPerspective) {
+    j["projection"] = "perspective";
+    j["fov_deg"] = fov_deg;
+  } else {
+    j["projection"] = "orthographic";
+    j["ortho_width"] = ortho_width;
+  }
+  return j.dump();
+}
+
+StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) {
+  namespace jf = json_fields;
+  VOX_ASSIGN_OR_RETURN(nlohmann::json j, jf::Parse(json_text, file));
+  VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(
+      j, {"position", "look_at", "up", "fov_deg", "width", "height", "projection", "ortho_width"},
+      file, ""));
+  Camera cam;
+  std::string projection = "perspective";
+  VOX_RETURN_IF_ERROR(jf::GetString(j, "projection", file, "", false, &projection));
+  if (projection == "perspective") {
+    cam.projection = Projection::kPerspective;
+  } else if (projection == "orthographic") {
+    cam.projection = Projection::kOrthographic;
+  } else {
+    return jf::FieldError(file, "projection",
+                          "is '" + projection + "'; it must be 'perspective' or 'orthographic'");
+  }
+  VOX_RETURN_IF_ERROR(jf::GetVec3(j, "position", file, "", true, &cam.position));
+  VOX_RETURN_IF_ERROR(jf::GetVec3(j, "look_at", file, "", true, &cam.look_at));
+  VOX_RETURN_IF_ERROR(jf::GetVec3(j, "up", file, "", false, &cam.up));
+  VOX_RETURN_IF_ERROR(jf::GetInt(j, "width", file, "", true, 1, kMaxImageSide, &cam.width));
+  VOX_RETURN_IF_ERROR(jf::GetInt(j, "height", file, "", true, 1, kMaxImageSide, &cam.height));
+  if (cam.projection == Projection::kPerspective) {
+    VOX_RETURN_IF_ERROR(jf::GetNumber(j, "fov_deg", file, "", true, &cam.fov_deg));
+    if (j.contains("ortho_width"))
+      return jf::FieldError(file, "ortho_width", "only applies to an orthographic projection");
+  } else {
+    VOX_RETURN_IF_ERROR(jf::GetNumber(j, "ortho_width", file, "", true, &cam.ortho_width));
+    if (j.contains("fov_deg"))
+      return jf::FieldError(file, "fov_deg", "only applies to a perspective projection");
+  }
+  VOX_RETURN_IF_ERROR(cam.Finalize(file));
+  return cam;
+}
+
+StatusOr<std::string> ReadTextFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return NotFoundError(path + ": cannot open for reading");
+  std::ostringstream s;
+  s << in.rdbuf();
+  if (in.bad()) return IoError(path + ": read failed");
+  return s.str();
+}
+
+StatusOr<Camera> LoadCamera(const std::string& path) {
+  VOX_ASSIGN_OR_RETURN(std::string text, ReadTextFile(path));
+  return ParseCamera(text, path);
+}
+
+Camera DefaultCamera(const glm::dvec3& lo, const glm::dvec3& hi, int width, int height) {
+  Camera cam;
+  cam.width = width;
+  cam.height = height;
+  cam.projection = Projection::kPerspective;
+  cam.fov_deg = 40.0;
+  glm::dvec3 centre = 0.5 * (lo + hi);
+  double radius = 0.5 * glm::length(hi - lo);
+  if (!(radius > 0)) radius = 1.0;
+  // Fit the bounding sphere in the narrower field of view.
+  double half_h = cam.fov_deg * M_PI / 360.0;
+  double half_v = std::atan(std::tan(half_h) * double(height) / double(width));
+  double half = std::min(half_h, half_v);
+  double dist = radius / std::sin(half) * 1.02;
+  glm::dvec3 view_dir = glm::normalize(glm::dvec3(0.55, 0.45, 0.7));
+  cam.position = centre + view_dir * dist;
+  cam.look_at = centre;
+  cam.up = {0.0, 1.0, 0.0};
+  Status s = cam.Finalize("default camera");
+  (void)s;  // cannot fail: finite box, up not parallel to view_dir
+  return cam;
+}
+
+}  // namespace vox

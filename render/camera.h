@@ -1,0 +1,85 @@
+// vox::Camera: the pinhole (perspective) and orthographic cameras of
+// vox-render, read from cam.json, and the primary rays through pixel centres.
+//
+// cam.json, in the world space of the source VDB:
+//   {"position":[x,y,z], "look_at":[x,y,z], "up":[0,1,0], "fov_deg":F,
+//    "width":W, "height":H, "projection":"perspective"}
+// or "projection":"orthographic" with "ortho_width":S (world units across the
+// image). fov_deg is the horizontal field of view, as vdb_render's -fov; the
+// image plane follows vdb_render's camera (pixel (i, j) maps to screen
+// ((2(i + 0.5)/W - 1) s, (1 - 2(j + 0.5)/H) s H/W)), so row 0 is the top row.
+// "up" defaults to [0,1,0] and "projection" to "perspective"; the other
+// fields are required. Unknown fields are refused (they are usually typos).
+//
+// Thread safety: a Camera is an immutable value once Finalize()d; PixelRay is
+// const and thread-safe.
+#ifndef VOX_RENDER_CAMERA_H_
+#define VOX_RENDER_CAMERA_H_
+
+#include <string>
+#include <string_view>
+
+#include <glm/vec3.hpp>
+
+#include "core/status.h"
+
+namespace vox {
+
+enum class Projection { kPerspective, kOrthographic };
+
+// A ray in world space; `dir` has unit length.
+struct WorldRay {
+  glm::dvec3 origin{0.0};
+  glm::dvec3 dir{0.0, 0.0, -1.0};
+};
+
+// Largest image side vox-render accepts.
+inline constexpr int kMaxImageSide = 1 << 20;
+
+class Camera {
+ public:
+  glm::dvec3 position{0.0, 0.0, 1.0};
+  glm::dvec3 look_at{0.0};
+  glm::dvec3 up{0.0, 1.0, 0.0};
+  double fov_deg = 40.0;
+  double ortho_width = 1.0;
+  int width = 0, height = 0;
+  Projection projection = Projection::kPerspective;
+
+  // Checks the fields (finite, positive size, fov in (0, 180), up not
+  // parallel to the view direction) and computes the camera frame. `source`
+  // names where the camera came from, for the messages.
+  Status Finalize(std::string_view source = "camera");
+
+  // The ray through image position (x, y), in pixels from the top-left
+  // corner: pixel (i, j)'s centre is (i + 0.5, j + 0.5). REQUIRES: Finalize().
+  WorldRay PixelRay(double x, double y) const;
+
+  const glm::dvec3& forward() const { return forward_; }
+  const glm::dvec3& right() const { return right_; }
+  const glm::dvec3& true_up() const { return true_up_; }
+
+  // The camera as cam.json text (one line), for EXR headers and logs.
+  std::string ToJson() const;
+
+ private:
+  glm::dvec3 forward_{0.0, 0.0, -1.0}, right_{1.0, 0.0, 0.0}, true_up_{0.0, 1.0, 0.0};
+  double scale_x_ = 1.0, scale_y_ = 1.0;  // screen half-extent (tan(fov/2) or ortho_width / 2)
+};
+
+// Parses cam.json text; `file` names it in every error ("cam.json: field
+// 'width' must be a positive integer").
+StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file);
+// Reads and parses a cam.json file.
+StatusOr<Camera> LoadCamera(const std::string& path);
+
+// A perspective camera that frames the world box [lo, hi] from a three-quarter
+// view above it, with the whole box in the image.
+Camera DefaultCamera(const glm::dvec3& lo, const glm::dvec3& hi, int width, int height);
+
+// Reads a whole file into a string; NotFound / IoError name the file.
+StatusOr<std::string> ReadTextFile(const std::string& path);
+
+}  // namespace vox
+
+#endif  // VOX_RENDER_CAMERA_H_

@@ -1,0 +1,256 @@
+#include "render/exr.h"
+
+#include <png.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <limits>
+
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFloatAttribute.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfTileDescription.h>
+#include <OpenEXR/ImfTiledInputFile.h>
+#include <OpenEXR/ImfTiledOutputFile.h>
+
+namespace vox {
+namespace {
+
+constexpr size_t kTimingsSlot = 1000;
+
+const char* const kChannelNames[kNumChannels] = {"R",   "G",   "B",       "A",       "Z",      "N.x",
+                                                 "N.y", "N.z", "voxel.i", "voxel.j", "voxel.k"};
+
+Imf::Slice TileSlice(float* base, int stride) {
+  return Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(base), sizeof(float),
+                    sizeof(float) * size_t(stride), 1, 1, 0.0, /*xTileCoords=*/true,
+                    /*yTileCoords=*/true);
+}
+
+}  // namespace
+
+const char* ChannelName(int c) { return kChannelNames[c]; }
+
+void TileBuffer::Allocate(int tile_size, const ImageLayers& layers) {
+  size = tile_size;
+  for (int c = 0; c < kNumChannels; ++c) {
+    if (layers.Has(c))
+      ch[c].assign(size_t(tile_size) * tile_size, 0.0f);
+    else
+      ch[c].clear();
+  }
+}
+
+TiledExrWriter::~TiledExrWriter() {
+  if (file_) (void)Close();
+}
+
+StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::string& path, int width,
+                                                                 int height, int tile,
+                                                                 const ImageLayers& layers,
+                                                                 const ExrAttributes& attrs) {
+  auto w = std::unique_ptr<TiledExrWriter>(new TiledExrWriter());
+  w->path_ = path;
+  w->layers_ = layers;
+  try {
+    Imf::Header header(width, height);
+    header.setTileDescription(Imf::TileDescription(tile, tile, Imf::ONE_LEVEL));
+    header.lineOrder() = Imf::RANDOM_Y;
+    header.compression() = Imf::ZIP_COMPRESSION;
+    for (int c = 0; c < kNumChannels; ++c)
+      if (layers.Has(c)) header.channels().insert(kChannelNames[c], Imf::Channel(Imf::FLOAT));
+    for (const auto& [k, v] : attrs) header.insert(k, Imf::StringAttribute(v));
+    header.insert("renderTimeSeconds", Imf::FloatAttribute(0.0f));
+    header.insert("vox:timings", Imf::StringAttribute(std::string(kTimingsSlot, ' ')));
+    w->file_ = std::make_unique<Imf::TiledOutputFile>(path.c_str(), header);
+  } catch (const std::exception& e) {
+    return IoError(path + ": cannot create EXR: " + e.what());
+  }
+  return w;
+}
+
+Status TiledExrWriter::WriteTile(const TileRect& rect, const TileBuffer& buf) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!file_) return InternalError(path_ + ": WriteTile after Close");
+  try {
+    Imf::FrameBuffer fb;
+    for (int c = 0; c < kNumChannels; ++c)
+      if (layers_.Has(c))
+        fb.insert(kChannelNames[c], TileSlice(const_cast<float*>(buf.ch[c].data()), buf.size));
+    file_->setFrameBuffer(fb);
+    file_->writeTile(rect.tx, rect.ty);
+  } catch (const std::exception& e) {
+    return IoError(path_ + ": writing tile (" + std::to_string(rect.tx) + ", " +
+                   std::to_string(rect.ty) + ") failed: " + e.what());
+  }
+  return OkStatus();
+}
+
+Status TiledExrWriter::Close() {
+  std::lock_guard<std::mutex> lock(mu_);
+  try {
+    file_.reset();
+  } catch (const std::exception& e) {
+    return IoError(path_ + ": closing EXR failed: " + e.what());
+  }
+  return OkStatus();
+}
+
+Status PatchTimings(const std::string& path, double render_seconds, const std::string& timings_json) {
+  if (timings_json.size() > kTimingsSlot)
+    return InternalError("timings JSON longer than its header slot");
+  std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+  if (!f) return IoError(path + ": cannot reopen to record timings");
+  std::string head(size_t(1) << 16, '\0');
+  f.read(head.data(), std::streamsize(head.size()));
+  head.resize(size_t(f.gcount()));
+  f.clear();
+  auto patch = [&](const std::string& key, const char* bytes, size_t n) -> Status {
+    size_t pos = head.find(key);
+    if (pos == std::string::npos) return CorruptionError(path + ": header slot for timings not found");
+    uint32_t size = 0;
+    std::memcpy(&size, head.data() + pos + key.size(), 4);  // little-endian (x86, EXR)
+    if (size != n) return CorruptionError(path + ": header slot for timings has the wrong size");
+    f.seekp(std::streamoff(pos + key.size() + 4));
+    f.write(bytes, std::streamsize(n));
+    return OkStatus();
+  };
+  float secs = float(render_seconds);
+  VOX_RETURN_IF_ERROR(patch(std::string("renderTimeSeconds\0float\0", 24), reinterpret_cast<char*>(&secs), 4));
+  std::string padded = timings_json + std::string(kTimingsSlot - timings_json.size(), ' ');
+  VOX_RETURN_IF_ERROR(patch(std::string("vox:timings\0string\0", 19), padded.data(), padded.size()));
+  f.flush();
+  if (!f) return IoError(path + ": writing timings failed");
+  return OkStatus();
+}
+
+namespace {
+
+ExrInfo InfoFromFile(const Imf::TiledInputFile& in) {
+  ExrInfo info;
+  const Imf::Header& h = in.header();
+  const auto& dw = h.dataWindow();
+  info.width = dw.max.x - dw.min.x + 1;
+  info.height = dw.max.y - dw.min.y + 1;
+  info.tile = int(in.tileXSize());
+  for (auto it = h.channels().begin(); it != h.channels().end(); ++it) info.channels.push_back(it.name());
+  for (auto it = h.begin(); it != h.end(); ++it) {
+    if (auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) info.attrs[it.name()] = s->value();
+    if (std::strcmp(it.name(), "renderTimeSeconds") == 0)
+      if (auto* f = dynamic_cast<const Imf::FloatAttribute*>(&it.attribute())) info.render_seconds = f->value();
+  }
+  info.complete = in.isComplete();
+  return info;
+}
+
+}  // namespace
+
+StatusOr<ExrInfo> ReadExrInfo(const std::string& path) {
+  try {
+    Imf::TiledInputFile in(path.c_str());
+    return InfoFromFile(in);
+  } catch (const std::exception& e) {
+    return IoError(path + ": cannot read as a tiled EXR: " + e.what());
+  }
+}
+
+StatusOr<ExrImage> ReadExr(const std::string& path) {
+  try {
+    Imf::TiledInputFile in(path.c_str());
+    ExrImage img;
+    img.info = InfoFromFile(in);
+    if (!img.info.complete) return CorruptionError(path + ": EXR is missing tiles (a partial render?)");
+    const auto& dw = in.header().dataWindow();
+    Imf::FrameBuffer fb;
+    const size_t w = size_t(img.info.width), h = size_t(img.info.height);
+    for (const std::string& c : img.info.channels) {
+      auto& v = img.pixels[c];
+      v.assign(w * h, 0.0f);
+      char* base = reinterpret_cast<char*>(v.data()) -
+                   (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * ptrdiff_t(w)) * ptrdiff_t(sizeof(float));
+      fb.insert(c, Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * w));
+    }
+    in.setFrameBuffer(fb);
+    in.readTiles(0, in.numXTiles() - 1, 0, in.numYTiles() - 1);
+    return img;
+  } catch (const std::exception& e) {
+    return IoError(path + ": cannot read EXR: " + e.what());
+  }
+}
+
+namespace {
+
+uint8_t ToSrgb8(float v) {
+  if (!(v > 0)) return 0;
+  if (v >= 1) return 255;
+  double s = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(double(v), 1 / 2.4) - 0.055;
+  return uint8_t(std::lround(s * 255.0));
+}
+
+struct PngFile {
+  FILE* fp = nullptr;
+  png_structp png = nullptr;
+  png_infop info = nullptr;
+  ~PngFile() {
+    if (png) png_destroy_write_struct(&png, info ? &info : nullptr);
+    if (fp) fclose(fp);
+  }
+};
+
+}  // namespace
+
+Status WritePngPreview(const std::string& exr_path, const std::string& png_path) {
+  try {
+    Imf::TiledInputFile in(exr_path.c_str());
+    ExrInfo info = InfoFromFile(in);
+    if (!info.complete) return InvalidArgumentError(exr_path + ": a partial EXR has no preview; merge the parts first");
+    const auto& dw = in.header().dataWindow();
+    const int w = info.width, tile = int(in.tileYSize());
+    std::vector<float> band[3];
+    for (auto& b : band) b.assign(size_t(w) * tile, 0.0f);
+    std::vector<uint8_t> row(size_t(w) * 3);
+
+    PngFile out;
+    out.fp = fopen(png_path.c_str(), "wb");
+    if (!out.fp) return IoError(png_path + ": cannot open for writing");
+    out.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+    if (!out.png) return ResourceExhaustedError(png_path + ": libpng init failed");
+    out.info = png_create_info_struct(out.png);
+    if (!out.info) return ResourceExhaustedError(png_path + ": libpng init failed");
+    if (setjmp(png_jmpbuf(out.png))) return IoError(png_path + ": libpng write failed");
+    png_init_io(out.png, out.fp);
+    png_set_IHDR(out.png, out.info, png_uint_32(w), png_uint_32(info.height), 8, PNG_COLOR_TYPE_RGB,
+                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+    png_write_info(out.png, out.info);
+    const char* names[3] = {"R", "G", "B"};
+    for (int ty = 0; ty < in.numYTiles(); ++ty) {
+      const int y0 = ty * tile;
+      const int rows = std::min(tile, info.height - y0);
+      Imf::FrameBuffer fb;
+      for (int c = 0; c < 3; ++c) {
+        char* base = reinterpret_cast<char*>(band[c].data()) -
+                     (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y + y0) * ptrdiff_t(w)) * ptrdiff_t(sizeof(float));
+        fb.insert(names[c], Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(w)));
+      }
+      in.setFrameBuffer(fb);
+      in.readTiles(0, in.numXTiles() - 1, ty, ty);
+      for (int y = 0; y < rows; ++y) {
+        for (int x = 0; x < w; ++x)
+          for (int c = 0; c < 3; ++c) row[size_t(x) * 3 + c] = ToSrgb8(band[c][size_t(y) * w + x]);
+        png_write_row(out.png, row.data());
+      }
+    }
+    png_write_end(out.png, nullptr);
+    if (fflush(out.fp) != 0) return IoError(png_path + ": write failed");
+  } catch (const std::exception& e) {
+    return IoError(exr_path + ": cannot read EXR for the preview: " + e.what());
+  }
+  return OkStatus();
+}
+
+}  // namespace vox

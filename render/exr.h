@@ -1,0 +1,108 @@
+// OpenEXR output of vox-render: the tile buffers the renderer fills, a
+// tiled-EXR writer that takes tiles in any order as they finish (so memory
+// stays bounded by the tiles in flight, whatever the image size), reading
+// back (tests, vox-merge, previews) and the PNG preview.
+//
+// Channels: R, G, B, A (1 where the pixel's ray hit, 0 on the background;
+// 1 - transmittance for fog), Z (world distance from the camera along the
+// ray to the first hit, +inf on the background), and on request N.x N.y N.z
+// (world-space unit normal) and voxel.i voxel.j voxel.k (OpenVDB index
+// coordinates of the hit voxel; exact up to 2^24). All FLOAT.
+// Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
+// vox:part ("I/N"), vox:tileOrder, plus renderTimeSeconds (float, as pbrt)
+// and vox:timings (JSON), which are patched in place after the last tile.
+//
+// Thread safety: TiledExrWriter::WriteTile is thread-safe; everything else is
+// thread-compatible.
+#ifndef VOX_RENDER_EXR_H_
+#define VOX_RENDER_EXR_H_
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <OpenEXR/ImfForward.h>
+
+#include "core/status.h"
+#include "render/tiles.h"
+
+
+namespace vox {
+
+enum ChannelId { kChR, kChG, kChB, kChA, kChZ, kChNx, kChNy, kChNz, kChVi, kChVj, kChVk, kNumChannels };
+const char* ChannelName(int c);
+
+struct ImageLayers {
+  bool normal = false;
+  bool voxel = false;
+  bool Has(int c) const {
+    if (c >= kChNx && c <= kChNz) return normal;
+    if (c >= kChVi) return voxel;
+    return true;
+  }
+};
+
+// One tile's pixels, per channel, row-major with stride `size`.
+struct TileBuffer {
+  int size = 0;
+  std::vector<float> ch[kNumChannels];
+  void Allocate(int tile_size, const ImageLayers& layers);
+  float* at(int c, int x, int y) { return &ch[c][size_t(y) * size + x]; }
+};
+
+using ExrAttributes = std::map<std::string, std::string>;
+
+class TiledExrWriter {
+ public:
+  // Creates `path` (ZIP-compressed tiles of `tile` pixels, random tile order)
+  // with the given string attributes, and reserves renderTimeSeconds and
+  // vox:timings for PatchTimings.
+  static StatusOr<std::unique_ptr<TiledExrWriter>> Create(const std::string& path, int width,
+                                                          int height, int tile,
+                                                          const ImageLayers& layers,
+                                                          const ExrAttributes& attrs);
+  ~TiledExrWriter();
+  // Writes one tile; thread-safe.
+  Status WriteTile(const TileRect& rect, const TileBuffer& buf);
+  // Finishes the file (tiles not written are left missing: a partial image).
+  Status Close();
+
+ private:
+  TiledExrWriter() = default;
+  std::string path_;
+  ImageLayers layers_;
+  std::mutex mu_;
+  std::unique_ptr<Imf::TiledOutputFile> file_;
+};
+
+// Writes renderTimeSeconds and vox:timings (JSON, at most 1000 bytes) into
+// the reserved header slots of a closed file written by TiledExrWriter.
+Status PatchTimings(const std::string& path, double render_seconds, const std::string& timings_json);
+
+// Header of an EXR written by vox.
+struct ExrInfo {
+  int width = 0, height = 0, tile = 0;
+  std::vector<std::string> channels;
+  ExrAttributes attrs;          // string attributes
+  double render_seconds = 0.0;  // renderTimeSeconds, 0 when absent
+  bool complete = false;
+};
+StatusOr<ExrInfo> ReadExrInfo(const std::string& path);
+
+// A whole image in memory, for tests and small files: channel name -> pixels
+// (row-major, width x height).
+struct ExrImage {
+  ExrInfo info;
+  std::map<std::string, std::vector<float>> pixels;
+};
+StatusOr<ExrImage> ReadExr(const std::string& path);
+
+// Writes an 8-bit sRGB PNG of the R, G, B channels of a complete tiled EXR,
+// one row of tiles at a time (bounded memory).
+Status WritePngPreview(const std::string& exr_path, const std::string& png_path);
+
+}  // namespace vox
+
+#endif  // VOX_RENDER_EXR_H_

@@ -1,0 +1,185 @@
+#include "render/frame.h"
+
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+namespace vox {
+namespace {
+
+double Seconds(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
+
+struct Worker {
+  TileBuffer buf;
+  RenderCounters counters;
+  double write_seconds = 0;
+};
+
+}  // namespace
+
+Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOptions& options,
+                   FrameStats* stats) {
+  using Clock = std::chrono::steady_clock;
+  const Camera& cam = renderer.camera();
+  if (options.tile_size < 8 || options.tile_size > 4096)
+    return InvalidArgumentError("--tile-size " + std::to_string(options.tile_size) +
+                                ": must be in 8..4096");
+  const TileLayout layout(cam.width, cam.height, options.tile_size);
+  int64_t begin = 0, end = 0;
+  layout.PartRange(options.part, &begin, &end);
+
+  ExrAttributes attrs = options.attrs;
+  attrs["vox:camera"] = cam.ToJson();
+  attrs["vox:scene"] = renderer.scene().ToJson();
+  attrs["vox:split"] = renderer.SplitString();
+  attrs["vox:passes"] = renderer.passes().ToString();
+  attrs["vox:part"] = options.part.ToString();
+  attrs["vox:tileOrder"] = "morton";
+  attrs["vox:store"] = attrs.count("vox:store") ? attrs["vox:store"] : volume->description();
+  attrs["software"] = "vox-render";
+
+  const ImageLayers& img_layers = renderer.layers();
+  VOX_ASSIGN_OR_RETURN(auto writer, TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
+                                                           options.tile_size, img_layers, attrs));
+  int threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+  stats->threads = threads;
+  stats->tiles_total = end - begin;
+  stats->cache_start = volume->cache_stats();
+
+  Progress progress(options.progress, options.progress_out);
+  std::atomic<int64_t> cursor{begin};
+  std::atomic<int64_t> done{0};
+  std::atomic<uint64_t> rays{0};
+  std::atomic<bool> abort{false};
+  std::mutex err_mu;
+  Status first_error;
+  tbb::enumerable_thread_specific<Worker> workers([&] {
+    Worker w;
+    w.buf.Allocate(options.tile_size, img_layers);
+    return w;
+  });
+
+  auto snapshot = [&] {
+    ProgressSnapshot s;
+    s.tiles_done = done.load();
+    s.tiles_total = end - begin;
+    s.rays = rays.load();
+    CacheStats c = volume->cache_stats();
+    s.cache_hits = c.hits - stats->cache_start.hits;
+    s.cache_misses = c.misses - stats->cache_start.misses;
+    return s;
+  };
+
+  const auto t0 = Clock::now();
+  tbb::task_arena arena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(0, threads, [&](int) {
+      Worker& w = workers.local();
+      for (;;) {
+        if (abort.load(std::memory_order_relaxed)) return;
+        const int64_t i = cursor.fetch_add(1);
+        if (i >= end) return;
+        const TileRect& rect = layout.order()[size_t(i)];
+        uint64_t rays_before = 0;
+        for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
+        Status s = renderer.RenderTile(rect, &w.buf, &w.counters);
+        const auto tw = Clock::now();
+        if (s.ok()) s = writer->WriteTile(rect, w.buf);
+        w.write_seconds += Seconds(tw, Clock::now());
+        if (!s.ok()) {
+          std::lock_guard<std::mutex> lock(err_mu);
+          if (first_error.ok())
+            first_error = s.WithContext("tile (" + std::to_string(rect.tx) + ", " + std::to_string(rect.ty) + ")");
+          abort = true;
+          return;
+        }
+        uint64_t rays_after = 0;
+        for (int k = 0; k < kNumRayKinds; ++k) rays_after += w.counters.rays[k];
+        rays.fetch_add(rays_after - rays_before, std::memory_order_relaxed);
+        done.fetch_add(1, std::memory_order_relaxed);
+        progress.Update(snapshot());
+      }
+    });
+  });
+  const auto t1 = Clock::now();
+  stats->render_seconds = Seconds(t0, t1);
+  for (Worker& w : workers) {
+    stats->counters.Add(w.counters);
+    stats->write_seconds += w.write_seconds;
+  }
+  stats->tiles = done.load();
+  stats->cache_end = volume->cache_stats();
+  if (!first_error.ok()) {
+    (void)writer->Close();
+    return first_error;
+  }
+  progress.Finish(snapshot());
+  VOX_RETURN_IF_ERROR(writer->Close());
+  nlohmann::json timings{{"render_seconds", stats->render_seconds},
+                         {"write_seconds", stats->write_seconds},
+                         {"threads", threads}};
+  VOX_RETURN_IF_ERROR(PatchTimings(options.exr_path, stats->render_seconds, timings.dump()));
+  stats->close_seconds = Seconds(t1, Clock::now());
+  return OkStatus();
+}
+
+std::string StatsJson(const Renderer& renderer, const FrameStats& st,
+                      const std::vector<std::pair<std::string, double>>& extra_timings) {
+  using nlohmann::json;
+  const RenderCounters& c = st.counters;
+  json rays;
+  uint64_t total = 0;
+  for (int k = 0; k < kNumRayKinds; ++k) {
+    rays[RayKindName(k)] = c.rays[k];
+    total += c.rays[k];
+  }
+  rays["total"] = total;
+  const TraceCounters& t = c.trace;
+  json j;
+  j["image"] = {{"width", renderer.camera().width}, {"height", renderer.camera().height},
+                {"pixels", c.pixels},               {"hit_pixels", c.hit_pixels},
+                {"tiles", st.tiles},                {"tiles_total", st.tiles_total},
+                {"samples_per_pixel", renderer.scene().samples_per_pixel}};
+  j["passes"] = {{"shading", renderer.passes().shading},     {"shadows", renderer.passes().shadows},
+                 {"reflection", renderer.passes().reflection}, {"refraction", renderer.passes().refraction},
+                 {"volume", renderer.passes().volume},       {"scattering", renderer.passes().scattering}};
+  j["split"] = {{"n1", renderer.n1()}, {"n2", renderer.n2()}};
+  j["rays"] = rays;
+  j["dda"] = {{"moves", t.total_moves()},         {"moves_x", t.moves[0]},
+              {"moves_y", t.moves[1]},            {"moves_z", t.moves[2]},
+              {"driving_moves", t.driving_moves}, {"passive_moves", t.passive_moves},
+              {"skips", t.skips},                 {"cells_visited", t.cells_visited},
+              {"transitions", t.transitions},     {"brick_fetches", t.brick_fetches},
+              {"traversals", t.rays},             {"hits", t.hits}};
+  j["attribute_lookups"] = c.attribute_lookups;
+  const CacheStats& a = st.cache_start;
+  const CacheStats& b = st.cache_end;
+  j["cache"] = {{"hits", b.hits - a.hits},
+                {"misses", b.misses - a.misses},
+                {"bricks_paged_in", b.misses - a.misses},
+                {"evictions", b.evictions - a.evictions},
+                {"bytes_decompressed", b.bytes_decompressed - a.bytes_decompressed},
+                {"bytes_resident", b.bytes_resident},
+                {"capacity", b.capacity}};
+  json timings{{"render_seconds", st.render_seconds},
+               {"write_seconds", st.write_seconds},
+               {"close_seconds", st.close_seconds}};
+  for (const auto& [name, secs] : extra_timings) timings[name] = secs;
+  j["timings"] = timings;
+  j["threads"] = st.threads;
+  if (st.render_seconds > 0) {
+    j["rates"] = {{"rays_per_second", double(total) / st.render_seconds},
+                  {"dda_moves_per_second", double(t.total_moves()) / st.render_seconds}};
+  }
+  return j.dump(2);
+}
+
+}  // namespace vox

@@ -1,0 +1,58 @@
+// vox::RenderFrame: renders all tiles of an image (or of one part, for
+// `--tiles I/N`) in parallel with TBB, writing each tile to the tiled EXR as
+// it finishes, and reports progress and statistics.
+//
+// Threads pull tiles from one atomic cursor over the Morton tile order, so
+// the tiles in flight are neighbours and share their bricks in the cache.
+// Each thread has its own tile buffer and counters (merged at the end); the
+// memory in use is threads x one tile, whatever the image size.
+//
+// Thread safety: RenderFrame is thread-compatible (one call per Renderer at a
+// time).
+#ifndef VOX_RENDER_FRAME_H_
+#define VOX_RENDER_FRAME_H_
+
+#include <cstdio>
+#include <string>
+
+#include "core/status.h"
+#include "render/exr.h"
+#include "render/progress.h"
+#include "render/renderer.h"
+#include "render/tiles.h"
+#include "render/volume.h"
+
+namespace vox {
+
+struct FrameOptions {
+  std::string exr_path;
+  int threads = 0;  // 0: all cores
+  int tile_size = 64;
+  PartSpec part;
+  ProgressMode progress = ProgressMode::kQuiet;
+  FILE* progress_out = stderr;
+  ExrAttributes attrs;  // extra header attributes
+};
+
+struct FrameStats {
+  RenderCounters counters;
+  CacheStats cache_start, cache_end;
+  int64_t tiles = 0, tiles_total = 0;
+  int threads = 0;
+  double render_seconds = 0;  // tiles rendered and written (wall clock)
+  double write_seconds = 0;   // time spent in EXR tile writes, summed over threads
+  double close_seconds = 0;   // closing the EXR and recording timings
+};
+
+Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOptions& options,
+                   FrameStats* stats);
+
+// The --stats document: rays by kind, DDA moves, transitions, bricks paged
+// in, cache hits and misses, timings. `extra_timings` adds named seconds
+// (open, setup, preview).
+std::string StatsJson(const Renderer& renderer, const FrameStats& stats,
+                      const std::vector<std::pair<std::string, double>>& extra_timings);
+
+}  // namespace vox
+
+#endif  // VOX_RENDER_FRAME_H_

@@ -1,0 +1,123 @@
+// Typed field readers over nlohmann::json for cam.json and scene.json: each
+// error names the file and the field path ("scene.json: lights[0].color[2]
+// must be a finite number"). Stateless; thread-safe.
+#ifndef VOX_RENDER_INTERNAL_JSON_FIELDS_H_
+#define VOX_RENDER_INTERNAL_JSON_FIELDS_H_
+
+#include <cmath>
+#include <initializer_list>
+#include <string>
+#include <string_view>
+
+#include <glm/vec3.hpp>
+#include <nlohmann/json.hpp>
+
+#include "core/status.h"
+
+namespace vox::json_fields {
+
+using nlohmann::json;
+
+inline Status FieldError(std::string_view file, const std::string& field, const std::string& what) {
+  return InvalidArgumentError(std::string(file) + ": field '" + field + "' " + what);
+}
+
+inline std::string Join(const std::string& prefix, std::string_view key) {
+  return prefix.empty() ? std::string(key) : prefix + "." + std::string(key);
+}
+
+// Parses JSON text; a syntax error names the file and the byte offset.
+inline StatusOr<json> Parse(std::string_view text, std::string_view file) {
+  json j = json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded()) {
+    // Re-parse with exceptions to learn where it failed.
+    try {
+      json unused = json::parse(text);
+      (void)unused;
+    } catch (const json::exception& e) {
+      return InvalidArgumentError(std::string(file) + ": not valid JSON: " + e.what());
+    }
+    return InvalidArgumentError(std::string(file) + ": not valid JSON");
+  }
+  if (!j.is_object()) return InvalidArgumentError(std::string(file) + ": top level must be a JSON object");
+  return j;
+}
+
+inline Status CheckKnownKeys(const json& obj, std::initializer_list<std::string_view> known,
+                             std::string_view file, const std::string& prefix) {
+  for (auto it = obj.begin(); it != obj.end(); ++it) {
+    bool ok = false;
+    for (std::string_view k : known) ok = ok || it.key() == k;
+    if (!ok) return FieldError(file, Join(prefix, it.key()), "is not a known field");
+  }
+  return OkStatus();
+}
+
+inline Status ReadNumber(const json& v, std::string_view file, const std::string& field, double* out) {
+  if (!v.is_number()) return FieldError(file, field, "must be a number");
+  double d = v.get<double>();
+  if (!std::isfinite(d)) return FieldError(file, field, "must be a finite number");
+  *out = d;
+  return OkStatus();
+}
+
+inline Status ReadVec3(const json& v, std::string_view file, const std::string& field, glm::dvec3* out) {
+  if (!v.is_array() || v.size() != 3) return FieldError(file, field, "must be an array of 3 numbers");
+  for (int a = 0; a < 3; ++a)
+    VOX_RETURN_IF_ERROR(ReadNumber(v[a], file, field + "[" + std::to_string(a) + "]", &(*out)[a]));
+  return OkStatus();
+}
+
+// Optional members: leave *out alone when the key is absent. Required ones
+// report "is missing".
+inline Status GetNumber(const json& obj, std::string_view key, std::string_view file,
+                        const std::string& prefix, bool required, double* out) {
+  auto it = obj.find(key);
+  if (it == obj.end()) return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
+  return ReadNumber(*it, file, Join(prefix, key), out);
+}
+
+inline Status GetVec3(const json& obj, std::string_view key, std::string_view file,
+                      const std::string& prefix, bool required, glm::dvec3* out) {
+  auto it = obj.find(key);
+  if (it == obj.end()) return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
+  return ReadVec3(*it, file, Join(prefix, key), out);
+}
+
+inline Status GetInt(const json& obj, std::string_view key, std::string_view file,
+                     const std::string& prefix, bool required, int64_t lo, int64_t hi, int* out) {
+  auto it = obj.find(key);
+  const std::string field = Join(prefix, key);
+  if (it == obj.end()) return required ? FieldError(file, field, "is missing") : OkStatus();
+  if (!it->is_number_integer() && !(it->is_number_float() && std::isfinite(it->get<double>()) &&
+                                    std::floor(it->get<double>()) == it->get<double>()))
+    return FieldError(file, field, "must be an integer");
+  double d = it->get<double>();
+  if (d < double(lo) || d > double(hi))
+    return FieldError(file, field, "is " + it->dump() + "; it must be in " + std::to_string(lo) +
+                                       ".." + std::to_string(hi));
+  *out = int(d);
+  return OkStatus();
+}
+
+inline Status GetBool(const json& obj, std::string_view key, std::string_view file,
+                      const std::string& prefix, bool* out) {
+  auto it = obj.find(key);
+  if (it == obj.end()) return OkStatus();
+  if (!it->is_boolean()) return FieldError(file, Join(prefix, key), "must be true or false");
+  *out = it->get<bool>();
+  return OkStatus();
+}
+
+inline Status GetString(const json& obj, std::string_view key, std::string_view file,
+                        const std::string& prefix, bool required, std::string* out) {
+  auto it = obj.find(key);
+  if (it == obj.end()) return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
+  if (!it->is_string()) return FieldError(file, Join(prefix, key), "must be a string");
+  *out = it->get<std::string>();
+  return OkStatus();
+}
+
+}  // namespace vox::json_fields
+
+#endif  // VOX_RENDER_INTERNAL_JSON_FIELDS_H_

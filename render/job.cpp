@@ -1,0 +1,108 @@
+#include "render/job.h"
+
+#include <chrono>
+#include <charconv>
+#include <fstream>
+
+#include "render/camera.h"
+#include "render/frame.h"
+#include "render/renderer.h"
+#include "render/scene.h"
+#include "render/store_volume.h"
+
+namespace vox {
+
+StatusOr<int> ParseSplit(const std::string& text, int levels) {
+  auto parse_int = [](std::string_view s, int* v) {
+    auto r = std::from_chars(s.data(), s.data() + s.size(), *v);
+    return !s.empty() && r.ec == std::errc() && r.ptr == s.data() + s.size();
+  };
+  auto plus = text.find('+');
+  int n1 = 0, n2 = 0;
+  if (plus == std::string::npos) {
+    if (!parse_int(text, &n1)) return InvalidArgumentError("--split '" + text + "': expected N1+N2 or N1");
+    n2 = levels - n1;
+  } else {
+    if (!parse_int(std::string_view(text).substr(0, plus), &n1) ||
+        !parse_int(std::string_view(text).substr(plus + 1), &n2))
+      return InvalidArgumentError("--split '" + text + "': expected N1+N2 or N1");
+  }
+  if (n1 < 1 || n2 < 0 || n1 + n2 != levels)
+    return InvalidArgumentError("--split '" + text + "': the steps must be positive and add up to the store's " +
+                                std::to_string(levels) + " levels");
+  return n1;
+}
+
+Status RunRenderJob(const RenderJobOptions& o) {
+  using Clock = std::chrono::steady_clock;
+  auto secs = [](Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); };
+  const auto t_start = Clock::now();
+  if (o.tile_size < 8 || o.tile_size > 4096)
+    return InvalidArgumentError("--tile-size " + std::to_string(o.tile_size) + ": must be in 8..4096");
+  if (o.threads < 0) return InvalidArgumentError("--threads must not be negative");
+  if (!o.preview_path.empty() && !o.part.whole())
+    return InvalidArgumentError("--preview needs the whole image; with --tiles, preview the vox-merge output");
+  OpenOptions open;
+  open.cache_bytes = o.cache_mb << 20;
+  VOX_ASSIGN_OR_RETURN(auto volume, StoreVolume::Open(o.store_dir, open));
+  const auto t_open = Clock::now();
+  const StoreMeta& meta = volume->meta();
+
+  Camera camera;
+  if (o.camera_path.empty()) {
+    glm::dvec3 lo, hi;
+    WorldBounds(meta, &lo, &hi);
+    camera = DefaultCamera(lo, hi, o.default_width, o.default_height);
+  } else {
+    VOX_ASSIGN_OR_RETURN(camera, LoadCamera(o.camera_path));
+  }
+  Scene scene;
+  if (!o.scene_path.empty()) {
+    VOX_ASSIGN_OR_RETURN(scene, LoadScene(o.scene_path));
+  }
+
+  RenderOptions ro;
+  ro.layers = o.layers;
+  ro.n1 = o.single_step ? meta.levels : o.n1;
+  VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(volume.get(), camera, scene, ro));
+  const auto t_setup = Clock::now();
+
+  FrameOptions fo;
+  fo.exr_path = o.exr_path;
+  fo.threads = o.threads;
+  fo.tile_size = o.tile_size;
+  fo.part = o.part;
+  fo.progress = ChooseProgressMode(o.log, o.quiet);
+  fo.progress_out = o.log;
+  fo.attrs["vox:store"] = o.store_dir;
+  fo.attrs["vox:grid"] = meta.grid_name;
+  fo.attrs["vox:source"] = meta.source_file;
+  FrameStats stats;
+  VOX_RETURN_IF_ERROR(RenderFrame(*renderer, volume.get(), fo, &stats));
+  const auto t_render = Clock::now();
+  if (!o.preview_path.empty()) VOX_RETURN_IF_ERROR(WritePngPreview(o.exr_path, o.preview_path));
+  const auto t_preview = Clock::now();
+  if (!o.stats_path.empty()) {
+    std::string json = StatsJson(*renderer, stats,
+                                 {{"open_seconds", secs(t_start, t_open)},
+                                  {"setup_seconds", secs(t_open, t_setup)},
+                                  {"frame_seconds", secs(t_setup, t_render)},
+                                  {"preview_seconds", secs(t_render, t_preview)},
+                                  {"total_seconds", secs(t_start, t_preview)}});
+    std::ofstream out(o.stats_path);
+    out << json << "\n";
+    out.close();
+    if (!out) return IoError(o.stats_path + ": cannot write the stats");
+  }
+  if (!o.quiet) {
+    uint64_t total = 0;
+    for (int k = 0; k < kNumRayKinds; ++k) total += stats.counters.rays[k];
+    fprintf(o.log, "vox-render: %s (%dx%d, part %s, split %s, passes %s): %.3f s, %llu rays, %.2fM rays/s\n",
+            o.exr_path.c_str(), camera.width, camera.height, o.part.ToString().c_str(),
+            renderer->SplitString().c_str(), renderer->passes().ToString().c_str(), stats.render_seconds,
+            (unsigned long long)total, stats.render_seconds > 0 ? total / stats.render_seconds / 1e6 : 0.0);
+  }
+  return OkStatus();
+}
+
+}  // namespace vox

@@ -1,0 +1,126 @@
+#include "render/merge.h"
+
+#include <algorithm>
+#include <map>
+
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfTiledInputFile.h>
+#include <nlohmann/json.hpp>
+
+#include "render/exr.h"
+#include "render/tiles.h"
+
+namespace vox {
+
+Status MergeParts(const std::vector<std::string>& parts, const std::string& out_path,
+                  MergeResult* result) {
+  if (parts.empty()) return InvalidArgumentError("vox-merge: no part files given");
+  std::vector<ExrInfo> infos;
+  std::vector<PartSpec> specs;
+  for (const std::string& p : parts) {
+    if (p == out_path) return InvalidArgumentError(p + ": the output is also listed as a part");
+    VOX_ASSIGN_OR_RETURN(ExrInfo info, ReadExrInfo(p));
+    auto it = info.attrs.find("vox:part");
+    if (it == info.attrs.end())
+      return InvalidArgumentError(p + ": not a vox-render output (no vox:part attribute)");
+    auto spec = ParsePartSpec(it->second);
+    if (!spec.ok()) return InvalidArgumentError(p + ": bad vox:part attribute '" + it->second + "'");
+    if (info.attrs["vox:tileOrder"] != "morton")
+      return UnsupportedError(p + ": unknown tile order '" + info.attrs["vox:tileOrder"] + "'");
+    infos.push_back(std::move(info));
+    specs.push_back(*spec);
+  }
+  // Everything that must agree, compared with the first part.
+  const ExrInfo& ref = infos[0];
+  for (size_t i = 1; i < parts.size(); ++i) {
+    const ExrInfo& o = infos[i];
+    auto differ = [&](const std::string& what, const std::string& a, const std::string& b) {
+      return InvalidArgumentError(parts[i] + " does not belong with " + parts[0] + ": " + what +
+                                  " differs (" + b + " vs " + a + ")");
+    };
+    if (o.width != ref.width || o.height != ref.height)
+      return differ("image size", std::to_string(ref.width) + "x" + std::to_string(ref.height),
+                    std::to_string(o.width) + "x" + std::to_string(o.height));
+    if (o.tile != ref.tile) return differ("tile size", std::to_string(ref.tile), std::to_string(o.tile));
+    if (o.channels != ref.channels) return differ("channel list", "", "");
+    for (const char* key : {"vox:camera", "vox:scene", "vox:split", "vox:store", "vox:passes"}) {
+      auto a = ref.attrs.find(key), b = o.attrs.find(key);
+      std::string va = a == ref.attrs.end() ? "<none>" : a->second;
+      std::string vb = b == o.attrs.end() ? "<none>" : b->second;
+      if (va != vb) return differ(key, va, vb);
+    }
+    if (specs[i].count != specs[0].count)
+      return differ("part count", std::to_string(specs[0].count), std::to_string(specs[i].count));
+  }
+  const int n = specs[0].count;
+  std::map<int, size_t> by_index;
+  for (size_t i = 0; i < parts.size(); ++i) {
+    auto [it, inserted] = by_index.emplace(specs[i].index, i);
+    if (!inserted)
+      return InvalidArgumentError("parts overlap: " + parts[it->second] + " and " + parts[i] +
+                                  " are both part " + specs[i].ToString());
+  }
+  for (int k = 1; k <= n; ++k)
+    if (!by_index.count(k))
+      return InvalidArgumentError("part " + std::to_string(k) + "/" + std::to_string(n) +
+                                  " is missing (" + std::to_string(parts.size()) + " of " +
+                                  std::to_string(n) + " parts given)");
+
+  ImageLayers layers;
+  for (const std::string& c : ref.channels) {
+    if (c == "N.x") layers.normal = true;
+    if (c == "voxel.i") layers.voxel = true;
+  }
+  ExrAttributes attrs = ref.attrs;
+  attrs.erase("vox:timings");
+  attrs["vox:part"] = "1/1";
+  attrs["vox:mergedFrom"] = std::to_string(n) + " parts";
+  const TileLayout layout(ref.width, ref.height, ref.tile);
+  VOX_ASSIGN_OR_RETURN(auto writer,
+                       TiledExrWriter::Create(out_path, ref.width, ref.height, ref.tile, layers, attrs));
+  TileBuffer buf;
+  buf.Allocate(ref.tile, layers);
+  MergeResult res;
+  res.parts = n;
+  for (int k = 1; k <= n; ++k) {
+    const size_t i = by_index[k];
+    const std::string& path = parts[i];
+    res.sum_render_seconds += infos[i].render_seconds;
+    res.max_render_seconds = std::max(res.max_render_seconds, infos[i].render_seconds);
+    int64_t begin = 0, end = 0;
+    layout.PartRange(specs[i], &begin, &end);
+    try {
+      Imf::TiledInputFile in(path.c_str());
+      Imf::FrameBuffer fb;
+      for (int c = 0; c < kNumChannels; ++c)
+        if (layers.Has(c))
+          fb.insert(ChannelName(c), Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(buf.ch[c].data()),
+                                               sizeof(float), sizeof(float) * size_t(buf.size), 1, 1,
+                                               0.0, true, true));
+      in.setFrameBuffer(fb);
+      for (int64_t t = begin; t < end; ++t) {
+        const TileRect& r = layout.order()[size_t(t)];
+        try {
+          in.readTile(r.tx, r.ty);
+        } catch (const std::exception& e) {
+          return CorruptionError(path + ": part " + specs[i].ToString() + " lacks tile (" +
+                                 std::to_string(r.tx) + ", " + std::to_string(r.ty) +
+                                 "); did its render finish? (" + e.what() + ")");
+        }
+        VOX_RETURN_IF_ERROR(writer->WriteTile(r, buf));
+        ++res.tiles;
+      }
+    } catch (const std::exception& e) {
+      return IoError(path + ": cannot read: " + e.what());
+    }
+  }
+  VOX_RETURN_IF_ERROR(writer->Close());
+  nlohmann::json timings{{"parts", n},
+                         {"sum_render_seconds", res.sum_render_seconds},
+                         {"max_render_seconds", res.max_render_seconds}};
+  VOX_RETURN_IF_ERROR(PatchTimings(out_path, res.max_render_seconds, timings.dump()));
+  if (result) *result = res;
+  return OkStatus();
+}
+
+}  // namespace vox

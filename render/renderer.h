@@ -1,0 +1,129 @@
+// vox::Renderer: shades the pixels of one tile by discrete ray tracing of a
+// RenderVolume (core/tracer.h), simulating only the effects the scene calls
+// for. The passes are decided once, at Create:
+//   - shadows:     a light with "shadows": true (and intensity > 0), surfaces only;
+//   - reflection:  a material with reflect > 0 and max_depth > 0;
+//   - refraction:  a material with transmit > 0 and max_depth > 0;
+//   - volume:      fog volumes only (level sets are never integrated);
+//   - scattering:  fog with scattering > 0 and a light.
+// Surfaces are shaded from the stored normals (index-space gradients taken to
+// world space by the inverse transpose of index_to_world); a voxel without a
+// normal uses the face its ray entered through.
+//
+// Secondary rays (shadow, reflection, refraction) start on the hit voxel's
+// face and skip the run of occupied voxels contiguous with their start (the
+// surface they leave), so a surface never shadows or reflects itself, while
+// anything after an empty voxel does occlude. Refracted rays cross the
+// object to the end of the first occupied run whose stored normal faces
+// along the ray (the back surface; a level set's interior is hollow).
+//
+// Fog: absorption on the exact DDA segments (each occupied voxel's entry and
+// exit t), extinction = (absorption + scattering) * density per world unit;
+// single scattering with isotropic phase, the light attenuated by a
+// transmittance ray to the light. A = 1 - transmittance. Integration stops
+// once transmittance falls below 1e-6.
+//
+// Thread safety: a Renderer is immutable after Create; RenderTile is const
+// and runs concurrently (one TileBuffer and RenderCounters per thread).
+#ifndef VOX_RENDER_RENDERER_H_
+#define VOX_RENDER_RENDERER_H_
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "core/ray.h"
+#include "core/status.h"
+#include "core/tracer.h"
+#include "render/camera.h"
+#include "render/exr.h"
+#include "render/scene.h"
+#include "render/tiles.h"
+#include "render/volume.h"
+
+namespace vox {
+
+enum RayKind { kRayPrimary, kRayShadow, kRayReflection, kRayRefraction, kRayVolume, kNumRayKinds };
+const char* RayKindName(int kind);
+
+struct RenderCounters {
+  TraceCounters trace;           // all rays' DDA work
+  uint64_t rays[kNumRayKinds] = {};
+  uint64_t pixels = 0;
+  uint64_t hit_pixels = 0;       // pixels with at least one primary hit (or fog)
+  uint64_t attribute_lookups = 0;
+  void Add(const RenderCounters& o);
+};
+
+struct RenderPasses {
+  bool shading = true;  // surfaces: local lighting from normals
+  bool shadows = false;
+  bool reflection = false;
+  bool refraction = false;
+  bool volume = false;
+  bool scattering = false;
+  std::string ToString() const;
+};
+
+struct RenderOptions {
+  int n1 = 0;  // first-step levels of the two-step traversal; 0: DefaultSplit
+  ImageLayers layers;
+};
+
+// The first-step levels vox uses for a `levels`-level octree.
+int DefaultSplit(int levels);
+
+class Renderer {
+ public:
+  // `volume` must outlive the renderer.
+  static StatusOr<std::unique_ptr<Renderer>> Create(RenderVolume* volume, const Camera& camera,
+                                                    const Scene& scene, const RenderOptions& options);
+
+  // Renders `rect` into `buf` (pixel (x, y) of the image at buf(x - x0, y - y0)).
+  Status RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters) const;
+
+  const RenderPasses& passes() const { return passes_; }
+  const Scene& scene() const { return scene_; }  // with the default lights filled in
+  const Camera& camera() const { return camera_; }
+  const ImageLayers& layers() const { return options_.layers; }
+  int n1() const { return tracer_.n1(); }
+  int n2() const { return tracer_.n2(); }
+  std::string SplitString() const;
+
+ private:
+  struct Ctx;
+  struct Sample;
+  Renderer(RenderVolume* volume, const Camera& camera, const Scene& scene, const RenderOptions& o,
+           DefaultTracer tracer, GridTransform xf)
+      : volume_(volume), camera_(camera), scene_(scene), options_(o), tracer_(tracer), xf_(xf) {}
+
+  Ray ToGrid(const glm::dvec3& origin_w, const glm::dvec3& dir_w) const;
+  glm::dvec3 Background(const glm::dvec3& dir) const;
+  void ShadePixel(double x, double y, Ctx& cx, Sample* s) const;
+  glm::dvec3 Radiance(const glm::dvec3& origin_g, const glm::dvec3& origin_w, const glm::dvec3& dir,
+                      int depth, int kind, Ctx& cx) const;
+  glm::dvec3 ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h, int depth, Ctx& cx,
+                          glm::dvec3* normal_out) const;
+  glm::dvec3 Refract(const glm::dvec3& origin_g, const glm::dvec3& origin_w, const glm::dvec3& dir,
+                     int depth, Ctx& cx) const;
+  glm::dvec3 Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double* transmittance,
+                 double* first_t) const;
+  double Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max, Ctx& cx) const;
+  bool Occluded(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max, Ctx& cx) const;
+  bool FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit) const;
+  glm::dvec3 WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a) const;
+
+  RenderVolume* volume_;
+  Camera camera_;
+  Scene scene_;
+  RenderOptions options_;
+  DefaultTracer tracer_;
+  GridTransform xf_;
+  RenderPasses passes_;
+  bool fog_ = false;
+  double eps_t_ = 1e-9;  // t tolerance for "touching" voxels, in world units
+};
+
+}  // namespace vox
+
+#endif  // VOX_RENDER_RENDERER_H_

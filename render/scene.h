@@ -1,0 +1,102 @@
+// vox::Scene: what vox-render simulates besides the camera, read from
+// scene.json. Every field is optional; the defaults give a lit, shadowed,
+// diffuse picture:
+//   {
+//     "background": [r,g,b]  or  {"top":[r,g,b], "bottom":[r,g,b]},
+//                               (a gradient along the camera's up vector)
+//     "ambient": [r,g,b],
+//     "lights": [ {"type":"directional", "direction":[x,y,z], ...},
+//                 {"type":"point", "position":[x,y,z], ...} ],
+//         each with "color":[r,g,b], "intensity":I, "shadows":true|false;
+//         "direction" is the way the light travels (from the light into
+//         the scene). Without a "lights" key the scene has one shadow-casting
+//         key light above and behind the camera; "lights":[] has none.
+//     "material": {"color":[r,g,b], "diffuse":kd, "specular":ks,
+//                  "shininess":n, "reflect":kr, "transmit":kt, "ior":eta},
+//     "materials": [ {"box":{"min":[x,y,z],"max":[x,y,z]}, ...material...} ],
+//         region overrides in world space: the first box holding the hit
+//         point gives the material; elsewhere "material" applies,
+//     "volume": {"absorption":sa, "scattering":ss, "color":[r,g,b]},
+//         per world unit, times the voxel density (fog volumes only),
+//     "max_depth": D,          reflection/refraction generations (0..16)
+//     "samples_per_pixel": S   (1..1024)
+//   }
+// A colour stored per voxel replaces the material colour. Surface colour =
+// (1 - reflect - transmit) * local + reflect * reflected + transmit *
+// refracted, where local = colour * (ambient + sum diffuse) + specular.
+//
+// Thread safety: immutable value; thread-safe to read.
+#ifndef VOX_RENDER_SCENE_H_
+#define VOX_RENDER_SCENE_H_
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "core/status.h"
+
+namespace vox {
+
+struct Light {
+  enum class Type { kDirectional, kPoint };
+  Type type = Type::kDirectional;
+  glm::dvec3 direction{0.0, -1.0, 0.0};  // unit; directional lights: travel direction
+  glm::dvec3 position{0.0};              // point lights
+  glm::dvec3 color{1.0};
+  double intensity = 1.0;
+  bool shadows = true;
+};
+
+struct Material {
+  glm::dvec3 color{0.8};
+  double diffuse = 0.9;
+  double specular = 0.15;
+  double shininess = 40.0;
+  double reflect = 0.0;
+  double transmit = 0.0;
+  double ior = 1.5;
+};
+
+struct MaterialRegion {
+  glm::dvec3 min{0.0}, max{0.0};  // world box, inclusive
+  Material material;
+};
+
+struct VolumeMedium {
+  double absorption = 0.5;
+  double scattering = 0.5;
+  glm::dvec3 color{1.0};  // tint of the scattered light
+};
+
+struct Scene {
+  glm::dvec3 background_top{0.32, 0.38, 0.48};
+  glm::dvec3 background_bottom{0.12, 0.12, 0.14};
+  glm::dvec3 ambient{0.12};
+  bool default_lights = true;  // no "lights" key: a key light set from the camera
+  std::vector<Light> lights;
+  Material material;
+  std::vector<MaterialRegion> regions;
+  VolumeMedium volume;
+  int max_depth = 4;
+  int samples_per_pixel = 1;
+
+  // The material at world point p.
+  const Material& MaterialAt(const glm::dvec3& p) const {
+    for (const MaterialRegion& r : regions)
+      if (p.x >= r.min.x && p.y >= r.min.y && p.z >= r.min.z && p.x <= r.max.x &&
+          p.y <= r.max.y && p.z <= r.max.z)
+        return r.material;
+    return material;
+  }
+  std::string ToJson() const;
+};
+
+// Parses scene.json text; errors name `file` and the field.
+StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file);
+StatusOr<Scene> LoadScene(const std::string& path);
+
+}  // namespace vox
+
+#endif  // VOX_RENDER_SCENE_H_
