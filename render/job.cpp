@@ -11,8 +11,10 @@
 #include "render/store_volume.h"
 
 namespace vox {
+namespace {
 
-StatusOr<int> ParseSplit(const std::string& text, int levels) {
+// --split "N1+N2" or "N1" for a `levels`-level store: n1.
+StatusOr<int> ParseSplitFlag(const std::string& text, int levels) {
   auto parse_int = [](std::string_view s, int* v) {
     auto r = std::from_chars(s.data(), s.data() + s.size(), *v);
     return !s.empty() && r.ec == std::errc() && r.ptr == s.data() + s.size();
@@ -32,6 +34,8 @@ StatusOr<int> ParseSplit(const std::string& text, int levels) {
                                 std::to_string(levels) + " levels");
   return n1;
 }
+
+}  // namespace
 
 Status RunRenderJob(const RenderJobOptions& o) {
   using Clock = std::chrono::steady_clock;
@@ -63,7 +67,13 @@ Status RunRenderJob(const RenderJobOptions& o) {
 
   RenderOptions ro;
   ro.layers = o.layers;
-  ro.n1 = o.single_step ? meta.levels : o.n1;
+  if (o.single_step && !o.split.empty())
+    return InvalidArgumentError("--split and --single-step both choose the split; give one");
+  if (o.single_step) {
+    ro.n1 = meta.levels;
+  } else if (!o.split.empty()) {
+    VOX_ASSIGN_OR_RETURN(ro.n1, ParseSplitFlag(o.split, meta.levels));
+  }
   VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(volume.get(), camera, scene, ro));
   const auto t_setup = Clock::now();
 

@@ -24,7 +24,7 @@ struct RenderJobOptions {
   std::string exr_path = "render.exr";
   std::string preview_path;  // empty: none
   std::string stats_path;    // empty: none
-  int n1 = 0;                // --split; 0: default
+  std::string split;         // --split N1+N2 or N1; empty: DefaultSplit
   bool single_step = false;
   size_t cache_mb = 1024;
   int threads = 0;
@@ -35,9 +35,6 @@ struct RenderJobOptions {
   int default_width = 1024, default_height = 1024;  // for the default camera
   FILE* log = stderr;
 };
-
-// Parses --split "N1+N2" or "N1" for a `levels`-level store into n1.
-StatusOr<int> ParseSplit(const std::string& text, int levels);
 
 Status RunRenderJob(const RenderJobOptions& options);
 

@@ -1,0 +1,255 @@
+// RenderFrame to tiled EXR: round trip through OpenEXR, header contents,
+// split renders merged bit for bit, merge refusing parts that do not belong
+// together, the PNG preview and the progress line.
+#include <png.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <filesystem>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "render/exr.h"
+#include "render/frame.h"
+#include "render/merge.h"
+#include "render/progress.h"
+#include "tests/render/render_util.h"
+#include "tests/render/test_volumes.h"
+
+namespace vox {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::Box;
+using testing::MakeVolume;
+using testing::Sphere;
+using testing::TestMeta;
+
+class FrameTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("vox_frame_test_" + std::to_string(getpid()));
+    fs::create_directories(dir_);
+    vol_ = MakeVolume(TestMeta(5, GridClass::kLevelSet), {Sphere({15, 17, 16}, 10), Box({2, 2, 2}, {8, 28, 6})});
+    ASSERT_TRUE(vol_);
+    cam_.position = {40, 30, 50};
+    cam_.look_at = {16, 16, 16};
+    cam_.fov_deg = 40;
+    cam_.width = 83;  // not a multiple of the tile size
+    cam_.height = 61;
+    ASSERT_TRUE(cam_.Finalize().ok());
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Path(const std::string& name) { return (dir_ / name).string(); }
+
+  std::unique_ptr<Renderer> MakeRenderer(const Camera& cam, ImageLayers layers = {}) {
+    RenderOptions o;
+    o.layers = layers;
+    auto r = Renderer::Create(vol_.get(), cam, scene_, o);
+    EXPECT_TRUE(r.ok()) << r.status().ToString();
+    return r.ok() ? std::move(r).value() : nullptr;
+  }
+
+  Status Frame(const Renderer& r, const std::string& path, PartSpec part = {}, int tile = 16,
+               FrameStats* stats_out = nullptr) {
+    FrameOptions fo;
+    fo.exr_path = path;
+    fo.threads = 2;
+    fo.tile_size = tile;
+    fo.part = part;
+    FrameStats stats;
+    Status s = RenderFrame(r, vol_.get(), fo, &stats);
+    if (stats_out) *stats_out = stats;
+    return s;
+  }
+
+  fs::path dir_;
+  std::unique_ptr<MemoryVolume> vol_;
+  Camera cam_;
+  Scene scene_;  // defaults: a shadow-casting key light
+};
+
+TEST_F(FrameTest, ExrRoundTripMatchesTheRenderer) {
+  ImageLayers layers;
+  layers.normal = layers.voxel = true;
+  auto r = MakeRenderer(cam_, layers);
+  ASSERT_TRUE(r);
+  FrameStats stats;
+  ASSERT_TRUE(Frame(*r, Path("full.exr"), {}, 16, &stats).ok());
+  testing::Image mem;
+  RenderCounters counters;
+  ASSERT_TRUE(testing::RenderToMemory(*r, &mem, &counters, 16).ok());
+  auto img = ReadExr(Path("full.exr"));
+  ASSERT_TRUE(img.ok()) << img.status().ToString();
+  EXPECT_EQ(img->info.width, 83);
+  EXPECT_EQ(img->info.height, 61);
+  EXPECT_EQ(img->info.tile, 16);
+  EXPECT_TRUE(img->info.complete);
+  EXPECT_EQ(img->pixels.size(), size_t(kNumChannels));
+  for (const auto& [name, pixels] : mem.ch) {
+    ASSERT_TRUE(img->pixels.count(name)) << name;
+    EXPECT_EQ(std::memcmp(pixels.data(), img->pixels[name].data(), pixels.size() * 4), 0) << name;
+  }
+  // Counters match the in-memory render; every tile was written.
+  EXPECT_EQ(stats.counters.rays[kRayPrimary], counters.rays[kRayPrimary]);
+  EXPECT_EQ(stats.counters.rays[kRayShadow], counters.rays[kRayShadow]);
+  EXPECT_GT(stats.counters.rays[kRayShadow], 0u);
+  EXPECT_EQ(stats.tiles, 6 * 4);
+  // Header: camera, split, passes, part, timings.
+  EXPECT_EQ(img->info.attrs["vox:camera"], cam_.ToJson());
+  EXPECT_EQ(img->info.attrs["vox:split"], r->SplitString());
+  EXPECT_EQ(img->info.attrs["vox:part"], "1/1");
+  EXPECT_EQ(img->info.attrs["vox:store"], "memory");
+  EXPECT_NE(img->info.attrs["vox:passes"].find("shadows"), std::string::npos);
+  EXPECT_GT(img->info.render_seconds, 0.0);
+  auto timings = nlohmann::json::parse(img->info.attrs["vox:timings"]);
+  EXPECT_EQ(timings["threads"], 2);
+  EXPECT_NEAR(timings["render_seconds"].get<double>(), img->info.render_seconds, 1e-3);
+  // The stats document has the counters the issue asks for.
+  auto js = nlohmann::json::parse(StatsJson(*r, stats, {{"total_seconds", 1.0}}));
+  EXPECT_EQ(js["rays"]["primary"], 83 * 61);
+  EXPECT_EQ(js["rays"]["shadow"], stats.counters.rays[kRayShadow]);
+  EXPECT_EQ(js["rays"]["reflection"], 0);
+  EXPECT_GT(js["dda"]["moves"].get<uint64_t>(), 0u);
+  EXPECT_TRUE(js["dda"].contains("transitions"));
+  EXPECT_TRUE(js["cache"].contains("bricks_paged_in"));
+  EXPECT_TRUE(js["cache"].contains("hits"));
+  EXPECT_TRUE(js["timings"].contains("render_seconds"));
+}
+
+TEST_F(FrameTest, PartsMergeBitForBitIntoTheFullRender) {
+  auto r = MakeRenderer(cam_);
+  ASSERT_TRUE(r);
+  ASSERT_TRUE(Frame(*r, Path("full.exr")).ok());
+  std::vector<std::string> parts;
+  int64_t tiles = 0;
+  for (int i = 1; i <= 3; ++i) {
+    parts.push_back(Path("part" + std::to_string(i) + ".exr"));
+    FrameStats st;
+    ASSERT_TRUE(Frame(*r, parts.back(), PartSpec{i, 3}, 16, &st).ok());
+    tiles += st.tiles;
+    auto info = ReadExrInfo(parts.back());
+    ASSERT_TRUE(info.ok());
+    EXPECT_FALSE(info->complete);
+  }
+  EXPECT_EQ(tiles, 24);
+  MergeResult res;
+  // Any order of the part files.
+  Status s = MergeParts({parts[2], parts[0], parts[1]}, Path("merged.exr"), &res);
+  ASSERT_TRUE(s.ok()) << s.ToString();
+  EXPECT_EQ(res.parts, 3);
+  EXPECT_EQ(res.tiles, 24);
+  auto full = ReadExr(Path("full.exr"));
+  auto merged = ReadExr(Path("merged.exr"));
+  ASSERT_TRUE(full.ok() && merged.ok());
+  ASSERT_EQ(full->pixels.size(), merged->pixels.size());
+  for (const auto& [name, pixels] : full->pixels)
+    EXPECT_EQ(std::memcmp(pixels.data(), merged->pixels[name].data(), pixels.size() * 4), 0) << name;
+  EXPECT_EQ(merged->info.attrs["vox:camera"], full->info.attrs["vox:camera"]);
+
+  // Refusals, each naming the culprit.
+  auto expect_error = [&](const std::vector<std::string>& list, const std::string& needle) {
+    Status e = MergeParts(list, Path("bad.exr"));
+    ASSERT_FALSE(e.ok());
+    EXPECT_NE(e.message().find(needle), std::string::npos) << e.ToString();
+  };
+  expect_error({parts[0], parts[1]}, "part 3/3 is missing");
+  expect_error({parts[0], parts[1], parts[1]}, "overlap");
+  expect_error({parts[0], parts[1], parts[2], Path("full.exr")}, "part count");
+  expect_error({parts[0], Path("nonexistent.exr")}, "nonexistent.exr");
+  // A part rendered with another camera.
+  Camera other = cam_;
+  other.position.x += 1;
+  ASSERT_TRUE(other.Finalize().ok());
+  auto r2 = MakeRenderer(other);
+  ASSERT_TRUE(Frame(*r2, Path("other2.exr"), PartSpec{2, 3}).ok());
+  expect_error({parts[0], Path("other2.exr"), parts[2]}, "vox:camera");
+  // Another tile size.
+  ASSERT_TRUE(Frame(*r, Path("tile32.exr"), PartSpec{2, 3}, 32).ok());
+  expect_error({parts[0], Path("tile32.exr"), parts[2]}, "tile size");
+  // A part whose render stopped early: same header, one tile only.
+  {
+    auto info = ReadExrInfo(parts[1]);
+    ASSERT_TRUE(info.ok());
+    ExrAttributes attrs = info->attrs;
+    attrs.erase("vox:timings");
+    auto w = TiledExrWriter::Create(Path("short.exr"), 83, 61, 16, {}, attrs);
+    ASSERT_TRUE(w.ok());
+    TileBuffer buf;
+    buf.Allocate(16, {});
+    TileLayout layout(83, 61, 16);
+    int64_t b = 0, e = 0;
+    layout.PartRange({2, 3}, &b, &e);
+    ASSERT_TRUE((*w)->WriteTile(layout.order()[size_t(b)], buf).ok());
+    ASSERT_TRUE((*w)->Close().ok());
+  }
+  expect_error({parts[0], Path("short.exr"), parts[2]}, "lacks tile");
+}
+
+TEST_F(FrameTest, TileOrderAndParts) {
+  TileLayout layout(100, 50, 16);
+  EXPECT_EQ(layout.num_tiles(), 7 * 4);
+  std::vector<int> seen(28, 0);
+  for (const TileRect& t : layout.order()) ++seen[size_t(t.ty * 7 + t.tx)];
+  for (int s : seen) EXPECT_EQ(s, 1);
+  // Morton order: the first four tiles are the top-left 2x2 block.
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_LT(layout.order()[size_t(k)].tx, 2);
+    EXPECT_LT(layout.order()[size_t(k)].ty, 2);
+  }
+  EXPECT_EQ(layout.Rect(6, 3).w, 4);
+  EXPECT_EQ(layout.Rect(6, 3).h, 2);
+  int64_t covered = 0, prev_end = 0;
+  for (int i = 1; i <= 5; ++i) {
+    int64_t b, e;
+    layout.PartRange({i, 5}, &b, &e);
+    EXPECT_EQ(b, prev_end);
+    covered += e - b;
+    prev_end = e;
+  }
+  EXPECT_EQ(covered, 28);
+  EXPECT_FALSE(ParsePartSpec("0/3").ok());
+  EXPECT_FALSE(ParsePartSpec("4/3").ok());
+  EXPECT_FALSE(ParsePartSpec("1/").ok());
+  EXPECT_FALSE(ParsePartSpec("a/b").ok());
+  EXPECT_TRUE(ParsePartSpec("3/3").ok());
+}
+
+TEST_F(FrameTest, PngPreview) {
+  scene_.background_top = scene_.background_bottom = {0.2, 0.2, 0.2};
+  auto r = MakeRenderer(cam_);
+  ASSERT_TRUE(Frame(*r, Path("full.exr")).ok());
+  ASSERT_TRUE(WritePngPreview(Path("full.exr"), Path("full.png")).ok());
+  png_image image;
+  std::memset(&image, 0, sizeof image);
+  image.version = PNG_IMAGE_VERSION;
+  ASSERT_TRUE(png_image_begin_read_from_file(&image, Path("full.png").c_str()));
+  EXPECT_EQ(image.width, 83u);
+  EXPECT_EQ(image.height, 61u);
+  image.format = PNG_FORMAT_RGB;
+  std::vector<uint8_t> px(PNG_IMAGE_SIZE(image));
+  ASSERT_TRUE(png_image_finish_read(&image, nullptr, px.data(), 0, nullptr));
+  // Top-left pixel is background 0.2 linear = 124 in sRGB.
+  EXPECT_EQ(px[0], 124);
+  // A partial EXR has no preview.
+  ASSERT_TRUE(Frame(*r, Path("part.exr"), PartSpec{1, 2}).ok());
+  EXPECT_FALSE(WritePngPreview(Path("part.exr"), Path("part.png")).ok());
+}
+
+TEST(ProgressTest, LineShowsTilesRateCacheAndTimeLeft) {
+  ProgressSnapshot s;
+  s.tiles_done = 25;
+  s.tiles_total = 100;
+  s.rays = 2000000;
+  s.cache_hits = 90;
+  s.cache_misses = 10;
+  std::string line = Progress::Line(s, 2.0);
+  EXPECT_NE(line.find("tiles 25/100"), std::string::npos) << line;
+  EXPECT_NE(line.find("1.00M rays/s"), std::string::npos) << line;
+  EXPECT_NE(line.find("cache hits 90%"), std::string::npos) << line;
+  EXPECT_NE(line.find("left 6.0s"), std::string::npos) << line;
+}
+
+}  // namespace
+}  // namespace vox

@@ -1,0 +1,39 @@
+// Writes generated voxels to a real store with StoreWriter, for tests that
+// run vox-render end to end.
+#ifndef VOX_TESTS_RENDER_STORE_UTIL_H_
+#define VOX_TESTS_RENDER_STORE_UTIL_H_
+
+#include <map>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "render/volume.h"
+#include "storage/store.h"
+
+namespace vox::testing {
+
+// `meta` as for MemoryVolume; the voxels are grid coordinates.
+inline Status WriteStore(const std::string& dir, StoreMeta meta, const std::vector<MemoryVoxel>& voxels) {
+  const int sub = meta.levels - meta.brick_level;
+  std::map<std::tuple<uint64_t, uint64_t, uint64_t>, std::vector<BrickVoxel>> bricks;
+  const uint64_t mask = (uint64_t(1) << sub) - 1;
+  for (const MemoryVoxel& v : voxels) {
+    BrickVoxel b;
+    b.x = uint32_t(v.x & mask);
+    b.y = uint32_t(v.y & mask);
+    b.z = uint32_t(v.z & mask);
+    b.attr = v.attr;
+    bricks[{v.x >> sub, v.y >> sub, v.z >> sub}].push_back(b);
+  }
+  WriteOptions wo;
+  wo.force = true;
+  VOX_ASSIGN_OR_RETURN(auto writer, StoreWriter::Create(dir, meta, wo));
+  for (auto& [coord, list] : bricks)
+    VOX_RETURN_IF_ERROR(writer->AddBrick({std::get<0>(coord), std::get<1>(coord), std::get<2>(coord)}, std::move(list)));
+  return writer->Finish();
+}
+
+}  // namespace vox::testing
+
+#endif  // VOX_TESTS_RENDER_STORE_UTIL_H_

@@ -1,0 +1,59 @@
+// vox-merge: assembles the partial EXRs of `vox-render --tiles I/N` into one
+// image. Parses flags and calls vox::MergeParts.
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "render/exr.h"
+#include "render/merge.h"
+
+namespace {
+
+const char kUsage[] =
+    "usage: vox-merge PART.exr... -o out.exr [--preview out.png] [--quiet]\n"
+    "  Checks that the parts belong together (same image, tiles, camera, scene, split,\n"
+    "  store), that every part 1..N is present once and complete, and writes the image.\n";
+
+int Usage(const std::string& error) {
+  if (!error.empty()) fprintf(stderr, "vox-merge: %s\n", error.c_str());
+  fprintf(stderr, "%s", kUsage);
+  return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<std::string> parts;
+  std::string out, preview;
+  bool quiet = false;
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    if (a == "-h" || a == "--help") {
+      fprintf(stdout, "%s", kUsage);
+      return 0;
+    } else if (a == "-o" || a == "--preview") {
+      if (i + 1 >= argc) return Usage(a + " needs a value");
+      (a == "-o" ? out : preview) = argv[++i];
+    } else if (a == "--quiet") {
+      quiet = true;
+    } else if (!a.empty() && a[0] == '-') {
+      return Usage("unknown flag " + a);
+    } else {
+      parts.push_back(a);
+    }
+  }
+  if (out.empty()) return Usage("no output given (-o out.exr)");
+  if (parts.empty()) return Usage("no part files given");
+  vox::MergeResult result;
+  vox::Status s = vox::MergeParts(parts, out, &result);
+  if (s.ok() && !preview.empty()) s = vox::WritePngPreview(out, preview);
+  if (!s.ok()) {
+    fprintf(stderr, "vox-merge: %s\n", s.ToString().c_str());
+    return 1;
+  }
+  if (!quiet)
+    fprintf(stderr, "vox-merge: %s from %d parts (%lld tiles); render time %.3f s max, %.3f s total\n",
+            out.c_str(), result.parts, (long long)result.tiles, result.max_render_seconds,
+            result.sum_render_seconds);
+  return 0;
+}
