@@ -12,7 +12,9 @@
 // ijk is [ijk, ijk + 1)^3), so a probe point P is the grid point P - origin.
 //
 // Thread safety: a Store is thread-safe (FetchBrick, Attributes, stats).
-// A StoreWriter is used by one thread at a time.
+// StoreWriter::AddBrick may be called from several threads at once (bricks
+// are encoded and compressed in parallel, appended in turn); Finish must not
+// race with AddBrick.
 #ifndef VOX_STORAGE_STORE_H_
 #define VOX_STORAGE_STORE_H_
 

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <mutex>
 #include <random>
 #include <cstring>
 #include <unordered_set>
@@ -36,6 +37,15 @@ struct CoordHash {
   }
 };
 
+// One compression context per thread, shared by all writers.
+struct CCtxDeleter {
+  void operator()(ZSTD_CCtx* c) const { ZSTD_freeCCtx(c); }
+};
+ZSTD_CCtx* ThreadCCtx() {
+  thread_local std::unique_ptr<ZSTD_CCtx, CCtxDeleter> cctx(ZSTD_createCCtx());
+  return cctx.get();
+}
+
 Status ValidateMeta(const StoreMeta& m) {
   if (m.levels < 1 || m.levels > kMaxLevels)
     return InvalidArgumentError("store levels " + std::to_string(m.levels) + " outside 1..40");
@@ -58,11 +68,9 @@ class StoreWriterImpl : public StoreWriter {
         options_(options),
         store_id_(store_id),
         depth_(meta_.levels - meta_.brick_level),
-        flags_(AttrFlags(meta_)),
-        cctx_(ZSTD_createCCtx()) {}
+        flags_(AttrFlags(meta_)) {}
 
   ~StoreWriterImpl() override {
-    ZSTD_freeCCtx(cctx_);
     if (!finished_) {
       bricks_.reset();
       std::error_code ec;
@@ -71,47 +79,49 @@ class StoreWriterImpl : public StoreWriter {
   }
 
   Status Init() {
-    if (cctx_ == nullptr) return ResourceExhaustedError("cannot allocate a zstd context");
     VOX_ASSIGN_OR_RETURN(bricks_, WritableFile::Create(temp_ + "/" + kBrickFileName));
     return bricks_->Append(EncodeFileHeader(kBrickMagic, store_id_));
   }
 
   Status AddBrick(const glm::u64vec3& c, std::vector<BrickVoxel> voxels) override {
-    if (!status_.ok()) return status_;
-    if (finished_) return InvalidArgumentError("AddBrick after Finish");
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (!status_.ok()) return status_;
+      if (finished_) return InvalidArgumentError("AddBrick after Finish");
+    }
     const uint64_t top_size = uint64_t(1) << meta_.brick_level;
     if (c.x >= top_size || c.y >= top_size || c.z >= top_size)
       return InvalidArgumentError("brick " + CoordString(c) + " outside the 2^" +
                                   std::to_string(meta_.brick_level) + " brick grid");
     if (voxels.empty()) return InvalidArgumentError("brick " + CoordString(c) + " has no voxels");
-    if (!seen_.insert(c).second)
-      return InvalidArgumentError("brick " + CoordString(c) + " added twice");
     const uint64_t local = uint64_t(1) << depth_;
-    for (const BrickVoxel& v : voxels)
+    glm::u64vec3 lo(UINT64_MAX), hi(0);
+    for (const BrickVoxel& v : voxels) {
       if (v.x >= local || v.y >= local || v.z >= local)
         return InvalidArgumentError("voxel (" + std::to_string(v.x) + "," + std::to_string(v.y) +
                                     "," + std::to_string(v.z) + ") of brick " + CoordString(c) +
                                     " outside the brick's 2^" + std::to_string(depth_) +
                                     " voxels");
-    // Track the occupied bounds in grid coordinates.
-    for (const BrickVoxel& v : voxels) {
-      glm::u64vec3 g{(c.x << depth_) + v.x, (c.y << depth_) + v.y, (c.z << depth_) + v.z};
-      if (!have_bounds_) {
-        gmin_ = gmax_ = g;
-        have_bounds_ = true;
-      }
-      gmin_ = glm::min(gmin_, g);
-      gmax_ = glm::max(gmax_, g);
+      glm::u64vec3 l(v.x, v.y, v.z);
+      lo = glm::min(lo, l);
+      hi = glm::max(hi, l);
+    }
+    if (depth_ == 0 && voxels.size() != 1)
+      return InvalidArgumentError("brick " + CoordString(c) + " repeats its voxel");
+    if (voxels.size() >= kBrickBit)
+      return InvalidArgumentError("brick " + CoordString(c) + " has too many voxels");
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (!seen_.insert(c).second)
+        return InvalidArgumentError("brick " + CoordString(c) + " added twice");
     }
     if (depth_ == 0) {
       // Top-only store: each "brick" is one voxel, kept in the top's payloads.
-      if (voxels.size() != 1) return InvalidArgumentError("brick " + CoordString(c) + " repeats its voxel");
+      std::lock_guard<std::mutex> lock(mu_);
       top_voxels_.push_back({{c.x, c.y, c.z, kEmptyRef}, voxels[0].attr});
-      ++voxel_count_;
+      AddBoundsLocked(c, lo, hi, 1);
       return OkStatus();
     }
-    if (voxels.size() >= kBrickBit)
-      return InvalidArgumentError("brick " + CoordString(c) + " has too many voxels");
 
     // Morton order; payload k is the k-th voxel in that order.
     std::vector<LeafPoint> pts(voxels.size());
@@ -121,27 +131,30 @@ class StoreWriterImpl : public StoreWriter {
     std::vector<VoxelAttributes> attrs(pts.size());
     for (size_t k = 0; k < pts.size(); ++k) {
       if (k > 0 && pts[k].x == pts[k - 1].x && pts[k].y == pts[k - 1].y && pts[k].z == pts[k - 1].z)
-        return InvalidArgumentError("brick " + CoordString(c) + " has voxel (" +
-                                    std::to_string(pts[k].x) + "," + std::to_string(pts[k].y) +
-                                    "," + std::to_string(pts[k].z) + ") twice");
+        return Unsee(c, InvalidArgumentError("brick " + CoordString(c) + " has voxel (" +
+                                             std::to_string(pts[k].x) + "," +
+                                             std::to_string(pts[k].y) + "," +
+                                             std::to_string(pts[k].z) + ") twice"));
       attrs[k] = voxels[pts[k].ref].attr;
       pts[k].ref = MakeLeafRef(uint32_t(k));
     }
     std::vector<Cell> cells = BuildCells(pts, depth_);
     std::string raw = EncodeBrickRaw(cells, attrs, depth_, flags_);
     if (raw.size() > kMaxBrickRawBytes)
-      return InvalidArgumentError("brick " + CoordString(c) + " is " + std::to_string(raw.size()) +
-                                  " bytes; the limit is " + std::to_string(kMaxBrickRawBytes) +
-                                  " (choose a deeper brick level)");
-    frame_.resize(ZSTD_compressBound(raw.size()));
-    size_t z = ZSTD_compressCCtx(cctx_, frame_.data(), frame_.size(), raw.data(), raw.size(),
+      return Unsee(c, InvalidArgumentError("brick " + CoordString(c) + " is " +
+                                           std::to_string(raw.size()) + " bytes; the limit is " +
+                                           std::to_string(kMaxBrickRawBytes) +
+                                           " (choose a deeper brick level)"));
+    ZSTD_CCtx* cctx = ThreadCCtx();
+    if (cctx == nullptr) return Fail(ResourceExhaustedError("cannot allocate a zstd context"));
+    std::string frame(ZSTD_compressBound(raw.size()), '\0');
+    size_t z = ZSTD_compressCCtx(cctx, frame.data(), frame.size(), raw.data(), raw.size(),
                                  options_.zstd_level);
     if (ZSTD_isError(z))
       return Fail(InternalError(std::string("zstd compression failed: ") + ZSTD_getErrorName(z)));
-    frame_.resize(z);
-    std::string trailer = BlockTrailer(frame_.data(), frame_.size(), kCodecZstd);
+    frame.resize(z);
+    std::string trailer = BlockTrailer(frame.data(), frame.size(), kCodecZstd);
     BrickEntry e;
-    e.offset = bricks_->size();
     e.x = c.x;
     e.y = c.y;
     e.z = c.z;
@@ -151,19 +164,24 @@ class StoreWriterImpl : public StoreWriter {
     e.voxel_count = uint32_t(attrs.size());
     e.crc = DecodeFixed32Trailer(trailer);
     e.codec = kCodecZstd;
-    Status s = bricks_->Append(frame_);
+
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!status_.ok()) return status_;
+    e.offset = bricks_->size();
+    Status s = bricks_->Append(frame);
     if (s.ok()) s = bricks_->Append(trailer);
-    if (!s.ok()) return Fail(s);
+    if (!s.ok()) return FailLocked(s);
     entries_.push_back(e);
-    voxel_count_ += attrs.size();
+    AddBoundsLocked(c, lo, hi, attrs.size());
     return OkStatus();
   }
 
   Status Finish() override {
+    std::lock_guard<std::mutex> lock(mu_);
     if (!status_.ok()) return status_;
     if (finished_) return InvalidArgumentError("Finish called twice");
     Status s = DoFinish();
-    if (!s.ok()) return Fail(s);
+    if (!s.ok()) return FailLocked(s);
     finished_ = true;
     return OkStatus();
   }
@@ -176,8 +194,30 @@ class StoreWriterImpl : public StoreWriter {
   }
 
   Status Fail(Status s) {
+    std::lock_guard<std::mutex> lock(mu_);
+    return FailLocked(std::move(s));
+  }
+  Status FailLocked(Status s) {
     status_ = s;
     return s;
+  }
+  // A brick refused after its coordinate was recorded may be added again.
+  Status Unsee(const glm::u64vec3& c, Status s) {
+    std::lock_guard<std::mutex> lock(mu_);
+    seen_.erase(c);
+    return s;
+  }
+  void AddBoundsLocked(const glm::u64vec3& c, const glm::u64vec3& lo, const glm::u64vec3& hi,
+                       uint64_t voxels) {
+    glm::u64vec3 glo = (c << uint64_t(depth_)) + lo, ghi = (c << uint64_t(depth_)) + hi;
+    if (!have_bounds_) {
+      gmin_ = glo;
+      gmax_ = ghi;
+      have_bounds_ = true;
+    }
+    gmin_ = glm::min(gmin_, glo);
+    gmax_ = glm::max(gmax_, ghi);
+    voxel_count_ += voxels;
   }
 
   Status DoFinish() {
@@ -270,12 +310,11 @@ class StoreWriterImpl : public StoreWriter {
   const uint64_t store_id_;
   const int depth_;
   const uint8_t flags_;
-  ZSTD_CCtx* cctx_;
   std::unique_ptr<WritableFile> bricks_;
   std::vector<BrickEntry> entries_;
   std::unordered_set<glm::u64vec3, CoordHash> seen_;
   std::vector<std::pair<LeafPoint, VoxelAttributes>> top_voxels_;
-  std::string frame_;
+  std::mutex mu_;  // guards everything below, the brick file and status_
   uint64_t voxel_count_ = 0;
   glm::u64vec3 gmin_{0}, gmax_{0};
   bool have_bounds_ = false;

@@ -1,6 +1,8 @@
 #include "storage/internal/format.h"
 
 #include <algorithm>
+#include <bit>
+#include <type_traits>
 #include <cmath>
 #include <cstring>
 
@@ -262,6 +264,43 @@ inline void ScatterPlanes(uint8_t* planes, uint32_t count, uint32_t index, int n
                           uint64_t v) {
   for (int b = 0; b < nbytes; ++b) planes[size_t(b) * count + index] = uint8_t(v >> (8 * b));
 }
+
+// Attribute components (width in bytes) in plane order, for delta coding.
+int Components(uint8_t flags, int* widths) {
+  int k = 0;
+  if (flags & kAttrNormal) widths[k++] = 2, widths[k++] = 2;
+  if (flags & kAttrDensity) widths[k++] = 4;
+  if (flags & kAttrColor) widths[k++] = 2, widths[k++] = 2, widths[k++] = 2;
+  return k;
+}
+
+// Replaces each component's values by their differences (mod 2^(8 width))
+// from the previous voxel's, or undoes that. Neighbours in Morton order have
+// similar normals, densities and colours: small differences compress well.
+template <int W>
+void DeltaComponent(uint8_t* planes, uint32_t count, bool encode) {
+  using T = std::conditional_t<W == 2, uint16_t, uint32_t>;
+  uint8_t* p[W];
+  for (int b = 0; b < W; ++b) p[b] = planes + size_t(b) * count;
+  T prev = 0;
+  for (uint32_t i = 0; i < count; ++i) {
+    T v = 0;
+    for (int b = 0; b < W; ++b) v = T(v | (T(p[b][i]) << (8 * b)));
+    T out = encode ? T(v - prev) : T(v + prev);
+    for (int b = 0; b < W; ++b) p[b][i] = uint8_t(out >> (8 * b));
+    prev = encode ? v : out;
+  }
+}
+
+void DeltaPlanes(uint8_t* planes, uint32_t count, uint8_t flags, bool encode) {
+  int widths[6];
+  int n = Components(flags, widths);
+  for (int c = 0; c < n; ++c) {
+    if (widths[c] == 2) DeltaComponent<2>(planes, count, encode);
+    else DeltaComponent<4>(planes, count, encode);
+    planes += size_t(widths[c]) * count;
+  }
+}
 }  // namespace
 
 VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
@@ -321,7 +360,9 @@ std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAtt
       if (c.child[d] != kEmptyRef) mask |= uint8_t(1u << d);
     s.push_back(char(mask));
   }
+  size_t at = s.size();
   WriteAttributes(attrs, flags, &s);
+  DeltaPlanes(reinterpret_cast<uint8_t*>(s.data()) + at, uint32_t(attrs.size()), flags, true);
   return s;
 }
 
@@ -341,15 +382,18 @@ struct MaskDecoder {
       error = "a cell with no children";
       return false;
     }
-    for (int d = 0; d < 8; ++d) {
-      if (!((m >> d) & 1)) continue;
-      if (levels_left == 1) {
-        if (next_payload >= voxel_count) {
-          error = "more voxels than its table row says";
-          return false;
-        }
-        cells[index].child[d] = MakeLeafRef(next_payload++);
-      } else {
+    if (levels_left == 1) {
+      if (uint64_t(next_payload) + uint64_t(std::popcount(m)) > voxel_count) {
+        error = "more voxels than its table row says";
+        return false;
+      }
+      for (unsigned bits = m; bits; bits &= bits - 1)
+        cells[index].child[std::countr_zero(bits)] = MakeLeafRef(next_payload++);
+      return true;
+    }
+    for (unsigned bits = m; bits; bits &= bits - 1) {
+      const int d = std::countr_zero(bits);
+      {
         if (next_cell >= num_cells) {
           error = "more cells than its table row says";
           return false;
@@ -399,6 +443,7 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
                            std::to_string(num_cells) + ", " + std::to_string(voxel_count));
   const uint8_t* planes = raw + kBrickHeaderSize + num_cells;
   b->attr_planes.assign(planes, raw + n);
+  DeltaPlanes(b->attr_planes.data(), voxel_count, flags, false);
   b->voxel_count = voxel_count;
   b->flags = flags;
   return b;
