@@ -1,0 +1,196 @@
+// vox-render and vox-merge end to end on a store written with StoreWriter:
+// outputs, --stats, --tiles + vox-merge, and the error exits for bad camera
+// and scene files.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "render/exr.h"
+#include "tests/render/store_util.h"
+#include "tests/render/test_volumes.h"
+
+namespace vox {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RunResult {
+  int code = -1;
+  std::string output;
+};
+
+RunResult Exec(const std::string& cmd) {
+  RunResult r;
+  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
+  int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class CliTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new fs::path(fs::temp_directory_path() / ("vox_cli_test_" + std::to_string(getpid())));
+    fs::create_directories(*dir_);
+    StoreMeta meta = testing::TestMeta(6, GridClass::kLevelSet, 0.25);
+    meta.brick_level = 3;
+    meta.origin = {-32, -32, -32};
+    meta.index_to_world = glm::scale(glm::dmat4(1.0), glm::dvec3(0.25));
+    meta.source_file = "generated";
+    meta.grid_name = "sphere";
+    std::vector<MemoryVoxel> voxels;
+    // A sphere of radius 20 voxels centred on index (0,0,0): world radius 5.
+    for (int z = 0; z < 64; ++z)
+      for (int y = 0; y < 64; ++y)
+        for (int x = 0; x < 64; ++x) {
+          glm::dvec3 ijk(x - 32, y - 32, z - 32);
+          double r = glm::length(ijk);
+          if (r > 20 || r < 17) continue;
+          MemoryVoxel v;
+          v.x = uint64_t(x);
+          v.y = uint64_t(y);
+          v.z = uint64_t(z);
+          v.attr.normal = glm::vec3(ijk / std::max(r, 1e-9));
+          voxels.push_back(v);
+        }
+    Status s = testing::WriteStore(Path("store"), meta, voxels);
+    ASSERT_TRUE(s.ok()) << s.ToString();
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*dir_);
+    delete dir_;
+  }
+  static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
+  static std::string Write(const std::string& name, const std::string& text) {
+    std::ofstream(Path(name)) << text;
+    return Path(name);
+  }
+  static std::string Render(const std::string& args) {
+    return std::string(VOX_RENDER_BIN) + " " + Path("store") + " " + args;
+  }
+
+  static fs::path* dir_;
+};
+fs::path* CliTest::dir_ = nullptr;
+
+const char kCam[] = R"({"position":[0,3,20], "look_at":[0,0,0], "up":[0,1,0], "fov_deg":40, "width":64, "height":48, "projection":"perspective"})";
+
+TEST_F(CliTest, RendersExrPreviewAndStats) {
+  std::string cam = Write("cam.json", kCam);
+  RunResult r = Exec(Render("--cam " + cam + " -o " + Path("a.exr") + " --preview " + Path("a.png") +
+                           " --stats " + Path("a.json") + " --threads 2 --tile-size 16 --quiet"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(r.output, "");  // --quiet
+  EXPECT_TRUE(fs::exists(Path("a.png")));
+  auto img = ReadExr(Path("a.exr"));
+  ASSERT_TRUE(img.ok()) << img.status().ToString();
+  EXPECT_EQ(img->info.width, 64);
+  EXPECT_EQ(img->info.attrs["vox:store"], Path("store"));
+  // The sphere (world radius 5 at distance 20) covers the image centre, not the corners.
+  EXPECT_EQ(img->pixels["A"][24 * 64 + 32], 1.0f);
+  EXPECT_EQ(img->pixels["A"][0], 0.0f);
+  // Depth at the centre: from z = 20 to the sphere's front, about 15 (ray slightly tilted).
+  EXPECT_NEAR(img->pixels["Z"][24 * 64 + 32], std::sqrt(9.0 + 400.0) - 5.0, 0.3);
+  std::ifstream in(Path("a.json"));
+  auto stats = nlohmann::json::parse(in);
+  EXPECT_EQ(stats["rays"]["primary"], 64 * 48);
+  EXPECT_GT(stats["rays"]["shadow"].get<int>(), 0);  // default scene: a shadow-casting key light
+  EXPECT_GT(stats["cache"]["bricks_paged_in"].get<int>(), 0);
+  EXPECT_GT(stats["cache"]["hits"].get<int>(), 0);
+  EXPECT_GT(stats["dda"]["moves"].get<int>(), 0);
+  EXPECT_EQ(stats["threads"], 2);
+}
+
+TEST_F(CliTest, DefaultCameraAndPlainProgress) {
+  RunResult r = Exec(Render("-o " + Path("d.exr") + " --size 40x30 --single-step --threads 1"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("tiles 1/1"), std::string::npos) << r.output;  // plain lines, not a terminal
+  auto img = ReadExr(Path("d.exr"));
+  ASSERT_TRUE(img.ok());
+  EXPECT_EQ(img->info.width, 40);
+  EXPECT_EQ(img->info.attrs["vox:split"], "6 (single step)");
+  // The default camera frames the whole volume: the sphere is in the middle, not cut off.
+  EXPECT_EQ(img->pixels["A"][15 * 40 + 20], 1.0f);
+  for (int x = 0; x < 40; ++x) {
+    EXPECT_EQ(img->pixels["A"][size_t(x)], 0.0f);
+    EXPECT_EQ(img->pixels["A"][29 * 40 + size_t(x)], 0.0f);
+  }
+}
+
+TEST_F(CliTest, TilesAndMergeEqualTheFullRender) {
+  std::string cam = Write("cam.json", kCam);
+  ASSERT_EQ(Exec(Render("--cam " + cam + " -o " + Path("full.exr") + " --tile-size 16 --quiet --split 3+3")).code, 0);
+  std::string parts;
+  for (int i = 1; i <= 3; ++i) {
+    std::string p = Path("p" + std::to_string(i) + ".exr");
+    RunResult r = Exec(Render("--cam " + cam + " -o " + p + " --tile-size 16 --quiet --split 3 --tiles " +
+                             std::to_string(i) + "/3"));
+    ASSERT_EQ(r.code, 0) << r.output;
+    parts += " " + p;
+  }
+  RunResult m = Exec(std::string(VOX_MERGE_BIN) + parts + " -o " + Path("merged.exr") + " --quiet");
+  ASSERT_EQ(m.code, 0) << m.output;
+  auto full = ReadExr(Path("full.exr"));
+  auto merged = ReadExr(Path("merged.exr"));
+  ASSERT_TRUE(full.ok() && merged.ok());
+  for (const auto& [name, pixels] : full->pixels)
+    EXPECT_EQ(std::memcmp(pixels.data(), merged->pixels[name].data(), pixels.size() * 4), 0) << name;
+  // A missing part is refused.
+  RunResult bad = Exec(std::string(VOX_MERGE_BIN) + " " + Path("p1.exr") + " " + Path("p3.exr") + " -o " +
+                      Path("bad.exr"));
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.output.find("part 2/3 is missing"), std::string::npos) << bad.output;
+}
+
+TEST_F(CliTest, BadCameraFilesNameTheFieldAndFail) {
+  struct Case {
+    const char* json;
+    const char* field;
+  } cases[] = {
+      {R"({"look_at":[0,0,0], "fov_deg":40, "width":64, "height":48})", "'position' is missing"},
+      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":"wide", "width":64, "height":48})", "'fov_deg' must be a number"},
+      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40, "width":0, "height":48})", "'width'"},
+      {R"({"position":[0,3,20], "look_at":[0,0,0], "up":[0,6,40], "fov_deg":40, "width":64, "height":48})", "'up' is parallel"},
+      {R"({"position":[0,3,"NaN"], "look_at":[0,0,0], "fov_deg":40, "width":64, "height":48})", "'position[2]'"},
+      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40, "width":64, "height":48, "projection":"cylindrical"})", "'projection'"},
+  };
+  int k = 0;
+  for (const Case& c : cases) {
+    std::string cam = Write("bad" + std::to_string(k++) + ".json", c.json);
+    RunResult r = Exec(Render("--cam " + cam + " -o " + Path("x.exr") + " --quiet"));
+    EXPECT_EQ(r.code, 1) << c.json;
+    EXPECT_NE(r.output.find(c.field), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(cam), std::string::npos) << r.output;
+  }
+  std::string scene = Write("bad_scene.json", R"({"lights":[{"type":"directional"}]})");
+  RunResult r = Exec(Render("--cam " + Write("cam.json", kCam) + " --scene " + scene + " -o " + Path("x.exr")));
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("lights[0].direction"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(scene), std::string::npos) << r.output;
+}
+
+TEST_F(CliTest, BadFlagsAndMissingStore) {
+  EXPECT_EQ(Exec(Render("--tiles 4/3")).code, 2);
+  EXPECT_EQ(Exec(Render("--tile-size 0")).code, 2);
+  EXPECT_EQ(Exec(Render("--bogus")).code, 2);
+  RunResult split = Exec(Render("--split 4+4 --quiet -o " + Path("s.exr")));
+  EXPECT_EQ(split.code, 1);
+  EXPECT_NE(split.output.find("6 levels"), std::string::npos) << split.output;
+  RunResult missing = Exec(std::string(VOX_RENDER_BIN) + " " + Path("nostore") + " --quiet");
+  EXPECT_EQ(missing.code, 1);
+  EXPECT_NE(missing.output.find("nostore"), std::string::npos) << missing.output;
+}
+
+}  // namespace
+}  // namespace vox
