@@ -117,7 +117,8 @@ class Store : public BrickSource {
   // Attributes of a voxel hit in brick `brick` (kNoBrick: the top) at `payload`.
   virtual StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) = 0;
   virtual CacheStats cache_stats() const = 0;
-  // Bytes of the resident top (cells and top payloads).
+  // Bytes held in memory for the life of the Store: top cells, top payloads
+  // and the brick table (not the cache).
   virtual uint64_t resident_bytes() const = 0;
 };
 
