@@ -143,7 +143,10 @@ class Tracer {
     for (int a = 0; a < 3; ++a) {
       D[a] = std::ldexp(ray.dir[a], -e);  // exact: a power of two
       cx->D[a] = Real(D[a]);
-      cx->s[a] = D[a] >= 0 ? 1 : -1;
+      // The sign of the unscaled component: scaling can flush a subnormal
+      // component to +-0.0 (dir (1e6, -5e-324, 0) scaled by 2^-19), and the
+      // ray still leaves its start plane to that side.
+      cx->s[a] = ray.dir[a] >= 0 ? 1 : -1;
     }
     // Driving axis: largest |D|, ties to the lower axis.
     int d = 0;
@@ -171,7 +174,8 @@ class Tracer {
     int entry = -1;
     for (int a = 0; a < 3; ++a) {
       if (D[a] == 0) {
-        if (o[a] < 0 || o[a] >= G) return false;
+        // Half-open along the axis, on the side the ray leaves o towards.
+        if (cx->s[a] > 0 ? (o[a] < 0 || o[a] >= G) : (o[a] <= 0 || o[a] > G)) return false;
         continue;
       }
       Real near = cx->s[a] > 0 ? 0 : G, far = cx->s[a] > 0 ? G : 0;
@@ -204,6 +208,19 @@ class Tracer {
     return v < 0 ? 0 : v;
   }
 
+  // The voxel the ray is in just *before* reaching p on one axis: differs
+  // from StartVoxel only when p lies exactly on a voxel boundary. The second
+  // step starts there on axes whose crossing the single-step DDA would make
+  // after the move that entered C (its tie order: d, then i1, then i2), so
+  // both modes visit the same voxels at exact lattice crossings.
+  static int64_t BeforeVoxel(Real p, int s, int64_t size) {
+    if (!(p > 0)) return 0;
+    if (!(p < Real(size))) return size - 1;
+    int64_t f = int64_t(p);  // floor, as p > 0
+    int64_t v = s < 0 ? f : (Real(f) == p ? f - 1 : f);
+    return v < 0 ? 0 : v;
+  }
+
   // Distance from p to the next boundary of voxel v in the direction of travel.
   static Real H(Real p, int64_t v, int s) {
     Real h = s > 0 ? Real(v + 1) - p : p - Real(v);
@@ -224,10 +241,13 @@ class Tracer {
   }
 
   // Section 4: a step's DDA state from a start point in the step's units.
-  Step InitStep(const Ctx& cx, const Real p[3], int n) const {
+  // Axes in the bit mask `before` take BeforeVoxel instead of StartVoxel.
+  Step InitStep(const Ctx& cx, const Real p[3], int n, unsigned before = 0) const {
     int64_t size = int64_t(1) << n;
     int64_t v[3];
-    for (int a = 0; a < 3; ++a) v[a] = StartVoxel(p[a], cx.s[a], size);
+    for (int a = 0; a < 3; ++a)
+      v[a] = (before >> a) & 1 ? BeforeVoxel(p[a], cx.s[a], size)
+                               : StartVoxel(p[a], cx.s[a], size);
     Step st;
     Real ud = cx.s[cx.d] * p[cx.d];
     st.dprime = cx.s[cx.d] > 0 ? v[cx.d] : -v[cx.d] - 1;
@@ -269,7 +289,14 @@ class Tracer {
       p2[d] = s_d > 0 ? Real(0) : Real(size2);
       p2[cx.i1] = (p1[cx.i1] + dd * cx.r1 - Real(C[cx.i1])) * up2_;
       p2[cx.i2] = (p1[cx.i2] + dd * cx.r2 - Real(C[cx.i2])) * up2_;
-      return InitStep(cx, p2, n2);
+      // On a passive boundary exactly at the face, the single-step DDA moves
+      // along d first: start before that boundary, if the ray did arrive
+      // there (its coordinate moved since the start point; one that did not,
+      // e.g. a zero or 1e-300 component, keeps its start side).
+      unsigned before = 0;
+      for (int a : {cx.i1, cx.i2})
+        if (p2[a] != cx.p[a] - Real(C[a] << n2)) before |= 1u << a;
+      return InitStep(cx, p2, n2, before);
     }
     // Case C: entry through the face perpendicular to passive axis c, where
     // the first step crossed it (its l before the increment), in fixed point.
@@ -285,7 +312,11 @@ class Tracer {
     v[c] = cx.s[c] > 0 ? 0 : size2 - 1;
     Real xd1 = s_d * Fixed::template ToReal<Real>(lc_old);  // entry d, first-step units
     Real p_o = (p1[o] + (xd1 - p1[d]) * (c_is_1 ? cx.r2 : cx.r1) - Real(C[o])) * up2_;
-    v[o] = StartVoxel(p_o, cx.s[o], size2);
+    // On a boundary of the other passive axis exactly at the entry, the
+    // single-step DDA has crossed it already if it is i1 (i1 before i2).
+    // (An axis along which the ray has not moved keeps its start side.)
+    v[o] = c_is_1 && p_o != cx.p[o] - Real(C[o] << n2) ? BeforeVoxel(p_o, cx.s[o], size2)
+                                                        : StartVoxel(p_o, cx.s[o], size2);
     const Word qc = c_is_1 ? cx.q1 : cx.q2;
     const Word lc = qc >= sat_ ? sat_ : u2 + qc;
     const Word lo_w = LValue(Fixed::template ToReal<Real>(u2), H(p_o, v[o], cx.s[o]),
