@@ -1,0 +1,1016 @@
+// vox::Ingest: OpenVDB grid -> vox store. See ingest.h for the contract.
+//
+// How it streams. The file is opened with OpenVDB's delayed loading: reading
+// the grid loads its tree topology (nodes and active masks) but leaves every
+// leaf buffer on disk (memory-mapped) until a value is read. Then:
+//  1. Topology pass: list the leaves (with their mask-only active bbox) and
+//     the active tiles; no voxel values are read.
+//  2. Exact occupied bbox: scan the leaves from each of the 6 sides in order
+//     of their active bbox until no further leaf can move the bound; each
+//     scanned leaf is decoded into a private copy of its buffer and dropped,
+//     so the tree's leaves stay on disk. Usually a few hundred leaves.
+//  3. Placement (origin, levels), the StoreWriter, and the brick map: brick
+//     coordinate -> the leaves and tiles that overlap it.
+//  4. Bricks, ordered in slabs along the axis with most bricks, go through a
+//     TBB pipeline: a parallel stage decodes the brick's leaves (inside the
+//     tree, so neighbours serve the gradient) and builds its voxels, a serial
+//     in-order stage hands them to the writer. When a slab has been written,
+//     the leaves no later brick can read (their last slab, one voxel of
+//     gradient reach included, is done) have their buffers freed. Peak
+//     memory: the topology + about two slabs of leaf buffers + the bricks in
+//     flight.
+#include "ingest/ingest.h"
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/Interpolation.h>
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+
+namespace vox {
+namespace {
+
+using openvdb::Coord;
+using openvdb::CoordBBox;
+
+double Now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+void InitOpenVdb() {
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+}
+
+std::string Quote(const std::string& s) { return "'" + s + "'"; }
+
+// Smallest n with 2^n >= extent (extent >= 1).
+int CeilLog2(uint64_t extent) {
+  int n = 0;
+  while ((uint64_t(1) << n) < extent) ++n;
+  return n;
+}
+
+int64_t AlignDown(int64_t v, int b) { return (v >> b) << b; }  // arithmetic shift: floor
+
+// ---------------------------------------------------------------------------
+// Colour sampling from a vec3 grid of the same file.
+
+class ColorReader {
+ public:
+  virtual ~ColorReader() = default;
+  // The colour at main-grid index coordinate `ijk`.
+  virtual glm::vec3 At(const Coord& ijk) = 0;
+};
+
+// A leaf buffer that may be freed once the slab `last_slab` has been written.
+struct ReleaseEntry {
+  int64_t last_slab = 0;
+  void* leaf = nullptr;
+  void (*release)(void*) = nullptr;
+};
+
+template <class LeafT>
+void ReleaseLeafBuffer(void* p) {
+  auto& buf = static_cast<LeafT*>(p)->buffer();
+  if (buf.isOutOfCore() || buf.empty()) return;  // never loaded: nothing to free
+  typename LeafT::Buffer none{openvdb::PartialCreate{}, typename LeafT::ValueType{}};
+  buf.swap(none);  // `none` now owns the values and frees them
+}
+
+// Geometry shared by the release schedule: slab axis and brick size.
+struct SlabGeometry {
+  int axis = 0;
+  int64_t origin = 0;  // origin along the axis
+  int brick_depth = 0; // B: a brick is 2^B voxels
+  int64_t LastSlab(int64_t max_index_coord) const {
+    // The last slab whose bricks read this coordinate (gradient reach 1).
+    return (max_index_coord + 1 - origin) >> brick_depth;
+  }
+};
+
+class ColorSource {
+ public:
+  virtual ~ColorSource() = default;
+  virtual std::unique_ptr<ColorReader> NewReader() = 0;
+  virtual void AddReleases(const SlabGeometry& g, std::vector<ReleaseEntry>* out) = 0;
+};
+
+template <class CGridT>
+class TypedColorSource : public ColorSource {
+ public:
+  TypedColorSource(typename CGridT::Ptr grid, const openvdb::math::Transform& main)
+      : grid_(std::move(grid)), main_(main), same_(grid_->transform() == main) {}
+
+  std::unique_ptr<ColorReader> NewReader() override {
+    return std::make_unique<Reader>(*grid_, main_, same_);
+  }
+
+  void AddReleases(const SlabGeometry& g, std::vector<ReleaseEntry>* out) override {
+    using LeafT = typename CGridT::TreeType::LeafNodeType;
+    for (auto it = grid_->tree().beginLeaf(); it; ++it) {
+      LeafT* leaf = it.getLeaf();
+      CoordBBox nb = leaf->getNodeBoundingBox();
+      int64_t hi;
+      if (same_) {
+        hi = nb.max()[g.axis];
+      } else {
+        // The leaf's extent in main-grid index space (+1: the trilinear footprint).
+        double m = -std::numeric_limits<double>::infinity();
+        for (int c = 0; c < 8; ++c) {
+          openvdb::Vec3d p(c & 1 ? nb.max().x() + 1 : nb.min().x() - 1,
+                           c & 2 ? nb.max().y() + 1 : nb.min().y() - 1,
+                           c & 4 ? nb.max().z() + 1 : nb.min().z() - 1);
+          openvdb::Vec3d q = main_.worldToIndex(grid_->transform().indexToWorld(p));
+          m = std::max(m, q[g.axis]);
+        }
+        hi = m > 4e18 ? std::numeric_limits<int64_t>::max() / 2 : int64_t(std::ceil(m)) + 1;
+      }
+      out->push_back({g.LastSlab(hi), leaf, &ReleaseLeafBuffer<LeafT>});
+    }
+  }
+
+ private:
+  class Reader : public ColorReader {
+   public:
+    Reader(const CGridT& grid, const openvdb::math::Transform& main, bool same)
+        : grid_(grid), main_(main), same_(same), acc_(grid.getConstUnsafeAccessor()) {}
+    glm::vec3 At(const Coord& ijk) override {
+      typename CGridT::ValueType v;
+      if (same_) {
+        v = acc_.getValue(ijk);
+      } else {
+        openvdb::Vec3d p = grid_.transform().worldToIndex(main_.indexToWorld(ijk));
+        openvdb::tools::BoxSampler::sample(acc_, p, v);
+      }
+      return glm::vec3(float(v[0]), float(v[1]), float(v[2]));
+    }
+
+   private:
+    const CGridT& grid_;
+    const openvdb::math::Transform& main_;
+    bool same_;
+    typename CGridT::ConstUnsafeAccessor acc_;
+  };
+
+  typename CGridT::Ptr grid_;
+  const openvdb::math::Transform& main_;
+  bool same_;
+};
+
+// ---------------------------------------------------------------------------
+// The ingest of one float or double grid.
+
+struct Context {
+  const IngestOptions& options;
+  const WriterFactory& factory;
+  ProgressSink* progress;
+  IngestStats* stats;
+  LevelsChoice choice;
+  StoreMeta meta;  // source, grid, class, transform, options filled in by the caller
+  ColorSource* color = nullptr;
+};
+
+template <class GridT>
+class GridIngest {
+ public:
+  using TreeT = typename GridT::TreeType;
+  using LeafT = typename TreeT::LeafNodeType;
+  using ValueT = typename GridT::ValueType;
+
+  GridIngest(GridT& grid, Context& cx) : grid_(grid), tree_(grid.tree()), cx_(cx) {}
+
+  Status Run() {
+    const bool level_set = cx_.meta.grid_class == GridClass::kLevelSet;
+    level_set_ = level_set;
+    iso_ = ValueT(cx_.meta.isovalue);
+    threshold_ = ValueT(cx_.meta.threshold);
+
+    // 1. Topology.
+    double t0 = Now();
+    for (auto it = tree_.beginLeaf(); it; ++it) {
+      LeafT* leaf = it.getLeaf();
+      all_leaves_.push_back(leaf);
+      if (leaf->isEmpty()) continue;  // no active voxel
+      LeafInfo li;
+      li.leaf = leaf;
+      leaf->evalActiveBoundingBox(li.active, /*visitVoxels=*/true);
+      leaves_.push_back(li);
+    }
+    {
+      auto it = tree_.cbeginValueOn();
+      it.setMaxDepth(TreeT::ValueOnCIter::LEAF_DEPTH - 1);  // tiles only
+      for (; it; ++it) {
+        if (!it.isTileValue()) continue;
+        ++cx_.stats->active_tiles;
+        if (!Occupied(*it)) continue;
+        CoordBBox b;
+        it.getBoundingBox(b);
+        tiles_.push_back({b, *it});
+        cx_.stats->occupied_tile_voxels += b.volume();
+      }
+    }
+    cx_.stats->leaf_nodes = all_leaves_.size();
+    cx_.stats->active_voxels = tree_.activeVoxelCount();
+    cx_.stats->seconds_open += Now() - t0;
+    Message("grid " + Quote(cx_.meta.grid_name) + ": " + std::to_string(all_leaves_.size()) +
+            " leaf nodes, " + std::to_string(cx_.stats->active_tiles) + " active tiles, " +
+            std::to_string(cx_.stats->active_voxels) + " active voxels");
+
+    // 2. Exact occupied bbox.
+    t0 = Now();
+    CoordBBox occ = OccupiedBBox();
+    cx_.stats->seconds_bbox = Now() - t0;
+
+    // 3. Placement and writer.
+    int64_t bmin[3], bmax[3];
+    const bool empty = occ.empty();
+    for (int a = 0; a < 3; ++a) {
+      bmin[a] = empty ? 0 : occ.min()[a];
+      bmax[a] = empty ? -1 : occ.max()[a];
+    }
+    VOX_ASSIGN_OR_RETURN(Placement pl, PlaceGrid(bmin, bmax, cx_.choice));
+    StoreMeta& meta = cx_.meta;
+    meta.levels = pl.levels;
+    meta.brick_level = pl.brick_level;
+    meta.origin = glm::i64vec3(pl.origin[0], pl.origin[1], pl.origin[2]);
+    meta.bbox_min = glm::i64vec3(bmin[0], bmin[1], bmin[2]);
+    meta.bbox_max = glm::i64vec3(bmax[0], bmax[1], bmax[2]);
+    cx_.stats->meta = meta;
+    B_ = pl.levels - pl.brick_level;
+    for (int a = 0; a < 3; ++a) origin_[a] = pl.origin[a];
+    if (empty) {
+      Message("nothing occupied: writing an empty store");
+    } else {
+      Message("occupied bbox [" + std::to_string(bmin[0]) + "," + std::to_string(bmin[1]) + "," +
+              std::to_string(bmin[2]) + "] -> [" + std::to_string(bmax[0]) + "," +
+              std::to_string(bmax[1]) + "," + std::to_string(bmax[2]) + "], levels " +
+              std::to_string(pl.brick_level) + "+" + std::to_string(B_) + " (" +
+              std::to_string(cx_.stats->bbox_leaves_read) + " leaves read for the bbox)");
+    }
+    WriteOptions wo;
+    wo.zstd_level = cx_.options.zstd_level;
+    wo.force = cx_.options.force;
+    auto writer_or = cx_.factory(cx_.options.output, meta, wo);
+    if (!writer_or.ok()) return writer_or.status();
+    std::unique_ptr<StoreWriter> writer = std::move(writer_or).value();
+
+    // 4. Bricks.
+    t0 = Now();
+    if (!empty) {
+      VOX_RETURN_IF_ERROR(BuildBrickMap(occ));
+      VOX_RETURN_IF_ERROR(WriteBricks(writer.get()));
+    }
+    cx_.stats->seconds_bricks = Now() - t0;
+    t0 = Now();
+    VOX_RETURN_IF_ERROR(writer->Finish());
+    cx_.stats->seconds_finish = Now() - t0;
+    return OkStatus();
+  }
+
+ private:
+  struct LeafInfo {
+    LeafT* leaf = nullptr;
+    CoordBBox active;    // bbox of the active mask (no values read)
+    int state = 0;       // 0: not decoded, 1: decoded
+    CoordBBox occupied;  // once decoded
+  };
+  struct Tile {
+    CoordBBox box;
+    ValueT value;
+  };
+  struct BrickWork {
+    uint64_t key = 0;
+    std::vector<uint32_t> leaves;
+    std::vector<uint32_t> tiles;
+  };
+
+  bool Occupied(ValueT v) const { return level_set_ ? !(v > iso_) : v > threshold_; }
+
+  void Message(const std::string& m) {
+    if (cx_.progress) cx_.progress->Message(m);
+  }
+
+  // Decodes a leaf into a private buffer copy (the tree's leaf stays on disk).
+  void DecodeOccupied(LeafInfo& li) {
+    if (li.state) return;
+    typename LeafT::Buffer copy(li.leaf->buffer());
+    const ValueT* d = copy.data();
+    const Coord o = li.leaf->origin();
+    for (auto m = li.leaf->getValueMask().beginOn(); m; ++m) {
+      openvdb::Index n = m.pos();
+      if (!Occupied(d[n])) continue;
+      li.occupied.expand(o + Coord(int(n >> 6), int((n >> 3) & 7), int(n & 7)));
+    }
+    li.state = 1;
+    ++cx_.stats->bbox_leaves_read;
+  }
+
+  CoordBBox OccupiedBBox() {
+    CoordBBox tiles_box;
+    for (const Tile& t : tiles_) tiles_box.expand(t.box);
+    int64_t lo[3], hi[3];
+    const int64_t kBig = std::numeric_limits<int64_t>::max();
+    std::vector<uint32_t> order(leaves_.size());
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = tiles_box.empty() ? kBig : tiles_box.min()[a];
+      hi[a] = tiles_box.empty() ? -kBig : tiles_box.max()[a];
+      for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+      std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) {
+        return leaves_[x].active.min()[a] < leaves_[y].active.min()[a];
+      });
+      for (uint32_t i : order) {
+        LeafInfo& li = leaves_[i];
+        if (li.active.min()[a] >= lo[a]) break;
+        DecodeOccupied(li);
+        if (!li.occupied.empty()) lo[a] = std::min<int64_t>(lo[a], li.occupied.min()[a]);
+      }
+      std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) {
+        return leaves_[x].active.max()[a] > leaves_[y].active.max()[a];
+      });
+      for (uint32_t i : order) {
+        LeafInfo& li = leaves_[i];
+        if (li.active.max()[a] <= hi[a]) break;
+        DecodeOccupied(li);
+        if (!li.occupied.empty()) hi[a] = std::max<int64_t>(hi[a], li.occupied.max()[a]);
+      }
+      if (lo[a] == kBig) return CoordBBox();  // nothing occupied anywhere
+    }
+    return CoordBBox(Coord(int(lo[0]), int(lo[1]), int(lo[2])),
+                     Coord(int(hi[0]), int(hi[1]), int(hi[2])));
+  }
+
+  static constexpr int kKeyBits = 21;
+  static uint64_t Key(int64_t x, int64_t y, int64_t z) {
+    return uint64_t(x) | (uint64_t(y) << kKeyBits) | (uint64_t(z) << (2 * kKeyBits));
+  }
+  static int64_t KeyCoord(uint64_t k, int a) {
+    return int64_t((k >> (a * kKeyBits)) & ((uint64_t(1) << kKeyBits) - 1));
+  }
+
+  Status BuildBrickMap(const CoordBBox& occ) {
+    // Brick coordinate range of a box, clipped to the occupied bbox.
+    auto range = [&](const CoordBBox& box, int64_t lo[3], int64_t hi[3]) {
+      for (int a = 0; a < 3; ++a) {
+        int64_t mn = std::max<int64_t>(box.min()[a], occ.min()[a]);
+        int64_t mx = std::min<int64_t>(box.max()[a], occ.max()[a]);
+        if (mn > mx) return false;
+        lo[a] = (mn - origin_[a]) >> B_;
+        hi[a] = (mx - origin_[a]) >> B_;
+      }
+      return true;
+    };
+    std::unordered_map<uint64_t, uint32_t> index;
+    auto brick = [&](int64_t x, int64_t y, int64_t z) -> BrickWork& {
+      uint64_t k = Key(x, y, z);
+      auto [it, inserted] = index.try_emplace(k, uint32_t(bricks_.size()));
+      if (inserted) {
+        bricks_.emplace_back();
+        bricks_.back().key = k;
+      }
+      return bricks_[it->second];
+    };
+    int64_t lo[3], hi[3];
+    // Bricks the occupied tiles cover: refuse counts a store cannot index.
+    long double tile_bricks = 0;
+    for (const Tile& t : tiles_)
+      if (range(t.box, lo, hi))
+        tile_bricks += (long double)(hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1);
+    if (tile_bricks > (long double)(uint64_t(1) << 26))
+      return ResourceExhaustedError(
+          cx_.options.input + ": grid " + Quote(cx_.meta.grid_name) +
+          " has occupied active tiles covering " + std::to_string(double(tile_bricks)) +
+          " bricks of " + std::to_string(int64_t(1) << B_) + "^3 voxels; vox expands tiles to "
+          "voxels and cannot index that many");
+    for (uint32_t i = 0; i < leaves_.size(); ++i) {
+      if (!range(leaves_[i].active, lo, hi)) continue;
+      for (int64_t z = lo[2]; z <= hi[2]; ++z)
+        for (int64_t y = lo[1]; y <= hi[1]; ++y)
+          for (int64_t x = lo[0]; x <= hi[0]; ++x) brick(x, y, z).leaves.push_back(i);
+    }
+    for (uint32_t i = 0; i < tiles_.size(); ++i) {
+      if (!range(tiles_[i].box, lo, hi)) continue;
+      for (int64_t z = lo[2]; z <= hi[2]; ++z)
+        for (int64_t y = lo[1]; y <= hi[1]; ++y)
+          for (int64_t x = lo[0]; x <= hi[0]; ++x) brick(x, y, z).tiles.push_back(i);
+    }
+    // Slabs along the axis with the most bricks.
+    int64_t span[3];
+    for (int a = 0; a < 3; ++a)
+      span[a] = ((int64_t(occ.max()[a]) - origin_[a]) >> B_) -
+                ((int64_t(occ.min()[a]) - origin_[a]) >> B_);
+    slab_.axis = int(std::max_element(span, span + 3) - span);
+    slab_.origin = origin_[slab_.axis];
+    slab_.brick_depth = B_;
+    const int ax = slab_.axis, a1 = (ax + 1) % 3, a2 = (ax + 2) % 3;
+    std::sort(bricks_.begin(), bricks_.end(), [&](const BrickWork& p, const BrickWork& q) {
+      for (int a : {ax, a2, a1}) {
+        int64_t u = KeyCoord(p.key, a), v = KeyCoord(q.key, a);
+        if (u != v) return u < v;
+      }
+      return false;
+    });
+    // Release schedule: every leaf of the grid (and of the colour grid).
+    for (LeafT* leaf : all_leaves_)
+      releases_.push_back({slab_.LastSlab(leaf->getNodeBoundingBox().max()[ax]), leaf,
+                           &ReleaseLeafBuffer<LeafT>});
+    if (cx_.color) cx_.color->AddReleases(slab_, &releases_);
+    std::sort(releases_.begin(), releases_.end(),
+              [](const ReleaseEntry& p, const ReleaseEntry& q) { return p.last_slab < q.last_slab; });
+    return OkStatus();
+  }
+
+  // One brick's voxels. Runs concurrently on many bricks.
+  std::vector<BrickVoxel> ExtractBrick(const BrickWork& bw) {
+    const int64_t size = int64_t(1) << B_;
+    int64_t rmin[3], rmax[3];
+    for (int a = 0; a < 3; ++a) {
+      rmin[a] = origin_[a] + (KeyCoord(bw.key, a) << B_);
+      rmax[a] = rmin[a] + size - 1;
+    }
+    std::vector<BrickVoxel> out;
+    auto acc = grid_.getConstUnsafeAccessor();
+    std::unique_ptr<ColorReader> color = cx_.color ? cx_.color->NewReader() : nullptr;
+    auto finish = [&](BrickVoxel& bv, const Coord& ijk) {
+      if (color) bv.attr.color = color->At(ijk);
+    };
+    auto normal_from = [](double gx, double gy, double gz) {
+      double len = std::sqrt(gx * gx + gy * gy + gz * gz);
+      if (!(len > 0) || !std::isfinite(len)) return glm::vec3(0.0f);
+      return glm::vec3(float(gx / len), float(gy / len), float(gz / len));
+    };
+    for (uint32_t li_index : bw.leaves) {
+      const LeafInfo& li = leaves_[li_index];
+      const LeafT* leaf = li.leaf;
+      const ValueT* d = leaf->buffer().data();  // loads the leaf in the tree
+      const Coord o = leaf->origin();
+      for (auto m = leaf->getValueMask().beginOn(); m; ++m) {
+        const openvdb::Index n = m.pos();
+        const int lx = int(n >> 6), ly = int((n >> 3) & 7), lz = int(n & 7);
+        const int64_t x = int64_t(o.x()) + lx, y = int64_t(o.y()) + ly, z = int64_t(o.z()) + lz;
+        if (x < rmin[0] || x > rmax[0] || y < rmin[1] || y > rmax[1] || z < rmin[2] ||
+            z > rmax[2])
+          continue;
+        const ValueT v = d[n];
+        if (!Occupied(v)) continue;
+        BrickVoxel bv;
+        bv.x = uint32_t(x - rmin[0]);
+        bv.y = uint32_t(y - rmin[1]);
+        bv.z = uint32_t(z - rmin[2]);
+        const Coord ijk{int(x), int(y), int(z)};
+        if (level_set_) {
+          // Central differences; inside the leaf without the accessor.
+          double gx = (lx > 0 && lx < 7) ? double(d[n + 64]) - double(d[n - 64])
+                                          : double(acc.getValue(ijk.offsetBy(1, 0, 0))) -
+                                                double(acc.getValue(ijk.offsetBy(-1, 0, 0)));
+          double gy = (ly > 0 && ly < 7) ? double(d[n + 8]) - double(d[n - 8])
+                                          : double(acc.getValue(ijk.offsetBy(0, 1, 0))) -
+                                                double(acc.getValue(ijk.offsetBy(0, -1, 0)));
+          double gz = (lz > 0 && lz < 7) ? double(d[n + 1]) - double(d[n - 1])
+                                          : double(acc.getValue(ijk.offsetBy(0, 0, 1))) -
+                                                double(acc.getValue(ijk.offsetBy(0, 0, -1)));
+          bv.attr.normal = normal_from(gx, gy, gz);
+        } else {
+          bv.attr.density = float(v);
+        }
+        finish(bv, ijk);
+        out.push_back(bv);
+      }
+    }
+    for (uint32_t ti : bw.tiles) {
+      const Tile& t = tiles_[ti];
+      int64_t lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::max<int64_t>(t.box.min()[a], rmin[a]);
+        hi[a] = std::min<int64_t>(t.box.max()[a], rmax[a]);
+      }
+      for (int64_t x = lo[0]; x <= hi[0]; ++x)
+        for (int64_t y = lo[1]; y <= hi[1]; ++y)
+          for (int64_t z = lo[2]; z <= hi[2]; ++z) {
+            BrickVoxel bv;
+            bv.x = uint32_t(x - rmin[0]);
+            bv.y = uint32_t(y - rmin[1]);
+            bv.z = uint32_t(z - rmin[2]);
+            const Coord ijk{int(x), int(y), int(z)};
+            if (level_set_) {
+              auto g = [&](int dx, int dy, int dz) {
+                return double(acc.getValue(ijk.offsetBy(dx, dy, dz))) -
+                       double(acc.getValue(ijk.offsetBy(-dx, -dy, -dz)));
+              };
+              bv.attr.normal = normal_from(g(1, 0, 0), g(0, 1, 0), g(0, 0, 1));
+            } else {
+              bv.attr.density = float(t.value);
+            }
+            finish(bv, ijk);
+            out.push_back(bv);
+          }
+    }
+    return out;
+  }
+
+  Status WriteBricks(StoreWriter* writer) {
+    struct Item {
+      size_t index = 0;
+      std::vector<BrickVoxel> voxels;
+      Status status;
+    };
+    const size_t total = bricks_.size();
+    Message("writing " + std::to_string(total) + " bricks of " + std::to_string(1 << B_) +
+            "^3 voxels, slabs along " + "xyz"[slab_.axis]);
+    std::atomic<bool> failed{false};
+    Status first_error;
+    size_t next = 0, written = 0, released = 0;
+    uint64_t voxels_done = 0;
+    const int ax = slab_.axis;
+    const size_t tokens = size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
+    tbb::parallel_pipeline(
+        tokens,
+        tbb::make_filter<void, Item*>(
+            tbb::filter_mode::serial_in_order,
+            [&](tbb::flow_control& fc) -> Item* {
+              if (next >= total || failed.load()) {
+                fc.stop();
+                return nullptr;
+              }
+              Item* it = new Item;
+              it->index = next++;
+              return it;
+            }) &
+            tbb::make_filter<Item*, Item*>(
+                tbb::filter_mode::parallel,
+                [&](Item* it) -> Item* {
+                  if (failed.load()) return it;
+                  try {
+                    it->voxels = ExtractBrick(bricks_[it->index]);
+                  } catch (const openvdb::Exception& e) {
+                    it->status = CorruptionError(cx_.options.input + ": grid " +
+                                                 Quote(cx_.meta.grid_name) +
+                                                 ": cannot read voxel data: " + e.what());
+                  } catch (const std::bad_alloc&) {
+                    it->status = ResourceExhaustedError("out of memory while building brick " +
+                                                        std::to_string(it->index));
+                  } catch (const std::exception& e) {
+                    it->status = InternalError(cx_.options.input + ": " + e.what());
+                  }
+                  return it;
+                }) &
+            tbb::make_filter<Item*, void>(
+                tbb::filter_mode::serial_in_order, [&](Item* raw) {
+                  std::unique_ptr<Item> it(raw);
+                  if (failed.load()) return;
+                  const BrickWork& bw = bricks_[it->index];
+                  Status s = it->status;
+                  if (s.ok() && !it->voxels.empty()) {
+                    const size_t n = it->voxels.size();
+                    s = writer->AddBrick(glm::u64vec3(KeyCoord(bw.key, 0), KeyCoord(bw.key, 1),
+                                                      KeyCoord(bw.key, 2)),
+                                         std::move(it->voxels));
+                    if (s.ok()) {
+                      voxels_done += n;
+                      ++written;
+                    }
+                  }
+                  if (!s.ok()) {
+                    first_error = s;
+                    failed.store(true);
+                    return;
+                  }
+                  // Slab complete: free the leaves no later brick reads.
+                  const int64_t slab = KeyCoord(bw.key, ax);
+                  const bool slab_done =
+                      it->index + 1 == total || KeyCoord(bricks_[it->index + 1].key, ax) != slab;
+                  if (slab_done) {
+                    while (released < releases_.size() && releases_[released].last_slab <= slab) {
+                      releases_[released].release(releases_[released].leaf);
+                      ++released;
+                    }
+                  }
+                  if (cx_.progress) cx_.progress->Progress(it->index + 1, total, voxels_done);
+                }));
+    if (!first_error.ok()) return first_error;
+    cx_.stats->occupied_voxels = voxels_done;
+    cx_.stats->bricks = written;
+    return OkStatus();
+  }
+
+  GridT& grid_;
+  TreeT& tree_;
+  Context& cx_;
+  bool level_set_ = true;
+  ValueT iso_{}, threshold_{};
+  std::vector<LeafT*> all_leaves_;
+  std::vector<LeafInfo> leaves_;  // leaves with active voxels
+  std::vector<Tile> tiles_;       // occupied active tiles
+  int B_ = 0;
+  int64_t origin_[3] = {0, 0, 0};
+  std::vector<BrickWork> bricks_;
+  SlabGeometry slab_;
+  std::vector<ReleaseEntry> releases_;
+};
+
+// ---------------------------------------------------------------------------
+// The VDB file's outer layout, checked before OpenVDB reads it: OpenVDB trusts
+// the lengths it reads, so a truncated file can make it allocate gigabytes
+// for a garbage string. This walks the header, the file metadata and the grid
+// descriptors (each with its grid's [start, end) offsets) and checks every
+// length and offset against the file size. Grid contents are left to OpenVDB.
+
+// A descriptor's unique name: the grid name, with a "\x1e<n>" suffix when not unique.
+std::string GridDescriptorName(const std::string& unique) {
+  return unique.substr(0, unique.find('\x1e'));
+}
+
+class LayoutReader {
+ public:
+  LayoutReader(std::FILE* f, uint64_t size, const std::string& path)
+      : f_(f), size_(size), path_(path) {}
+
+  Status Read(void* p, uint64_t n, const char* what) {
+    if (pos_ + n > size_ || std::fread(p, 1, n, f_) != n)
+      return Truncated(what);
+    pos_ += n;
+    return OkStatus();
+  }
+  Status Skip(uint64_t n, const char* what) {
+    if (n > size_ - pos_) return Truncated(what);
+    return Seek(pos_ + n, what);
+  }
+  Status Seek(uint64_t p, const char* what) {
+    if (p > size_) return Truncated(what);
+    if (std::fseek(f_, long(p), SEEK_SET) != 0) return IoError(path_ + ": " + std::strerror(errno));
+    pos_ = p;
+    return OkStatus();
+  }
+  // A length-prefixed string (uint32 length + bytes).
+  Status String(std::string* s, const char* what) {
+    uint32_t n = 0;
+    VOX_RETURN_IF_ERROR(Read(&n, 4, what));
+    if (n > size_ - pos_) return Truncated(what);
+    s->resize(n);
+    return Read(s->data(), n, what);
+  }
+  Status Truncated(const char* what) const {
+    return CorruptionError(path_ + ": truncated or corrupt VDB file: " + what + " at byte " +
+                           std::to_string(pos_) + " runs past the end of the file (" +
+                           std::to_string(size_) + " bytes)");
+  }
+  uint64_t pos() const { return pos_; }
+  uint64_t size() const { return size_; }
+
+ private:
+  std::FILE* f_;
+  uint64_t size_;
+  const std::string& path_;
+  uint64_t pos_ = 0;
+};
+
+Status CheckVdbLayout(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return IoError(path + ": " + std::strerror(errno));
+  struct Closer {
+    std::FILE* f;
+    ~Closer() { std::fclose(f); }
+  } closer{f};
+  struct stat st;
+  if (::fstat(fileno(f), &st) != 0) return IoError(path + ": " + std::strerror(errno));
+  LayoutReader r(f, uint64_t(st.st_size), path);
+  int64_t magic = 0;
+  if (uint64_t(st.st_size) < 8 || !r.Read(&magic, 8, "magic").ok() ||
+      magic != int64_t(openvdb::OPENVDB_MAGIC))
+    return CorruptionError(path + ": not a readable OpenVDB file (no VDB magic number)");
+  uint32_t version = 0;
+  VOX_RETURN_IF_ERROR(r.Read(&version, 4, "file version"));
+  if (version < 211) {
+    VOX_RETURN_IF_ERROR(r.Skip(8, "file version"));
+    return OkStatus();  // pre-2.1.1 files: left to OpenVDB
+  }
+  VOX_RETURN_IF_ERROR(r.Skip(8, "library version"));
+  char has_offsets = 1;
+  if (version >= 212) VOX_RETURN_IF_ERROR(r.Read(&has_offsets, 1, "grid offsets flag"));
+  if (version >= 220 && version < 222) VOX_RETURN_IF_ERROR(r.Skip(1, "compression flag"));
+  VOX_RETURN_IF_ERROR(r.Skip(version >= 218 ? 36 : 16, "file UUID"));
+  // File metadata: count, then (name, type name, size-prefixed value).
+  int32_t count = 0;
+  VOX_RETURN_IF_ERROR(r.Read(&count, 4, "file metadata count"));
+  if (count < 0 || uint64_t(count) > r.size()) return r.Truncated("file metadata count");
+  std::string s;
+  for (int32_t i = 0; i < count; ++i) {
+    VOX_RETURN_IF_ERROR(r.String(&s, "file metadata name"));
+    VOX_RETURN_IF_ERROR(r.String(&s, "file metadata type"));
+    VOX_RETURN_IF_ERROR(r.String(&s, "file metadata value"));
+  }
+  if (!has_offsets) return OkStatus();  // a stream without offsets: left to OpenVDB
+  int32_t grids = 0;
+  VOX_RETURN_IF_ERROR(r.Read(&grids, 4, "grid count"));
+  if (grids < 0 || uint64_t(grids) > r.size()) return r.Truncated("grid count");
+  for (int32_t g = 0; g < grids; ++g) {
+    std::string name;
+    VOX_RETURN_IF_ERROR(r.String(&name, "grid name"));
+    VOX_RETURN_IF_ERROR(r.String(&s, "grid type"));
+    if (version >= 216) VOX_RETURN_IF_ERROR(r.String(&s, "instance parent name"));
+    int64_t pos[3];
+    VOX_RETURN_IF_ERROR(r.Read(pos, sizeof pos, "grid offsets"));
+    if (pos[0] < int64_t(r.pos()) || pos[1] < pos[0] || pos[2] < pos[1] ||
+        uint64_t(pos[2]) > r.size())
+      return CorruptionError(path + ": truncated or corrupt VDB file: grid " +
+                             Quote(GridDescriptorName(name)) + " spans bytes " +
+                             std::to_string(pos[0]) + ".." + std::to_string(pos[2]) +
+                             " of a " + std::to_string(r.size()) + "-byte file");
+    VOX_RETURN_IF_ERROR(r.Seek(uint64_t(pos[2]), "next grid descriptor"));
+  }
+  return OkStatus();
+}
+
+std::string GridTypeLabel(const openvdb::GridBase& g) {
+  return g.valueType() + (g.isType<openvdb::points::PointDataGrid>() ? " (points)" : "");
+}
+
+bool IsScalar(const openvdb::GridBase& g) {
+  return g.isType<openvdb::FloatGrid>() || g.isType<openvdb::DoubleGrid>();
+}
+
+std::string ListGrids(const openvdb::GridPtrVec& grids) {
+  std::string s;
+  for (const auto& g : grids) {
+    if (!s.empty()) s += ", ";
+    s += Quote(g->getName()) + " (" + GridTypeLabel(*g) + ", " +
+         openvdb::GridBase::gridClassToString(g->getGridClass()) + ")";
+  }
+  return s.empty() ? "none" : s;
+}
+
+std::string FormatDouble(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& factory,
+                                 ProgressSink* progress) {
+  const double t_start = Now();
+  IngestStats stats;
+  if (o.input.empty()) return InvalidArgumentError("no input .vdb file given");
+  if (o.output.empty()) return InvalidArgumentError("no output store directory given");
+  if (o.zstd_level < 1 || o.zstd_level > 22)
+    return InvalidArgumentError("zstd level " + std::to_string(o.zstd_level) + " outside 1..22");
+  if (o.threads < 0) return InvalidArgumentError("thread count must be >= 0 (0: all cores)");
+  if (o.isovalue && o.threshold)
+    return InvalidArgumentError(
+        "--isovalue (level sets) and --threshold (fog volumes) exclude each other");
+  if (o.isovalue && !std::isfinite(*o.isovalue))
+    return InvalidArgumentError("isovalue must be finite");
+  if (o.threshold && !std::isfinite(*o.threshold))
+    return InvalidArgumentError("threshold must be finite");
+  VOX_ASSIGN_OR_RETURN(LevelsChoice choice, ParseLevels(o.levels));
+
+  struct stat st;
+  if (::stat(o.input.c_str(), &st) != 0)
+    return errno == ENOENT ? NotFoundError(o.input + ": no such file")
+                           : IoError(o.input + ": " + std::strerror(errno));
+  if (!S_ISREG(st.st_mode)) return InvalidArgumentError(o.input + ": not a regular file");
+  stats.input_bytes = uint64_t(st.st_size);
+  // Refuse an existing target before the (long) read; the writer checks again.
+  if (!o.force && ::access(o.output.c_str(), F_OK) == 0)
+    return InvalidArgumentError(o.output + ": already exists; pass --force to replace it");
+
+  double t0 = Now();
+  VOX_RETURN_IF_ERROR(CheckVdbLayout(o.input));
+  InitOpenVdb();
+  openvdb::io::File file(o.input);
+  file.setCopyMaxBytes(0);  // read the file in place, no private copy
+  try {
+    file.open(/*delayLoad=*/true);
+  } catch (const openvdb::Exception& e) {
+    return CorruptionError(o.input + ": not a readable OpenVDB file (" + e.what() + ")");
+  }
+  openvdb::GridPtrVecPtr grids = file.readAllGridMetadata();
+  // The grid.
+  openvdb::GridBase::Ptr meta_grid;
+  if (!o.grid_name.empty()) {
+    for (const auto& g : *grids)
+      if (g->getName() == o.grid_name) {
+        meta_grid = g;
+        break;
+      }
+    if (!meta_grid)
+      return NotFoundError(o.input + ": no grid named " + Quote(o.grid_name) +
+                           "; the file has: " + ListGrids(*grids));
+  } else {
+    for (const auto& g : *grids)
+      if (IsScalar(*g)) {
+        meta_grid = g;
+        break;
+      }
+    if (!meta_grid)
+      return NotFoundError(o.input + ": no float or double grid to ingest; the file has: " +
+                           ListGrids(*grids));
+  }
+  const std::string name = meta_grid->getName();
+  const std::string where = "grid " + Quote(name) + " in " + o.input;
+  if (!IsScalar(*meta_grid))
+    return UnsupportedError(where + " holds " + GridTypeLabel(*meta_grid) +
+                            " values; vox ingests float and double grids (level sets and fog "
+                            "volumes)");
+  if (!meta_grid->transform().isLinear())
+    return UnsupportedError(where + " has a non-linear (" + meta_grid->transform().mapType() +
+                            ") transform; vox needs a linear (affine) one");
+
+  Context cx{o, factory, progress, &stats, choice, StoreMeta{}, nullptr};
+  StoreMeta& meta = cx.meta;
+  meta.source_file = o.input;
+  meta.grid_name = name;
+  switch (meta_grid->getGridClass()) {
+    case openvdb::GRID_LEVEL_SET:
+      if (o.threshold)
+        return InvalidArgumentError(where + " is a level set; --threshold applies to fog volumes "
+                                    "(use --isovalue)");
+      meta.grid_class = GridClass::kLevelSet;
+      break;
+    case openvdb::GRID_FOG_VOLUME:
+      if (o.isovalue)
+        return InvalidArgumentError(where + " is a fog volume; --isovalue applies to level sets "
+                                    "(use --threshold)");
+      meta.grid_class = GridClass::kFogVolume;
+      break;
+    default:
+      if (o.threshold) {
+        meta.grid_class = GridClass::kFogVolume;
+      } else if (o.isovalue) {
+        meta.grid_class = GridClass::kLevelSet;
+      } else {
+        return InvalidArgumentError(
+            where + " has grid class " +
+            Quote(openvdb::GridBase::gridClassToString(meta_grid->getGridClass())) +
+            "; pass --threshold F to read it as a fog volume or --isovalue F as a level set");
+      }
+  }
+  meta.isovalue = o.isovalue.value_or(0.0);
+  meta.threshold = o.threshold.value_or(0.0);
+  meta.has_normal = meta.grid_class == GridClass::kLevelSet;
+  meta.has_density = meta.grid_class == GridClass::kFogVolume;
+  const openvdb::math::Mat4d m = meta_grid->transform().baseMap()->getAffineMap()->getMat4();
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) meta.index_to_world[i][j] = m(i, j);  // row vectors: same indices
+  const openvdb::Vec3d vs = meta_grid->transform().voxelSize();
+  meta.voxel_size = std::max({vs[0], vs[1], vs[2]});
+  meta.build_options = o.command_line;
+  if (meta.build_options.empty()) {
+    meta.build_options = "levels=" + o.levels + " zstd_level=" + std::to_string(o.zstd_level);
+    if (o.isovalue) meta.build_options += " isovalue=" + FormatDouble(*o.isovalue);
+    if (o.threshold) meta.build_options += " threshold=" + FormatDouble(*o.threshold);
+    if (!o.color_grid.empty()) meta.build_options += " color=" + o.color_grid;
+  }
+
+  // The colour grid.
+  openvdb::GridBase::Ptr color_meta;
+  if (!o.color_grid.empty()) {
+    for (const auto& g : *grids)
+      if (g->getName() == o.color_grid) color_meta = g;
+    if (!color_meta)
+      return NotFoundError(o.input + ": no colour grid named " + Quote(o.color_grid) +
+                           "; the file has: " + ListGrids(*grids));
+    const std::string cwhere = "colour grid " + Quote(o.color_grid) + " in " + o.input;
+    if (!color_meta->isType<openvdb::Vec3fGrid>() && !color_meta->isType<openvdb::Vec3dGrid>())
+      return UnsupportedError(cwhere + " holds " + GridTypeLabel(*color_meta) +
+                              " values; a colour grid holds vec3s or vec3d");
+    if (!color_meta->transform().isLinear())
+      return UnsupportedError(cwhere + " has a non-linear transform");
+  }
+
+  if (progress) progress->Message("reading the topology of " + where);
+  openvdb::GridBase::Ptr base = file.readGrid(name);
+  const openvdb::math::Transform& xform = base->transform();
+  std::unique_ptr<ColorSource> color;
+  if (color_meta) {
+    openvdb::GridBase::Ptr cbase = file.readGrid(o.color_grid);
+    if (auto cg = openvdb::gridPtrCast<openvdb::Vec3fGrid>(cbase))
+      color = std::make_unique<TypedColorSource<openvdb::Vec3fGrid>>(cg, xform);
+    else
+      color = std::make_unique<TypedColorSource<openvdb::Vec3dGrid>>(
+          openvdb::gridPtrCast<openvdb::Vec3dGrid>(cbase), xform);
+    meta.has_color = true;
+    cx.color = color.get();
+  }
+  stats.seconds_open = Now() - t0;
+
+  const int threads = o.threads > 0 ? o.threads : tbb::this_task_arena::max_concurrency();
+  stats.threads = threads;
+  tbb::task_arena arena(threads);
+  Status s;
+  arena.execute([&] {
+    if (auto fg = openvdb::gridPtrCast<openvdb::FloatGrid>(base)) {
+      s = GridIngest<openvdb::FloatGrid>(*fg, cx).Run();
+    } else if (auto dg = openvdb::gridPtrCast<openvdb::DoubleGrid>(base)) {
+      s = GridIngest<openvdb::DoubleGrid>(*dg, cx).Run();
+    } else {
+      s = InternalError(where + ": grid type changed between metadata and read");
+    }
+  });
+  if (!s.ok()) return s;
+  stats.seconds_total = Now() - t_start;
+  if (progress) progress->Done();
+  return stats;
+}
+
+}  // namespace
+
+StatusOr<LevelsChoice> ParseLevels(std::string_view text) {
+  LevelsChoice c;
+  if (text == "auto") return c;
+  auto bad = [&](const std::string& why) {
+    return InvalidArgumentError("--levels " + std::string(text) + ": " + why +
+                                " (expected auto or N1+N2, e.g. 12+5)");
+  };
+  size_t plus = text.find('+');
+  if (plus == std::string_view::npos) return bad("no '+'");
+  auto num = [](std::string_view s, int* out) {
+    if (s.empty() || s.size() > 3) return false;
+    int v = 0;
+    for (char ch : s) {
+      if (ch < '0' || ch > '9') return false;
+      v = v * 10 + (ch - '0');
+    }
+    *out = v;
+    return true;
+  };
+  int n1 = 0, n2 = 0;
+  if (!num(text.substr(0, plus), &n1) || !num(text.substr(plus + 1), &n2))
+    return bad("N1 and N2 must be whole numbers");
+  if (n1 < 1 || n2 < 1) return bad("each step needs at least one level");
+  if (n1 > kMaxStepLevels || n2 > kMaxStepLevels) return bad("each step holds at most 20 levels");
+  if (n1 + n2 > kMaxLevels) return bad("at most 40 levels in all");
+  c.automatic = false;
+  c.brick_level = n1;
+  c.brick_depth = n2;
+  return c;
+}
+
+StatusOr<Placement> PlaceGrid(const int64_t bmin[3], const int64_t bmax[3],
+                              const LevelsChoice& choice) {
+  Placement p;
+  const bool empty = bmin[0] > bmax[0] || bmin[1] > bmax[1] || bmin[2] > bmax[2];
+  constexpr int kAutoBrickDepth = 5;
+  int b = choice.automatic ? kAutoBrickDepth : choice.brick_depth;
+  if (empty) {
+    p.brick_level = choice.automatic ? 1 : choice.brick_level;
+    p.levels = p.brick_level + b;
+    return p;
+  }
+  for (;;) {
+    uint64_t extent = 1;
+    for (int a = 0; a < 3; ++a) {
+      p.origin[a] = AlignDown(bmin[a], b);
+      extent = std::max<uint64_t>(extent, uint64_t(bmax[a] - p.origin[a] + 1));
+    }
+    const int cover = CeilLog2(extent);
+    if (!choice.automatic) {
+      p.levels = choice.brick_level + b;
+      p.brick_level = choice.brick_level;
+      if (cover > p.levels)
+        return InvalidArgumentError(
+            "--levels " + std::to_string(choice.brick_level) + "+" + std::to_string(b) +
+            " covers 2^" + std::to_string(p.levels) + " voxels per axis, but the occupied bbox "
+            "(with the origin aligned to the brick size) needs 2^" + std::to_string(cover));
+      return p;
+    }
+    p.levels = std::max(cover, b + 1);
+    if (p.levels > kMaxLevels)
+      return InvalidArgumentError("the occupied bbox needs 2^" + std::to_string(p.levels) +
+                                  " voxels per axis; vox handles at most 2^40");
+    if (p.levels - b > kMaxStepLevels) {
+      b = p.levels - kMaxStepLevels;  // deeper bricks; realign and measure again
+      continue;
+    }
+    p.brick_level = p.levels - b;
+    return p;
+  }
+}
+
+StatusOr<IngestStats> IngestWithWriter(const IngestOptions& options, const WriterFactory& factory,
+                                       ProgressSink* progress) {
+  try {
+    return IngestImpl(options, factory, progress);
+  } catch (const openvdb::Exception& e) {
+    return CorruptionError(options.input + ": OpenVDB cannot read it: " + e.what());
+  } catch (const std::bad_alloc&) {
+    return ResourceExhaustedError("out of memory ingesting " + options.input);
+  } catch (const std::exception& e) {
+    return InternalError("ingesting " + options.input + ": " + e.what());
+  }
+}
+
+}  // namespace vox

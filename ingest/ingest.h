@@ -1,0 +1,114 @@
+// vox::Ingest: reads one scalar grid of an OpenVDB file and writes it as a
+// vox store (storage/store.h), streaming brick region by brick region so the
+// peak memory stays far below the grid's.
+//
+// The occupancy rule: a level set voxel is occupied when it is active and its
+// value <= isovalue; a fog volume voxel when it is active and its density >
+// threshold. Active tiles count voxel by voxel (they are expanded). Level
+// sets keep a normal per voxel (the distance field's central-difference
+// gradient in index space), fog volumes the density, and `color_grid` (a
+// vec3 grid) an RGB colour sampled at each occupied voxel.
+//
+// Placement: origin = occupied bbox min aligned down to the brick size
+// 2^(levels - brick_level); levels = the smallest N that covers the bbox.
+// "auto" chooses 32^3 bricks (5 brick levels), at least one level above
+// them, and at most 20 levels above them (more brick levels for huge grids).
+// An empty grid (nothing occupied) makes a valid empty store.
+//
+// OpenVDB stays inside this library: nothing here includes it, and no
+// OpenVDB exception crosses Ingest(); every failure is a Status naming the
+// file (and grid). A failed ingest leaves no store at the target.
+//
+// Thread safety: Ingest() may be called from any thread; it runs its own TBB
+// arena of `threads` workers. A ProgressSink is called from one thread at a
+// time.
+#ifndef VOX_INGEST_INGEST_H_
+#define VOX_INGEST_INGEST_H_
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "core/status.h"
+#include "storage/store.h"
+
+namespace vox {
+
+struct IngestOptions {
+  std::string input;        // the .vdb file
+  std::string output;       // the store directory to create
+  std::string grid_name;    // empty: the first float or double grid of the file
+  std::string levels = "auto";  // "auto" or "N1+N2" (brick_level N1, levels N1 + N2)
+  std::optional<double> isovalue;   // level sets; default 0
+  std::optional<double> threshold;  // fog volumes; default 0
+  std::string color_grid;   // optional Vec3f/Vec3d grid of the same file
+  int zstd_level = 3;
+  int threads = 0;          // 0: all cores
+  bool force = false;       // replace an existing store
+  std::string command_line; // recorded in the store's build_options
+};
+
+// Where the levels come from: `levels` "auto" or "N1+N2". Exposed for tests.
+struct LevelsChoice {
+  bool automatic = true;
+  int brick_level = 0;  // N1 when !automatic
+  int brick_depth = 0;  // N2 when !automatic: levels inside a brick
+};
+StatusOr<LevelsChoice> ParseLevels(std::string_view text);
+
+// Integer placement of an occupied index bbox (inclusive) under a choice.
+// Exposed for tests. For an empty bbox (min > max) gives origin 0.
+struct Placement {
+  int64_t origin[3] = {0, 0, 0};
+  int levels = 0;
+  int brick_level = 0;
+};
+StatusOr<Placement> PlaceGrid(const int64_t bbox_min[3], const int64_t bbox_max[3],
+                              const LevelsChoice& choice);
+
+struct IngestStats {
+  StoreMeta meta;                   // what was handed to the writer (counts as far as known)
+  uint64_t input_bytes = 0;         // size of the .vdb file
+  uint64_t active_voxels = 0;       // the grid's active voxels, tiles expanded
+  uint64_t leaf_nodes = 0;
+  uint64_t active_tiles = 0;        // active tiles (all levels)
+  uint64_t occupied_tile_voxels = 0;  // occupied voxels that came from expanded tiles
+  uint64_t occupied_voxels = 0;
+  uint64_t bricks = 0;
+  uint64_t bbox_leaves_read = 0;    // leaves decoded to find the exact occupied bbox
+  int threads = 0;
+  double seconds_open = 0, seconds_bbox = 0, seconds_bricks = 0, seconds_finish = 0;
+  double seconds_total = 0;
+};
+
+// Receives progress: phase messages and brick counts. Implementations need
+// not be thread-safe (the ingest calls them from one thread at a time).
+class ProgressSink {
+ public:
+  virtual ~ProgressSink() = default;
+  virtual void Message(std::string_view line) = 0;
+  virtual void Progress(uint64_t bricks_done, uint64_t bricks_total, uint64_t voxels_done) = 0;
+  virtual void Done() = 0;
+};
+
+// A bar redrawn in place when `terminal` (stderr is a tty), else a plain line
+// every 10%.
+std::unique_ptr<ProgressSink> MakeStderrProgress(bool terminal);
+
+// Creates the writer; StoreWriter::Create unless a test substitutes one.
+using WriterFactory = std::function<StatusOr<std::unique_ptr<StoreWriter>>(
+    const std::string& dir, const StoreMeta& meta, const WriteOptions& options)>;
+
+// Ingests options.input into a store at options.output. `progress` may be null.
+StatusOr<IngestStats> Ingest(const IngestOptions& options, ProgressSink* progress = nullptr);
+
+// The same with another writer (tests: fakes, fault injection).
+StatusOr<IngestStats> IngestWithWriter(const IngestOptions& options, const WriterFactory& factory,
+                                       ProgressSink* progress = nullptr);
+
+}  // namespace vox
+
+#endif  // VOX_INGEST_INGEST_H_
