@@ -249,6 +249,9 @@ class StoreWriterImpl : public StoreWriter {
       pts = std::move(order);
     }
     std::vector<Cell> top = BuildCells(pts, meta_.brick_level);
+    if (top.size() >= kBrickBit)
+      return InvalidArgumentError("the top has " + std::to_string(top.size()) +
+                                  " cells; choose a lower brick level");
 
     meta_.voxel_count = voxel_count_;
     meta_.brick_count = entries_.size();

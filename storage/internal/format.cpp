@@ -182,7 +182,7 @@ StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& pa
   m.has_normal = flags & kAttrNormal;
   m.has_density = flags & kAttrDensity;
   m.has_color = flags & kAttrColor;
-  if (m.top_cells == 0 || m.top_cells > (uint64_t(1) << 32))
+  if (m.top_cells == 0 || m.top_cells >= kBrickBit)
     return bad("top cell count " + std::to_string(m.top_cells));
   if (m.brick_count >= kBrickBit) return bad("brick count " + std::to_string(m.brick_count));
   return m;
