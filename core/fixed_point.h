@@ -27,20 +27,33 @@ struct FixedPoint {
   static constexpr Word FromInt(int64_t i) { return Word(i) * (Word(1) << kFrac); }
   static constexpr int64_t Floor(Word w) { return int64_t(w >> kFrac); }
 
-  // round(x * 2^Frac). REQUIRES: |x| < 2^(kIntBits - 1), finite.
+  // round(x * 2^Frac), ties away from zero. REQUIRES: |x| < 2^(kIntBits - 1), finite.
   template <typename Real>
   static Word FromReal(Real x) {
     if constexpr (kBits <= 64) {
-      // x * 2^Frac is exact (a power of two) and fits in 63 bits.
+      // x * 2^Frac is exact (a power of two) and fits in 63 bits. Rounding
+      // by the exact remainder, not by y + 0.5 (which itself rounds: y just
+      // below k + 1/2 became k + 1).
       Real y = x * Real(uint64_t(1) << kFrac);
-      return Word(int64_t(y >= 0 ? y + Real(0.5) : y - Real(0.5)));
+      int64_t t = int64_t(y);  // toward zero
+      Real r = y - Real(t);    // exact, in (-1, 1)
+      return Word(t + (r >= Real(0.5)) - (r <= Real(-0.5)));
     } else {
-      // Integer part and fraction separately, so a 128-bit word gets all the
-      // precision that `Real` has.
-      Real ip = std::floor(x);
-      Real frac = (x - ip) * Real(uint64_t(1) << 62);  // exact
-      Word w = Word(int64_t(ip)) * (Word(1) << kFrac);
-      return w + Word(int64_t(frac + Real(0.5))) * (Word(1) << (kFrac - 62));
+      // Integer part, then the fraction in two exact chunks (62 bits, then
+      // the remaining kFrac - 62), rounded once: a 128-bit word gets all the
+      // precision that `Real` has, also for values far below 1. On |x|:
+      // x - floor(x) is not exact for small negative x.
+      const bool neg = x < 0;
+      const Real ax = neg ? -x : x;
+      Real ip = std::floor(ax);
+      Real f = (ax - ip) * Real(uint64_t(1) << 62);  // exact, in [0, 2^62)
+      int64_t hi = int64_t(f);                        // floor, as f >= 0
+      Real lo = (f - Real(hi)) * Real(uint64_t(1) << (kFrac - 62));  // exact
+      int64_t lo_i = int64_t(lo);
+      lo_i += (lo - Real(lo_i)) >= Real(0.5);
+      const Word w = Word(int64_t(ip)) * (Word(1) << kFrac) +
+                     Word(hi) * (Word(1) << (kFrac - 62)) + Word(lo_i);
+      return neg ? -w : w;
     }
   }
 

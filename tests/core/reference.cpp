@@ -329,6 +329,63 @@ std::string CheckFirstHit(const Reference& ref, const ExactRay& ray, const RefHi
   return e.empty() ? e : e + " at " + VoxelString(g) + where;
 }
 
+namespace {
+
+struct RationalContact {
+  bool touch = false;
+  mpq_class tin, tout;
+};
+
+// The ray against the closed box [v - eps, v + 1 + eps]^3, in rationals.
+RationalContact GrownContact(const Ray& ray, const Voxel& v, const mpq_class& eps) {
+  RationalContact c;
+  mpq_class tin(0);
+  std::optional<mpq_class> tout;
+  for (int a = 0; a < 3; ++a) {
+    mpq_class o(ray.origin[a]), d(ray.dir[a]);
+    mpq_class lo = mpq_class(double(v[a])) - eps, hi = mpq_class(double(v[a] + 1)) + eps;
+    if (d == 0) {
+      if (o < lo || o > hi) return c;
+      continue;
+    }
+    mpq_class t1 = (lo - o) / d, t2 = (hi - o) / d;
+    if (t1 > t2) std::swap(t1, t2);
+    if (t1 > tin) tin = t1;
+    if (!tout || t2 < *tout) tout = t2;
+  }
+  c.touch = tin <= *tout;
+  c.tin = tin;
+  c.tout = *tout;
+  return c;
+}
+
+}  // namespace
+
+bool WithinEpsilon(const Reference& ref, const ExactRay& ray, const RefHit& expected,
+                   const std::optional<Hit>& got, double eps) {
+  const Ray& r = ray.ray();
+  const mpq_class e(eps);
+  double m = std::max({std::fabs(r.dir.x), std::fabs(r.dir.y), std::fabs(r.dir.z)});
+  const mpq_class eps_t = e / mpq_class(m);  // eps along the ray, in t
+  std::optional<mpq_class> got_t;
+  if (got) {
+    if (!ref.Occupied(ToVoxel(*got))) return false;
+    RationalContact c = GrownContact(r, ToVoxel(*got), e);
+    if (!c.touch) return false;
+    if (!expected.hit || c.tin <= ray.Exact(expected.tin) + eps_t) return true;
+    got_t = c.tin;
+  }
+  // Every voxel met before the tracer's answer (all of them on a miss) is
+  // met over less than eps.
+  for (const RefContact& rc : ref.AllTouched(ray)) {
+    if (!rc.contact.meets) continue;
+    mpq_class tin = ray.Exact(rc.contact.tin);
+    if (got_t && tin + eps_t >= *got_t) break;
+    if (ray.Exact(rc.contact.tout) - tin >= eps_t) return false;
+  }
+  return true;
+}
+
 std::string CheckTraversal(const Reference& ref, const ExactRay& ray,
                            const std::vector<Hit>& got) {
   const std::string where = " [" + RayString(ray.ray()) + "]";

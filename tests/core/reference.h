@@ -137,6 +137,15 @@ class Reference {
 // acceptable (the rule of issue 2, stated in reference.cpp).
 std::string CheckFirstHit(const Reference& ref, const ExactRay& ray, const RefHit& expected,
                           const std::optional<Hit>& got);
+// For an answer CheckFirstHit refuses: true when it is explained by a ray
+// passing within `eps` voxels of a lattice edge or face, i.e. it would be
+// acceptable for a ray perturbed by at most that much: the tracer's voxel,
+// grown by eps, is touched no later than the reference's entry (plus eps
+// along the ray); or every voxel the ray meets (up to the tracer's) is met
+// over less than eps. Precision failures, as opposed to logic ones.
+bool WithinEpsilon(const Reference& ref, const ExactRay& ray, const RefHit& expected,
+                   const std::optional<Hit>& got, double eps);
+
 // Why a tracer's Traverse list is unacceptable, or "".
 std::string CheckTraversal(const Reference& ref, const ExactRay& ray,
                            const std::vector<Hit>& got);
