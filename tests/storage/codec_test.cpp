@@ -1,0 +1,187 @@
+// The structural checks behind the checksums: ValidatePool on hand-made bad
+// pools, a top with bad refs but valid CRCs refused at open, and the brick
+// decoder fed mutated bytes (never a bad pool, never a crash).
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <random>
+
+#include "core/shapes.h"
+#include "storage/internal/format.h"
+#include "storage/internal/store_impl.h"
+#include "tests/storage/test_util.h"
+
+namespace vox {
+namespace {
+
+using namespace storage_internal;
+
+uint32_t DecodeFixed32Raw(const char* p) {
+  uint32_t v;
+  std::memcpy(&v, p, 4);
+  return v;
+}
+
+// A 3-level pool: root -> cell 1 -> cell 2 -> leaves / bricks.
+std::vector<Cell> Chain(NodeRef last) {
+  std::vector<Cell> c(3, Cell{});
+  c[0].child[5] = 1;
+  c[1].child[0] = 2;
+  c[2].child[7] = last;
+  return c;
+}
+
+TEST(ValidatePool, AcceptsBuildCellsOutput) {
+  auto vol = GenerateShape("cubes:64");
+  ASSERT_TRUE(vol.ok());
+  std::vector<LeafPoint> pts = vol->voxels;
+  std::sort(pts.begin(), pts.end(), MortonLess);
+  pts.erase(std::unique(pts.begin(), pts.end(), [](auto& a, auto& b) {
+              return a.x == b.x && a.y == b.y && a.z == b.z;
+            }), pts.end());
+  for (size_t i = 0; i < pts.size(); ++i) pts[i].ref = MakeLeafRef(uint32_t(i));
+  auto cells = BuildCells(pts, vol->levels);
+  EXPECT_TRUE(ValidatePool(cells.data(), cells.size(), vol->levels, false, pts.size()).ok());
+  EXPECT_FALSE(ValidatePool(cells.data(), cells.size(), vol->levels, false, pts.size() - 1).ok());
+  EXPECT_FALSE(ValidatePool(cells.data(), cells.size(), vol->levels, true, 1u << 30).ok());
+  EXPECT_FALSE(ValidatePool(cells.data(), cells.size() - 1, vol->levels, false, pts.size()).ok());
+}
+
+TEST(ValidatePool, RefusesBadPools) {
+  EXPECT_TRUE(ValidatePool(Chain(MakeLeafRef(0)).data(), 3, 3, false, 1).ok());
+  EXPECT_TRUE(ValidatePool(Chain(MakeBrickRef(4)).data(), 3, 3, true, 5).ok());
+  // Leaf payload out of range; brick id out of range; brick ref where a leaf goes.
+  EXPECT_FALSE(ValidatePool(Chain(MakeLeafRef(1)).data(), 3, 3, false, 1).ok());
+  EXPECT_FALSE(ValidatePool(Chain(MakeBrickRef(5)).data(), 3, 3, true, 5).ok());
+  EXPECT_FALSE(ValidatePool(Chain(MakeBrickRef(0)).data(), 3, 3, false, 1).ok());
+  EXPECT_FALSE(ValidatePool(Chain(MakeLeafRef(0)).data(), 3, 3, true, 5).ok());
+  // Cell ref past the pool; a cycle; a brick ref above the brick level.
+  auto c = Chain(MakeLeafRef(0));
+  c[1].child[0] = 9;
+  EXPECT_FALSE(ValidatePool(c.data(), 3, 3, false, 1).ok());
+  c = Chain(MakeLeafRef(0));
+  c[1].child[0] = 0;
+  EXPECT_FALSE(ValidatePool(c.data(), 3, 3, false, 1).ok());
+  c = Chain(MakeLeafRef(0));
+  c[0].child[5] = MakeBrickRef(0);
+  EXPECT_FALSE(ValidatePool(c.data(), 3, 3, true, 5).ok());
+  // Two refs to the same cell (a DAG, exponential to walk) and an unreached cell.
+  c = Chain(MakeLeafRef(0));
+  c[0].child[6] = 1;
+  EXPECT_FALSE(ValidatePool(c.data(), 3, 3, false, 1).ok());
+  c = Chain(MakeLeafRef(0));
+  c.push_back(Cell{});
+  EXPECT_FALSE(ValidatePool(c.data(), 4, 3, false, 1).ok());
+  // Depth mismatch: leaves expected one level higher.
+  EXPECT_FALSE(ValidatePool(Chain(MakeLeafRef(0)).data(), 3, 2, false, 1).ok());
+  EXPECT_FALSE(ValidatePool(nullptr, 0, 3, false, 1).ok());
+}
+
+// Rewrites the top block of a store's index (same size), with valid CRCs.
+std::string WithTop(const std::string& index, const std::vector<Cell>& top) {
+  const uint8_t* p = reinterpret_cast<const uint8_t*>(index.data());
+  auto f = DecodeFooter(p + index.size() - kFooterSize, "x");
+  EXPECT_TRUE(f.ok());
+  std::string out = index;
+  EXPECT_EQ(f->top.size, top.size() * sizeof(Cell));
+  std::memcpy(out.data() + f->top.offset, top.data(), f->top.size);
+  std::string t = BlockTrailer(out.data() + f->top.offset, f->top.size, kCodecRaw);
+  std::memcpy(out.data() + f->top.offset + f->top.size, t.data(), t.size());
+  return out;
+}
+
+TEST(TopValidation, BadTopWithValidChecksumsIsRefusedAtOpen) {
+  auto vol = GenerateShape("sphere:32");
+  ASSERT_TRUE(vol.ok());
+  StoreMeta meta = storage_test::MetaFor(vol->levels, 3, GridClass::kLevelSet, false);
+  storage_test::TempDir tmp;
+  ASSERT_TRUE(storage_test::WriteVoxels(tmp / "s", vol->voxels, meta).ok());
+  std::string index = storage_test::ReadFile(tmp / "s/index.vxi");
+  std::string bricks = storage_test::ReadFile(tmp / "s/bricks.vxb");
+  auto s = Store::Open(tmp / "s", {});
+  ASSERT_TRUE(s.ok());
+  OctreeView v = (*s)->view();
+  std::vector<Cell> top(v.top, v.top + v.top_cells);
+  const uint32_t bricks_n = uint32_t((*s)->meta().brick_count);
+  auto open = [&](const std::vector<Cell>& t) {
+    return OpenStoreFromFiles("mem", NewMemoryFile("mem/index.vxi", WithTop(index, t)),
+                              NewMemoryFile("mem/bricks.vxb", bricks), {});
+  };
+  ASSERT_TRUE(open(top).ok());
+  // Find a brick ref and a cell ref to damage.
+  size_t bi = 0, bd = 0, ci = 0, cd = 0;
+  bool found_b = false, found_c = false;
+  for (size_t i = 0; i < top.size(); ++i)
+    for (int d = 0; d < 8; ++d) {
+      NodeRef r = top[i].child[d];
+      if (r == kEmptyRef) continue;
+      if (IsBrickRef(r) && !found_b) bi = i, bd = d, found_b = true;
+      if (!IsBrickRef(r) && !found_c) ci = i, cd = d, found_c = true;
+    }
+  ASSERT_TRUE(found_b && found_c);
+  for (NodeRef bad : {MakeBrickRef(bricks_n), MakeBrickRef(0x7fffffff), NodeRef(1), NodeRef(0x7fffffff)}) {
+    auto t = top;
+    t[bi].child[bd] = bad;
+    auto r = open(t);
+    EXPECT_EQ(r.status().code(), StatusCode::kCorruption) << std::hex << bad;
+    EXPECT_NE(r.status().message().find("top"), std::string::npos) << r.status().ToString();
+  }
+  for (NodeRef bad : {NodeRef(0), NodeRef(v.top_cells), NodeRef(0x7fffffff), MakeBrickRef(0)}) {
+    auto t = top;
+    t[ci].child[cd] = bad;
+    auto r = open(t);
+    EXPECT_FALSE(r.ok()) << std::hex << bad;
+  }
+}
+
+TEST(BrickDecoder, MutatedBricksNeverYieldABadPool) {
+  auto vol = GenerateShape("noise:32");
+  ASSERT_TRUE(vol.ok());
+  std::vector<LeafPoint> pts;
+  for (const LeafPoint& p : vol->voxels)
+    if (p.x < 16 && p.y < 16 && p.z < 16) pts.push_back(p);
+  std::sort(pts.begin(), pts.end(), MortonLess);
+  pts.erase(std::unique(pts.begin(), pts.end(), [](auto& a, auto& b) {
+              return a.x == b.x && a.y == b.y && a.z == b.z;
+            }), pts.end());
+  ASSERT_GT(pts.size(), 20u);
+  for (size_t i = 0; i < pts.size(); ++i) pts[i].ref = MakeLeafRef(uint32_t(i));
+  auto cells = BuildCells(pts, 4);
+  std::vector<VoxelAttributes> attrs(pts.size());
+  const uint8_t flags = kAttrNormal | kAttrColor;
+  std::string raw = EncodeBrickRaw(cells, attrs, 4, flags);
+  BrickEntry e;
+  e.num_cells = uint32_t(cells.size());
+  e.voxel_count = uint32_t(pts.size());
+  auto good = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, 4, flags);
+  ASSERT_TRUE(good.ok()) << good.status().ToString();
+  ASSERT_EQ((*good)->cells.size(), cells.size());
+  EXPECT_EQ(0, std::memcmp((*good)->cells.data(), cells.data(), cells.size() * sizeof(Cell)));
+  // Wrong depth, flags or counts are refused.
+  EXPECT_FALSE(DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, 5, flags).ok());
+  EXPECT_FALSE(DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, 4, 0).ok());
+  EXPECT_FALSE(DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size() - 1, e, 4, flags).ok());
+  std::mt19937_64 rng(11);
+  int accepted = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    std::string m = raw;
+    // Mutate 1-3 bytes of the header and topology (attributes always decode).
+    int k = 1 + int(rng() % 3);
+    for (int j = 0; j < k; ++j) m[rng() % (kBrickHeaderSize + cells.size())] ^= char(1 + rng() % 255);
+    BrickEntry me = e;
+    me.num_cells = DecodeFixed32Raw(m.data());
+    me.voxel_count = DecodeFixed32Raw(m.data() + 4);
+    auto d = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(m.data()), m.size(), me, 4, flags);
+    if (!d.ok()) {
+      EXPECT_EQ(d.status().code(), StatusCode::kCorruption);
+      continue;
+    }
+    ++accepted;
+    ASSERT_TRUE(ValidatePool((*d)->cells.data(), (*d)->cells.size(), 4, false, (*d)->voxel_count).ok());
+    ASSERT_EQ((*d)->attr_planes.size(), size_t((*d)->voxel_count) * AttrBytesPerVoxel(flags));
+  }
+  SUCCEED() << accepted << " mutated bricks decoded to valid pools";
+}
+
+}  // namespace
+}  // namespace vox
