@@ -47,8 +47,11 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
   attrs["software"] = "vox-render";
 
   const ImageLayers& img_layers = renderer.layers();
-  VOX_ASSIGN_OR_RETURN(auto writer, TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
-                                                           options.tile_size, img_layers, attrs));
+  std::unique_ptr<TiledExrWriter> writer;
+  if (!options.exr_path.empty()) {
+    VOX_ASSIGN_OR_RETURN(writer, TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
+                                                        options.tile_size, img_layers, attrs));
+  }
   int threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
   stats->threads = threads;
   stats->tiles_total = end - begin;
@@ -92,7 +95,7 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
         for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
         Status s = renderer.RenderTile(rect, &w.buf, &w.counters);
         const auto tw = Clock::now();
-        if (s.ok()) s = writer->WriteTile(rect, w.buf);
+        if (s.ok() && writer) s = writer->WriteTile(rect, w.buf);
         w.write_seconds += Seconds(tw, Clock::now());
         if (!s.ok()) {
           std::lock_guard<std::mutex> lock(err_mu);
@@ -118,10 +121,11 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
   stats->tiles = done.load();
   stats->cache_end = volume->cache_stats();
   if (!first_error.ok()) {
-    (void)writer->Close();
+    if (writer) (void)writer->Close();
     return first_error;
   }
   progress.Finish(snapshot());
+  if (!writer) return OkStatus();
   VOX_RETURN_IF_ERROR(writer->Close());
   nlohmann::json timings{{"render_seconds", stats->render_seconds},
                          {"write_seconds", stats->write_seconds},

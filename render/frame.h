@@ -25,7 +25,7 @@
 namespace vox {
 
 struct FrameOptions {
-  std::string exr_path;
+  std::string exr_path;  // empty: render without writing (benchmarks)
   int threads = 0;  // 0: all cores
   int tile_size = 64;
   PartSpec part;

@@ -4,6 +4,7 @@
 #include <charconv>
 #include <fstream>
 
+#include "core/tracer.h"
 #include "render/camera.h"
 #include "render/frame.h"
 #include "render/renderer.h"
@@ -11,32 +12,6 @@
 #include "render/store_volume.h"
 
 namespace vox {
-namespace {
-
-// --split "N1+N2" or "N1" for a `levels`-level store: n1.
-StatusOr<int> ParseSplitFlag(const std::string& text, int levels) {
-  auto parse_int = [](std::string_view s, int* v) {
-    auto r = std::from_chars(s.data(), s.data() + s.size(), *v);
-    return !s.empty() && r.ec == std::errc() && r.ptr == s.data() + s.size();
-  };
-  auto plus = text.find('+');
-  int n1 = 0, n2 = 0;
-  if (plus == std::string::npos) {
-    if (!parse_int(text, &n1)) return InvalidArgumentError("--split '" + text + "': expected N1+N2 or N1");
-    n2 = levels - n1;
-  } else {
-    if (!parse_int(std::string_view(text).substr(0, plus), &n1) ||
-        !parse_int(std::string_view(text).substr(plus + 1), &n2))
-      return InvalidArgumentError("--split '" + text + "': expected N1+N2 or N1");
-  }
-  if (n1 < 1 || n2 < 0 || n1 + n2 != levels)
-    return InvalidArgumentError("--split '" + text + "': the steps must be positive and add up to the store's " +
-                                std::to_string(levels) + " levels");
-  return n1;
-}
-
-}  // namespace
-
 Status RunRenderJob(const RenderJobOptions& o) {
   using Clock = std::chrono::steady_clock;
   auto secs = [](Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); };
@@ -72,7 +47,7 @@ Status RunRenderJob(const RenderJobOptions& o) {
   if (o.single_step) {
     ro.n1 = meta.levels;
   } else if (!o.split.empty()) {
-    VOX_ASSIGN_OR_RETURN(ro.n1, ParseSplitFlag(o.split, meta.levels));
+    VOX_ASSIGN_OR_RETURN(ro.n1, ParseSplit(o.split, meta.levels));
   }
   VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(volume.get(), camera, scene, ro));
   const auto t_setup = Clock::now();

@@ -47,12 +47,7 @@ std::string RenderPasses::ToString() const {
   return s;
 }
 
-int DefaultSplit(int levels) {
-  // Both steps at most 20 levels; small grids trace in one step.
-  if (levels <= 12) return levels;
-  int n1 = (levels + 1) / 2;
-  return std::clamp(n1, levels - kMaxStepLevels, kMaxStepLevels);
-}
+int DefaultSplit(int levels) { return DefaultFirstStepLevels(levels); }
 
 // Per-call state: the thread's counters and the first error.
 struct Renderer::Ctx {
@@ -78,7 +73,7 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(RenderVolume* volume, const
   const StoreMeta& meta = volume->meta();
   OctreeView view = volume->view();
   int n1 = options.n1 > 0 ? options.n1 : DefaultSplit(view.levels);
-  VOX_ASSIGN_OR_RETURN(DefaultTracer tracer, DefaultTracer::Create(view, n1));
+  VOX_ASSIGN_OR_RETURN(RenderTracer tracer, RenderTracer::Create(view, n1));
   VOX_ASSIGN_OR_RETURN(GridTransform xf, GridTransform::FromMeta(meta));
   Camera cam = camera;
   VOX_RETURN_IF_ERROR(cam.Finalize("camera"));

@@ -70,7 +70,13 @@ struct RenderOptions {
   ImageLayers layers;
 };
 
-// The first-step levels vox uses for a `levels`-level octree.
+// The tracer the renderer uses: 64-bit fixed point for the DDA, double for
+// the per-ray set-up and transitions (camera rays are doubles already; long
+// double set-up costs x87 arithmetic on every ray and transition).
+using RenderTracer = Tracer<Fixed64, double>;
+
+// The first-step levels vox uses for a `levels`-level octree (core's
+// DefaultFirstStepLevels: the paper's 6, single step up to 2^6).
 int DefaultSplit(int levels);
 
 class Renderer {
@@ -94,7 +100,7 @@ class Renderer {
   struct Ctx;
   struct Sample;
   Renderer(RenderVolume* volume, const Camera& camera, const Scene& scene, const RenderOptions& o,
-           DefaultTracer tracer, GridTransform xf)
+           RenderTracer tracer, GridTransform xf)
       : volume_(volume), camera_(camera), scene_(scene), options_(o), tracer_(tracer), xf_(xf) {}
 
   Ray ToGrid(const glm::dvec3& origin_w, const glm::dvec3& dir_w) const;
@@ -117,7 +123,7 @@ class Renderer {
   Camera camera_;
   Scene scene_;
   RenderOptions options_;
-  DefaultTracer tracer_;
+  RenderTracer tracer_;
   GridTransform xf_;
   RenderPasses passes_;
   bool fog_ = false;

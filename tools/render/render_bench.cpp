@@ -1,0 +1,128 @@
+// vox-render-bench: times vox's renderer on a store in one process: the first
+// frame with an empty brick cache (cold), then warm frames; prints JSON with
+// the times, their median, rays/s and DDA moves/s. scripts/render_bench.sh
+// runs it side by side with vdb_render.
+//   vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N]
+//                    [--threads N] [--split N1+N2|N1] [--exr out.exr] [--cache-mb M]
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/tracer.h"
+#include "render/camera.h"
+#include "render/frame.h"
+#include "render/renderer.h"
+#include "render/scene.h"
+#include "render/store_volume.h"
+
+int main(int argc, char** argv) {
+  std::string store, cam_path, scene_path, split, exr;
+  int runs = 5, threads = 2;
+  size_t cache_mb = 2048;
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        fprintf(stderr, "vox-render-bench: %s needs a value\n", a.c_str());
+        exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--cam") cam_path = next();
+    else if (a == "--scene") scene_path = next();
+    else if (a == "--split") split = next();
+    else if (a == "--exr") exr = next();
+    else if (a == "--runs") runs = std::max(2, atoi(next().c_str()));
+    else if (a == "--threads") threads = atoi(next().c_str());
+    else if (a == "--cache-mb") cache_mb = size_t(atol(next().c_str()));
+    else if (!a.empty() && a[0] != '-' && store.empty()) store = a;
+    else {
+      fprintf(stderr, "usage: vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N] "
+                      "[--threads N] [--split S] [--exr out.exr] [--cache-mb M]\n");
+      return 2;
+    }
+  }
+  if (store.empty() || cam_path.empty()) {
+    fprintf(stderr, "vox-render-bench: need STORE and --cam\n");
+    return 2;
+  }
+  auto fail = [](const vox::Status& s) {
+    fprintf(stderr, "vox-render-bench: %s\n", s.ToString().c_str());
+    return 1;
+  };
+  vox::OpenOptions oo;
+  oo.cache_bytes = cache_mb << 20;
+  auto vol = vox::StoreVolume::Open(store, oo);
+  if (!vol.ok()) return fail(vol.status());
+  auto cam = vox::LoadCamera(cam_path);
+  if (!cam.ok()) return fail(cam.status());
+  vox::Scene scene;
+  if (!scene_path.empty()) {
+    auto s = vox::LoadScene(scene_path);
+    if (!s.ok()) return fail(s.status());
+    scene = *s;
+  }
+  vox::RenderOptions ro;
+  if (!split.empty()) {
+    auto n1 = vox::ParseSplit(split, (*vol)->meta().levels);
+    if (!n1.ok()) return fail(n1.status());
+    ro.n1 = *n1;
+  }
+  auto renderer = vox::Renderer::Create(vol->get(), *cam, scene, ro);
+  if (!renderer.ok()) return fail(renderer.status());
+  auto cpu_now = [] {
+    rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    return double(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) + 1e-6 * double(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
+  };
+  std::vector<double> secs, cpu;
+  vox::FrameStats last;
+  for (int r = 0; r < runs; ++r) {
+    vox::FrameOptions fo;
+    fo.exr_path = exr;
+    fo.threads = threads;
+    vox::FrameStats st;
+    const double c0 = cpu_now();
+    vox::Status s = vox::RenderFrame(**renderer, vol->get(), fo, &st);
+    if (!s.ok()) return fail(s);
+    secs.push_back(st.render_seconds);
+    cpu.push_back(cpu_now() - c0);
+    last = st;
+  }
+  std::vector<double> warm(secs.begin() + 1, secs.end());
+  std::sort(warm.begin(), warm.end());
+  double median = warm.size() % 2 ? warm[warm.size() / 2]
+                                  : 0.5 * (warm[warm.size() / 2 - 1] + warm[warm.size() / 2]);
+  auto median_of = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+  };
+  const double cpu_median = median_of(std::vector<double>(cpu.begin() + 1, cpu.end()));
+  uint64_t rays = 0;
+  for (int k = 0; k < vox::kNumRayKinds; ++k) rays += last.counters.rays[k];
+  nlohmann::json j;
+  j["store"] = store;
+  j["width"] = cam->width;
+  j["height"] = cam->height;
+  j["threads"] = threads;
+  j["split"] = (*renderer)->SplitString();
+  j["passes"] = (*renderer)->passes().ToString();
+  j["write_exr"] = !exr.empty();
+  j["cold_seconds"] = secs[0];
+  j["warm_seconds"] = warm;
+  j["warm_median_seconds"] = median;
+  j["cold_cpu_seconds"] = cpu[0];
+  j["warm_cpu_median_seconds"] = cpu_median;
+  j["rays"] = rays;
+  j["dda_moves"] = last.counters.trace.total_moves();
+  j["warm_rays_per_second"] = double(rays) / median;
+  j["warm_dda_moves_per_second"] = double(last.counters.trace.total_moves()) / median;
+  printf("%s\n", j.dump(2).c_str());
+  return 0;
+}
