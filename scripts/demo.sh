@@ -10,8 +10,8 @@ mkdir -p out
 bin=build/tools
 if [ ! -s out/demo.vdb ]; then
   # A dodecahedron and a sphere resting on a ground slab: shading, shadows, reflections.
-  vdb_tool -platonic f=12 s=0.35 c=-0.25,0.0,0.0 v=0.002 w=3 \
-           -sphere r=0.28 c=0.38,-0.07,0.05 v=0.002 w=3 \
+  vdb_tool -platonic f=12 s=0.45 c=-0.45,0.0,0.0 v=0.002 w=3 \
+           -sphere r=0.3 c=0.45,-0.1,0.1 v=0.002 w=3 \
            -union -write out/demo.vdb >/dev/null
 fi
 "$bin"/ingest/vox-ingest out/demo.vdb out/demo.store --force
