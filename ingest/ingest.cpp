@@ -13,8 +13,9 @@
 //     coordinate -> the leaves and tiles that overlap it.
 //  4. Bricks, ordered in slabs along the axis with most bricks, go through a
 //     TBB pipeline: a parallel stage decodes the brick's leaves (inside the
-//     tree, so neighbours serve the gradient) and builds its voxels, a serial
-//     in-order stage hands them to the writer. When a slab has been written,
+//     tree, so neighbours serve the gradient), builds its voxels and hands
+//     them to the writer (which compresses in parallel); a serial in-order
+//     stage keeps the books. When every brick of a slab has been built,
 //     the leaves no later brick can read (their last slab, one voxel of
 //     gradient reach included, is done) have their buffers freed. Peak
 //     memory: the topology + about two slabs of leaf buffers + the bricks in
@@ -522,84 +523,86 @@ class GridIngest {
     return out;
   }
 
+  // Bricks go through a pipeline: the parallel stage builds a brick's voxels
+  // and hands them to the writer (AddBrick is thread-safe: it encodes and
+  // compresses in the calling thread); the serial in-order stage frees the
+  // leaves of finished slabs and reports progress.
   Status WriteBricks(StoreWriter* writer) {
     struct Item {
       size_t index = 0;
-      std::vector<BrickVoxel> voxels;
-      Status status;
+      size_t voxels = 0;
     };
     const size_t total = bricks_.size();
     Message("writing " + std::to_string(total) + " bricks of " + std::to_string(1 << B_) +
             "^3 voxels, slabs along " + "xyz"[slab_.axis]);
     std::atomic<bool> failed{false};
+    std::mutex error_mu;
     Status first_error;
+    auto fail = [&](Status s) {
+      std::lock_guard<std::mutex> lock(error_mu);
+      if (first_error.ok()) first_error = std::move(s);
+      failed.store(true);
+    };
     size_t next = 0, written = 0, released = 0;
     uint64_t voxels_done = 0;
     const int ax = slab_.axis;
     const size_t tokens = size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
     tbb::parallel_pipeline(
         tokens,
-        tbb::make_filter<void, Item*>(
+        tbb::make_filter<void, Item>(
             tbb::filter_mode::serial_in_order,
-            [&](tbb::flow_control& fc) -> Item* {
+            [&](tbb::flow_control& fc) -> Item {
               if (next >= total || failed.load()) {
                 fc.stop();
-                return nullptr;
+                return Item{};
               }
-              Item* it = new Item;
-              it->index = next++;
-              return it;
+              return Item{next++, 0};
             }) &
-            tbb::make_filter<Item*, Item*>(
+            tbb::make_filter<Item, Item>(
                 tbb::filter_mode::parallel,
-                [&](Item* it) -> Item* {
+                [&](Item it) -> Item {
                   if (failed.load()) return it;
+                  const BrickWork& bw = bricks_[it.index];
                   try {
-                    it->voxels = ExtractBrick(bricks_[it->index]);
+                    std::vector<BrickVoxel> voxels = ExtractBrick(bw);
+                    it.voxels = voxels.size();
+                    if (!voxels.empty()) {
+                      Status s = writer->AddBrick(
+                          glm::u64vec3(KeyCoord(bw.key, 0), KeyCoord(bw.key, 1),
+                                       KeyCoord(bw.key, 2)),
+                          std::move(voxels));
+                      if (!s.ok()) fail(s);
+                    }
                   } catch (const openvdb::Exception& e) {
-                    it->status = CorruptionError(cx_.options.input + ": grid " +
-                                                 Quote(cx_.meta.grid_name) +
-                                                 ": cannot read voxel data: " + e.what());
+                    fail(CorruptionError(cx_.options.input + ": grid " +
+                                         Quote(cx_.meta.grid_name) +
+                                         ": cannot read voxel data: " + e.what()));
                   } catch (const std::bad_alloc&) {
-                    it->status = ResourceExhaustedError("out of memory while building brick " +
-                                                        std::to_string(it->index));
+                    fail(ResourceExhaustedError("out of memory while building brick " +
+                                                std::to_string(it.index) + " of " +
+                                                cx_.options.input));
                   } catch (const std::exception& e) {
-                    it->status = InternalError(cx_.options.input + ": " + e.what());
+                    fail(InternalError(cx_.options.input + ": " + e.what()));
                   }
                   return it;
                 }) &
-            tbb::make_filter<Item*, void>(
-                tbb::filter_mode::serial_in_order, [&](Item* raw) {
-                  std::unique_ptr<Item> it(raw);
+            tbb::make_filter<Item, void>(
+                tbb::filter_mode::serial_in_order, [&](Item it) {
                   if (failed.load()) return;
-                  const BrickWork& bw = bricks_[it->index];
-                  Status s = it->status;
-                  if (s.ok() && !it->voxels.empty()) {
-                    const size_t n = it->voxels.size();
-                    s = writer->AddBrick(glm::u64vec3(KeyCoord(bw.key, 0), KeyCoord(bw.key, 1),
-                                                      KeyCoord(bw.key, 2)),
-                                         std::move(it->voxels));
-                    if (s.ok()) {
-                      voxels_done += n;
-                      ++written;
-                    }
-                  }
-                  if (!s.ok()) {
-                    first_error = s;
-                    failed.store(true);
-                    return;
-                  }
-                  // Slab complete: free the leaves no later brick reads.
-                  const int64_t slab = KeyCoord(bw.key, ax);
+                  voxels_done += it.voxels;
+                  if (it.voxels) ++written;
+                  // Slab complete (every earlier brick is built, in order):
+                  // free the leaves no later brick reads.
+                  const int64_t slab = KeyCoord(bricks_[it.index].key, ax);
                   const bool slab_done =
-                      it->index + 1 == total || KeyCoord(bricks_[it->index + 1].key, ax) != slab;
+                      it.index + 1 == total || KeyCoord(bricks_[it.index + 1].key, ax) != slab;
                   if (slab_done) {
                     while (released < releases_.size() && releases_[released].last_slab <= slab) {
                       releases_[released].release(releases_[released].leaf);
                       ++released;
                     }
                   }
-                  if (cx_.progress) cx_.progress->Progress(it->index + 1, total, voxels_done);
+                  if (cx_.progress) cx_.progress->Progress(it.index + 1, total, voxels_done);
                 }));
     if (!first_error.ok()) return first_error;
     cx_.stats->occupied_voxels = voxels_done;

@@ -1,7 +1,8 @@
 // Helpers for the ingest tests: a temporary directory, writing VDB files, and
 // FakeStore, a StoreWriter that records what the ingest hands it (checking
 // the StoreWriter contract as it goes) and can fail on demand.
-// Not thread-safe; one per test.
+// The fake writer's AddBrick is thread-safe, like StoreWriter's; the rest is
+// used by one test thread.
 #ifndef VOX_TESTS_INGEST_INGEST_TEST_UTIL_H_
 #define VOX_TESTS_INGEST_INGEST_TEST_UTIL_H_
 
@@ -11,6 +12,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <set>
 #include <string>
 #include <vector>
@@ -91,6 +93,7 @@ struct FakeStore {
    public:
     explicit Writer(FakeStore* s) : s_(s) {}
     Status AddBrick(const glm::u64vec3& c, std::vector<BrickVoxel> voxels) override {
+      std::lock_guard<std::mutex> lock(mu_);  // AddBrick is called concurrently
       EXPECT_FALSE(s_->finished);
       if (adds_++ == s_->fail_add_at) return IoError("/fake/bricks: No space left on device");
       const int b = s_->meta.levels - s_->meta.brick_level;
@@ -119,6 +122,7 @@ struct FakeStore {
 
    private:
     FakeStore* s_;
+    std::mutex mu_;
     int adds_ = 0;
   };
 };

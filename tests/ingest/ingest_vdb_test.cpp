@@ -625,7 +625,9 @@ TEST_F(IngestTest, WriterFailuresAbortTheIngest) {
     auto s = IngestWithWriter(o, store.Factory());
     ExpectError(s, StatusCode::kIoError, {"No space left"});
     EXPECT_FALSE(store.finished);
-    EXPECT_EQ(int(store.bricks.size()), fail_at);
+    // Bricks already in flight in other threads may still land; none after.
+    EXPECT_GE(int(store.bricks.size()), fail_at);
+    EXPECT_LE(int(store.bricks.size()), fail_at + 8);
   }
   FakeStore store;
   store.fail_create = true;
