@@ -18,6 +18,7 @@ double Seconds(std::chrono::steady_clock::time_point a, std::chrono::steady_cloc
 }
 
 struct Worker {
+  std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> state;
   TileBuffer buf;
   RenderCounters counters;
   double write_seconds = 0;
@@ -67,6 +68,7 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
   tbb::enumerable_thread_specific<Worker> workers([&] {
     Worker w;
     w.buf.Allocate(options.tile_size, img_layers);
+    w.state = renderer.NewThreadState();
     return w;
   });
 
@@ -93,7 +95,7 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
         const TileRect& rect = layout.order()[size_t(i)];
         uint64_t rays_before = 0;
         for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
-        Status s = renderer.RenderTile(rect, &w.buf, &w.counters);
+        Status s = renderer.RenderTile(rect, &w.buf, &w.counters, w.state.get());
         const auto tw = Clock::now();
         if (s.ok() && writer) s = writer->WriteTile(rect, w.buf);
         w.write_seconds += Seconds(tw, Clock::now());

@@ -49,8 +49,57 @@ std::string RenderPasses::ToString() const {
 
 int DefaultSplit(int levels) { return DefaultFirstStepLevels(levels); }
 
+// A thread's own view of the bricks: the last bricks it fetched, pinned, in a
+// small direct-mapped table, so a ray entering a brick a neighbouring ray
+// just used does not go through the shared cache (its lock, hash and LRU).
+class Renderer::LocalBricks : public BrickSource {
+ public:
+  explicit LocalBricks(BrickSource* base) : base_(base) {}
+  StatusOr<BrickView> FetchBrick(uint32_t id) override {
+    Slot& s = slots_[(id * 2654435761u) >> (32 - kSlotBits)];
+    if (s.valid && s.id == id) return s.view;
+    auto v = base_->FetchBrick(id);
+    if (v.ok()) {
+      s.valid = true;
+      s.id = id;
+      s.view = *v;
+    }
+    return v;
+  }
+
+ private:
+  static constexpr int kSlotBits = 6;
+  struct Slot {
+    bool valid = false;
+    uint32_t id = 0;
+    BrickView view;
+  };
+  BrickSource* base_;
+  Slot slots_[1 << kSlotBits];
+};
+
+struct Renderer::ThreadState {
+  std::unique_ptr<LocalBricks> bricks;
+  RenderTracer tracer;
+};
+
+std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> Renderer::NewThreadState() const {
+  std::unique_ptr<ThreadState, ThreadStateDeleter> ts(new ThreadState());
+  OctreeView view = volume_->view();
+  if (view.bricks != nullptr) {
+    ts->bricks = std::make_unique<LocalBricks>(view.bricks);
+    view.bricks = ts->bricks.get();
+  }
+  auto t = RenderTracer::Create(view, tracer_.n1());
+  ts->tracer = t.ok() ? *t : tracer_;  // cannot fail: same tree and split as tracer_
+  return ts;
+}
+
+void Renderer::ThreadStateDeleter::operator()(ThreadState* ts) const { delete ts; }
+
 // Per-call state: the thread's counters and the first error.
 struct Renderer::Ctx {
+  const RenderTracer* tracer;
   RenderCounters* c;
   Status error;
   bool failed() const { return !error.ok(); }
@@ -133,7 +182,7 @@ bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit) co
   bool in_run = skip_start_run, found = false;
   double run_end = 0.0;
   const double eps = eps_t_;
-  Status s = tracer_.Traverse(
+  Status s = cx.tracer->Traverse(
       gr,
       [&](const Hit& h) {
         if (in_run) {
@@ -278,7 +327,7 @@ glm::dvec3 Renderer::Refract(const glm::dvec3& origin_g, const glm::dvec3& origi
     *n = WorldNormal(gr, h, *a);
     return true;
   };
-  Status s = tracer_.Traverse(
+  Status s = cx.tracer->Traverse(
       gr,
       [&](const Hit& h) {
         if (have_run && h.t > run_end + eps * (1.0 + run_end)) {
@@ -327,7 +376,7 @@ double Renderer::Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir
   const double sigma_t = scene_.volume.absorption + scene_.volume.scattering;
   const bool has_density = volume_->meta().has_density;
   double tau = 0.0;
-  Status s = tracer_.Traverse(
+  Status s = cx.tracer->Traverse(
       gr,
       [&](const Hit& h) {
         if (h.t >= t_max) return false;
@@ -358,7 +407,7 @@ glm::dvec3 Renderer::Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double
   double tau = 0.0;
   glm::dvec3 scattered(0.0);
   *first_t = kInf;
-  Status s = tracer_.Traverse(
+  Status s = cx.tracer->Traverse(
       gr,
       [&](const Hit& h) {
         if (*first_t == kInf) *first_t = h.t;
@@ -437,8 +486,9 @@ void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out) const {
   out->color = ShadeSurface(gr, wr.dir, h, 0, cx, &out->normal);
 }
 
-Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters) const {
-  Ctx cx{counters, OkStatus()};
+Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
+                            ThreadState* ts) const {
+  Ctx cx{ts ? &ts->tracer : &tracer_, counters, OkStatus()};
   const int spp = scene_.samples_per_pixel;
   const ImageLayers& layers = options_.layers;
   const float inf = std::numeric_limits<float>::infinity();

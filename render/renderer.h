@@ -85,8 +85,18 @@ class Renderer {
   static StatusOr<std::unique_ptr<Renderer>> Create(RenderVolume* volume, const Camera& camera,
                                                     const Scene& scene, const RenderOptions& options);
 
+  // Per-thread state (a small pinned-brick table in front of the volume's
+  // cache); optional, for speed. Use one per thread; release it before the
+  // volume, after the frame (it pins up to 64 bricks).
+  struct ThreadState;
+  struct ThreadStateDeleter {
+    void operator()(ThreadState* ts) const;
+  };
+  std::unique_ptr<ThreadState, ThreadStateDeleter> NewThreadState() const;
+
   // Renders `rect` into `buf` (pixel (x, y) of the image at buf(x - x0, y - y0)).
-  Status RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters) const;
+  Status RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
+                    ThreadState* ts = nullptr) const;
 
   const RenderPasses& passes() const { return passes_; }
   const Scene& scene() const { return scene_; }  // with the default lights filled in
@@ -97,6 +107,7 @@ class Renderer {
   std::string SplitString() const;
 
  private:
+  class LocalBricks;
   struct Ctx;
   struct Sample;
   Renderer(RenderVolume* volume, const Camera& camera, const Scene& scene, const RenderOptions& o,
