@@ -84,7 +84,13 @@ class StoreImpl : public Store {
                                   dir_ + "' has " + std::to_string(table_.size()) + " bricks)");
     return cache_.GetOrLoad(id, [&]() -> StatusOr<std::pair<std::shared_ptr<const DecodedBrick>,
                                                             size_t>> {
-      auto b = LoadBrick(id);
+      StatusOr<std::shared_ptr<DecodedBrick>> b = InternalError("unreached");
+      try {
+        b = LoadBrick(id);
+      } catch (const std::bad_alloc&) {
+        b = ResourceExhaustedError("out of memory decoding brick " + std::to_string(id) +
+                                   " of store '" + dir_ + "'");
+      }
       if (!b.ok()) return b.status();
       size_t charge = (*b)->charge();
       return std::make_pair(std::shared_ptr<const DecodedBrick>(std::move(*b)), charge);
@@ -269,6 +275,10 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
       return row("sizes are inconsistent (" + std::to_string(e.raw_size) + " bytes, " +
                  std::to_string(e.num_cells) + " cells, " + std::to_string(e.voxel_count) +
                  " voxels)");
+    if (e.num_cells == 0 || e.voxel_count == 0 || e.num_cells > MaxCells(depth_, e.voxel_count))
+      return row("has " + std::to_string(e.num_cells) + " cells for " +
+                 std::to_string(e.voxel_count) + " voxels: impossible at depth " +
+                 std::to_string(depth_));
     if (e.x >= brick_grid || e.y >= brick_grid || e.z >= brick_grid)
       return row("coordinate lies outside the brick grid");
     voxels += e.voxel_count;

@@ -73,6 +73,10 @@ struct BrickVoxel {
 struct WriteOptions {
   int zstd_level = 3;
   bool force = false;  // replace an existing store at the target
+  // Precision of each octahedral normal component, 8..16 bits. Readers need
+  // not know: values stay 16-bit, multiples of 2^(16 - bits). 12 bits (max
+  // error 0.06 degrees; 16 bits: 0.004) makes level-set stores about a third smaller.
+  int normal_bits = 16;
 };
 
 class StoreWriter {

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <filesystem>
 #include <mutex>
@@ -139,7 +140,7 @@ class StoreWriterImpl : public StoreWriter {
       pts[k].ref = MakeLeafRef(uint32_t(k));
     }
     std::vector<Cell> cells = BuildCells(pts, depth_);
-    std::string raw = EncodeBrickRaw(cells, attrs, depth_, flags_);
+    std::string raw = EncodeBrickRaw(cells, attrs, depth_, flags_, options_.normal_bits);
     if (raw.size() > kMaxBrickRawBytes)
       return Unsee(c, InvalidArgumentError("brick " + CoordString(c) + " is " +
                                            std::to_string(raw.size()) + " bytes; the limit is " +
@@ -234,7 +235,7 @@ class StoreWriterImpl : public StoreWriter {
         pts.push_back(p);
         attrs.push_back(top_voxels_[k].second);
       }
-      WriteAttributes(attrs, flags_, &top_attr);
+      WriteAttributes(attrs, flags_, &top_attr, options_.normal_bits);
     } else {
       std::vector<LeafPoint> order(entries_.size());
       for (size_t i = 0; i < entries_.size(); ++i)
@@ -295,9 +296,22 @@ class StoreWriterImpl : public StoreWriter {
     // Into place: swap atomically with an existing store, or rename.
     std::error_code ec;
     if (replace_ && fs::exists(target_, ec)) {
-      if (renameat2(AT_FDCWD, temp_.c_str(), AT_FDCWD, target_.c_str(), RENAME_EXCHANGE) != 0)
+      if (renameat2(AT_FDCWD, temp_.c_str(), AT_FDCWD, target_.c_str(), RENAME_EXCHANGE) == 0) {
+        fs::remove_all(temp_, ec);  // now the old store
+      } else if (errno == EINVAL || errno == ENOSYS || errno == ENOTSUP) {
+        // No atomic exchange here: move the old store aside, then rename.
+        std::string old = temp_ + ".old";
+        if (rename(target_.c_str(), old.c_str()) != 0)
+          return ErrnoError("cannot move the old store aside", target_, errno);
+        if (rename(temp_.c_str(), target_.c_str()) != 0) {
+          int err = errno;
+          rename(old.c_str(), target_.c_str());
+          return ErrnoError("cannot rename '" + temp_ + "' to", target_, err);
+        }
+        fs::remove_all(old, ec);
+      } else {
         return ErrnoError("cannot replace store", target_, errno);
-      fs::remove_all(temp_, ec);  // now the old store
+      }
       if (ec) return IoError("cannot remove the replaced store at '" + temp_ + "': " + ec.message());
     } else if (rename(temp_.c_str(), target_.c_str()) != 0) {
       return ErrnoError("cannot rename '" + temp_ + "' to", target_, errno);
@@ -335,6 +349,9 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
     return InvalidArgumentError("zstd level " + std::to_string(options.zstd_level) + " outside " +
                                 std::to_string(ZSTD_minCLevel()) + ".." +
                                 std::to_string(ZSTD_maxCLevel()));
+  if (options.normal_bits < 8 || options.normal_bits > 16)
+    return InvalidArgumentError("normal precision " + std::to_string(options.normal_bits) +
+                                " bits outside 8..16");
   std::string target = dir;
   while (target.size() > 1 && target.back() == '/') target.pop_back();
   if (target.empty()) return InvalidArgumentError("empty store path");

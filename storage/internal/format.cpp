@@ -218,7 +218,18 @@ BrickEntry DecodeBrickEntry(const uint8_t* b) {
   return e;
 }
 
-uint32_t EncodeOctNormal(const glm::vec3& n) {
+uint64_t MaxCells(int depth, uint64_t voxels) {
+  if (depth < 1 || depth > kMaxLevels) return 0;
+  if (depth < 21 && voxels > (uint64_t(1) << (3 * depth))) return 0;
+  uint64_t total = 0, level = 1;
+  for (int l = 0; l < depth; ++l) {
+    total += std::min(level, voxels);
+    if (level < voxels) level *= 8;
+  }
+  return total;
+}
+
+uint32_t EncodeOctNormal(const glm::vec3& n, int bits) {
   float s = std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z);
   float px = 0, py = 0;
   if (std::isfinite(s) && s > 0) {
@@ -231,8 +242,11 @@ uint32_t EncodeOctNormal(const glm::vec3& n) {
       py = oy;
     }
   }
-  auto q = [](float v) {
-    return uint32_t(std::lround(std::clamp(v * 0.5f + 0.5f, 0.f, 1.f) * 65535.f));
+  const uint32_t step = uint32_t(1) << (16 - std::clamp(bits, 8, 16));
+  const uint32_t top = 65535 / step * step;
+  auto q = [&](float v) {
+    double t = std::clamp(double(v) * 0.5 + 0.5, 0.0, 1.0) * 65535.0 / step;
+    return std::min(uint32_t(std::lround(t)) * step, top);
   };
   return q(px) | (q(py) << 16);
 }
@@ -321,14 +335,15 @@ VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t fl
   return a;
 }
 
-void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst) {
+void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
+                     int normal_bits) {
   const uint32_t count = uint32_t(attrs.size());
   size_t start = dst->size();
   dst->resize(start + AttrBytesPerVoxel(flags) * count);
   uint8_t* planes = reinterpret_cast<uint8_t*>(dst->data()) + start;
   if (flags & kAttrNormal) {
     for (uint32_t i = 0; i < count; ++i)
-      ScatterPlanes(planes, count, i, 4, EncodeOctNormal(attrs[i].normal));
+      ScatterPlanes(planes, count, i, 4, EncodeOctNormal(attrs[i].normal, normal_bits));
     planes += size_t(4) * count;
   }
   if (flags & kAttrDensity) {
@@ -346,7 +361,7 @@ void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std:
 }
 
 std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
-                           int depth, uint8_t flags) {
+                           int depth, uint8_t flags, int normal_bits) {
   std::string s;
   s.reserve(kBrickHeaderSize + cells.size() + attrs.size() * AttrBytesPerVoxel(flags));
   PutFixed32(&s, uint32_t(cells.size()));
@@ -361,7 +376,7 @@ std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAtt
     s.push_back(char(mask));
   }
   size_t at = s.size();
-  WriteAttributes(attrs, flags, &s);
+  WriteAttributes(attrs, flags, &s, normal_bits);
   DeltaPlanes(reinterpret_cast<uint8_t*>(s.data()) + at, uint32_t(attrs.size()), flags, true);
   return s;
 }
@@ -430,7 +445,7 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
   if (expect != n)
     return CorruptionError("brick is " + std::to_string(n) + " bytes; its header implies " +
                            std::to_string(expect));
-  if (num_cells == 0 || voxel_count == 0 || uint64_t(num_cells) > uint64_t(voxel_count) * depth)
+  if (num_cells == 0 || voxel_count == 0 || num_cells > MaxCells(depth, voxel_count))
     return CorruptionError("brick has " + std::to_string(num_cells) + " cells for " +
                            std::to_string(voxel_count) + " voxels");
   auto b = std::make_shared<DecodedBrick>();

@@ -88,21 +88,26 @@ struct BrickEntry {
 void EncodeBrickEntry(const BrickEntry& e, std::string* dst);
 BrickEntry DecodeBrickEntry(const uint8_t* p);
 
-// Octahedral normal in 2 x 16 bits (u | v << 16). A zero or non-finite
-// vector encodes as +z.
-uint32_t EncodeOctNormal(const glm::vec3& n);
+// The most cells a `depth`-level pool over `voxels` voxels can have:
+// sum over levels l < depth of min(8^l, voxels). Zero when voxels exceed 8^depth.
+uint64_t MaxCells(int depth, uint64_t voxels);
+
+// Octahedral normal in 2 x 16 bits (u | v << 16), each a multiple of
+// 2^(16 - bits). A zero or non-finite vector encodes as +z.
+uint32_t EncodeOctNormal(const glm::vec3& n, int bits = 16);
 glm::vec3 DecodeOctNormal(uint32_t code);
 
 // A voxel's attributes from planar attribute bytes (`count` voxels).
 VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
                                uint32_t index);
 // Appends the planar attribute bytes of `attrs` (in payload order).
-void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst);
+void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
+                     int normal_bits = 16);
 
 // The decompressed contents of a brick: header, one child mask per cell in
 // pre-order, planar attributes. `cells` is a BuildCells pool (pre-order).
 std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
-                           int depth, uint8_t flags);
+                           int depth, uint8_t flags, int normal_bits = 16);
 
 // A decoded brick as the cache holds it.
 struct DecodedBrick {

@@ -47,6 +47,23 @@ TEST(ValidatePool, AcceptsBuildCellsOutput) {
   EXPECT_FALSE(ValidatePool(cells.data(), cells.size() - 1, vol->levels, false, pts.size()).ok());
 }
 
+TEST(MaxCells, BoundsBuildCells) {
+  EXPECT_EQ(MaxCells(1, 8), 1u);
+  EXPECT_EQ(MaxCells(1, 9), 0u);           // more voxels than a 2^3 grid has
+  EXPECT_EQ(MaxCells(3, 1), 3u);           // a chain
+  EXPECT_EQ(MaxCells(3, 512), 1u + 8 + 64);  // full
+  EXPECT_EQ(MaxCells(3, 10), 1u + 8 + 10);
+  // BuildCells never exceeds the bound, and reaches it for a chain and a full grid.
+  auto vol = GenerateShape("noise:32");
+  ASSERT_TRUE(vol.ok());
+  std::vector<LeafPoint> pts = vol->voxels;
+  std::sort(pts.begin(), pts.end(), MortonLess);
+  pts.erase(std::unique(pts.begin(), pts.end(), [](auto& a, auto& b) {
+              return a.x == b.x && a.y == b.y && a.z == b.z;
+            }), pts.end());
+  EXPECT_LE(BuildCells(pts, 5).size(), MaxCells(5, pts.size()));
+}
+
 TEST(ValidatePool, RefusesBadPools) {
   EXPECT_TRUE(ValidatePool(Chain(MakeLeafRef(0)).data(), 3, 3, false, 1).ok());
   EXPECT_TRUE(ValidatePool(Chain(MakeBrickRef(4)).data(), 3, 3, true, 5).ok());

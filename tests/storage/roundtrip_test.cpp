@@ -2,8 +2,11 @@
 // attribute and metadata field intact, and trace exactly like MemoryOctree.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <random>
 #include <set>
+
+#include <glm/geometric.hpp>
 
 #include "core/tracer.h"
 #include "storage/crc32c.h"
@@ -36,13 +39,35 @@ TEST(Crc32c, KnownValues) {
 }
 
 TEST(OctNormal, RoundTripWithinQuantisation) {
-  std::mt19937 rng(5);
-  std::normal_distribution<float> g;
-  for (int i = 0; i < 10000; ++i) {
-    glm::vec3 n(g(rng), g(rng), g(rng));
-    n /= std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
-    glm::vec3 d = storage_internal::DecodeOctNormal(storage_internal::EncodeOctNormal(n));
-    EXPECT_GT(n.x * d.x + n.y * d.y + n.z * d.z, std::cos(0.01f * 3.14159f / 180 * 10));
+  // Maximum angular error (degrees) by precision, measured on random normals
+  // and on the axes and octant diagonals.
+  for (auto [bits, max_deg] : {std::pair{16, 0.005}, {12, 0.07}, {8, 1.2}}) {
+    std::mt19937 rng(5);
+    std::normal_distribution<double> g;
+    double worst = 0;
+    std::vector<glm::dvec3> ns = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1},
+                                  {0, 0, -1}, {1, 1, 1}, {-1, -1, -1}, {1, -1, 1}};
+    for (int i = 0; i < 20000; ++i) ns.push_back({g(rng), g(rng), g(rng)});
+    for (glm::dvec3 n : ns) {
+      n /= std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+      uint32_t code = storage_internal::EncodeOctNormal(glm::vec3(n), bits);
+      const uint32_t step = 1u << (16 - bits);
+      ASSERT_EQ((code & 0xffff) % step, 0u);
+      ASSERT_EQ((code >> 16) % step, 0u);
+      glm::dvec3 d(storage_internal::DecodeOctNormal(code));
+      glm::dvec3 x(n.y * d.z - n.z * d.y, n.z * d.x - n.x * d.z, n.x * d.y - n.y * d.x);
+      double angle = std::atan2(std::sqrt(x.x * x.x + x.y * x.y + x.z * x.z),
+                                n.x * d.x + n.y * d.y + n.z * d.z);
+      worst = std::max(worst, angle * 180 / M_PI);
+      ASSERT_NEAR(d.x * d.x + d.y * d.y + d.z * d.z, 1.0, 1e-5);
+    }
+    EXPECT_LT(worst, max_deg) << bits << " bits";
+    std::printf("octahedral normals, %d bits per component: max error %.4f degrees\n", bits, worst);
+  }
+  // Zero and NaN encode as +z.
+  for (glm::vec3 bad : {glm::vec3(0), glm::vec3(NAN, 0, 1)}) {
+    glm::vec3 z = storage_internal::DecodeOctNormal(storage_internal::EncodeOctNormal(bad));
+    EXPECT_GT(z.z, 0.99999f);
   }
 }
 
@@ -218,6 +243,36 @@ INSTANTIATE_TEST_SUITE_P(
         if (!isalnum(ch)) ch = '_';
       return s;
     });
+
+TEST(Writer, CoarserNormalsShrinkTheStoreAndStayAccurate) {
+  auto vol = GenerateShape("sphere:128");
+  ASSERT_TRUE(vol.ok());
+  StoreMeta meta = storage_test::MetaFor(vol->levels, 3, GridClass::kLevelSet, false);
+  TempDir tmp;
+  uint64_t sizes[2];
+  for (int k = 0; k < 2; ++k) {
+    WriteOptions wo;
+    wo.normal_bits = k == 0 ? 16 : 12;
+    std::string dir = tmp / ("s" + std::to_string(k));
+    ASSERT_TRUE(storage_test::WriteVoxels(dir, vol->voxels, meta, wo).ok());
+    sizes[k] = storage_test::ReadFile(dir + "/bricks.vxb").size();
+    auto s = Store::Open(dir, {});
+    ASSERT_TRUE(s.ok());
+    for (size_t i = 0; i < vol->voxels.size(); i += 97) {
+      const LeafPoint& p = vol->voxels[i];
+      auto loc = storage_test::Locate(**s, p.x, p.y, p.z);
+      ASSERT_TRUE(loc.ok() && loc->has_value());
+      auto a = (*s)->Attributes((*loc)->brick, (*loc)->payload);
+      ASSERT_TRUE(a.ok());
+      glm::vec3 e = storage_test::AttrFor(p.x, p.y, p.z, meta).normal;
+      EXPECT_GT(glm::dot(a->normal, e), std::cos(0.07 * M_PI / 180));
+    }
+  }
+  EXPECT_LT(sizes[1], sizes[0]);
+  WriteOptions bad;
+  bad.normal_bits = 17;
+  EXPECT_EQ(StoreWriter::Create(tmp / "x", meta, bad).status().code(), StatusCode::kInvalidArgument);
+}
 
 TEST(Writer, EmptyStoreOpens) {
   TempDir tmp;
