@@ -4,13 +4,19 @@
 // several cache budgets.
 //
 //   vox-storage-bench [--shape sphere:512] [--brick-level L] [--zstd-level Z]
-//                     [--threads N] [--keep DIR]
+//                     [--normal-bits B] [--threads N] [--keep DIR]
+//   vox-storage-bench --store DIR [--threads N] [--cache-mb M]
 // --keep DIR leaves the written store at DIR (useful to test readers without
 // an ingest); otherwise it is written to a temporary directory and removed.
+// --store DIR measures an existing store (nothing else held in memory) and
+// reports peak anonymous resident memory while tracing, against the budget.
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
+#include <atomic>
 #include <chrono>
+#include <cinttypes>
+#include <thread>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -31,8 +37,43 @@ double Seconds(Clock::time_point a) {
 }
 
 struct Options {
-  std::string shape = "sphere:512", keep;
-  int brick_level = -1, zstd_level = 3, threads = 2;
+  std::string shape = "sphere:512", keep, store;
+  int brick_level = -1, zstd_level = 3, threads = 2, normal_bits = 16;
+  double cache_mb = -1;  // trace with this budget only (default: 200%, 50%, 10%, 2% of the bricks)
+};
+
+// RssAnon of this process in bytes (Linux), 0 if unknown.
+uint64_t RssAnon() {
+  FILE* f = std::fopen("/proc/self/status", "r");
+  if (!f) return 0;
+  char line[256];
+  uint64_t kb = 0;
+  while (std::fgets(line, sizeof(line), f))
+    if (std::sscanf(line, "RssAnon: %" SCNu64 " kB", &kb) == 1) break;
+  std::fclose(f);
+  return kb << 10;
+}
+
+// Samples RssAnon every 2 ms while alive; peak() is the largest seen.
+class RssSampler {
+ public:
+  RssSampler() : thread_([this] {
+      while (!stop_) {
+        uint64_t r = RssAnon();
+        if (r > peak_) peak_ = r;
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      }
+    }) {}
+  ~RssSampler() {
+    stop_ = true;
+    thread_.join();
+  }
+  uint64_t peak() const { return peak_; }
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::atomic<uint64_t> peak_{0};
+  std::thread thread_;
 };
 
 int Fail(const std::string& m) {
@@ -40,37 +81,13 @@ int Fail(const std::string& m) {
   return 1;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  Options o;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "vox-storage-bench: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--shape") o.shape = next();
-    else if (a == "--brick-level") o.brick_level = std::atoi(next().c_str());
-    else if (a == "--zstd-level") o.zstd_level = std::atoi(next().c_str());
-    else if (a == "--threads") o.threads = std::atoi(next().c_str());
-    else if (a == "--keep") o.keep = next();
-    else {
-      std::fprintf(stderr, "usage: vox-storage-bench [--shape S] [--brick-level L] "
-                           "[--zstd-level Z] [--threads N] [--keep DIR]\n");
-      return 2;
-    }
-  }
-  tbb::global_control gc(tbb::global_control::max_allowed_parallelism, std::max(1, o.threads));
+// Writes o.shape as a store at *dir_out (a temporary directory when empty).
+int WriteShapeStore(Options& o, std::string* dir_out, std::string* tmp_out) {
   auto vol = vox::GenerateShape(o.shape);
   if (!vol.ok()) return Fail(vol.status().ToString());
   const int levels = vol->levels;
   if (o.brick_level < 0) o.brick_level = std::max(1, levels - 5);
   const double n = double(int64_t(1) << levels), c = n / 2;
-
   vox::StoreMeta meta;
   meta.source_file = "generated:" + o.shape;
   meta.grid_name = "shape";
@@ -80,8 +97,8 @@ int main(int argc, char** argv) {
   meta.has_normal = true;
   meta.build_options = "vox-storage-bench --shape " + o.shape;
 
-  std::string dir = o.keep;
-  std::string tmp;
+  std::string& dir = *dir_out;
+  std::string& tmp = *tmp_out;
   if (dir.empty()) {
     tmp = (std::filesystem::temp_directory_path() / ("vox_bench_" + std::to_string(getpid())))
               .string();
@@ -118,6 +135,7 @@ int main(int argc, char** argv) {
     vox::WriteOptions wo;
     wo.zstd_level = o.zstd_level;
     wo.force = true;
+    wo.normal_bits = o.normal_bits;
     auto w = vox::StoreWriter::Create(dir, meta, wo);
     if (!w.ok()) return Fail(w.status().ToString());
     std::atomic<bool> failed{false};
@@ -139,8 +157,53 @@ int main(int argc, char** argv) {
   std::printf("write: %.2f s, %.1f M voxels/s (%d threads, zstd level %d, including fsync)\n",
               write_s, double(vol->voxels.size()) / write_s / 1e6, o.threads, o.zstd_level);
 
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "vox-storage-bench: %s needs a value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--shape") o.shape = next();
+    else if (a == "--brick-level") o.brick_level = std::atoi(next().c_str());
+    else if (a == "--zstd-level") o.zstd_level = std::atoi(next().c_str());
+    else if (a == "--threads") o.threads = std::atoi(next().c_str());
+    else if (a == "--keep") o.keep = next();
+    else if (a == "--store") o.store = next();
+    else if (a == "--cache-mb") o.cache_mb = std::atof(next().c_str());
+    else if (a == "--normal-bits") o.normal_bits = std::atoi(next().c_str());
+    else {
+      std::fprintf(stderr, "usage: vox-storage-bench [--shape S] [--brick-level L] "
+                           "[--zstd-level Z] [--normal-bits B] [--threads N] [--keep DIR]\n"
+                           "       vox-storage-bench --store DIR [--threads N] [--cache-mb M]\n");
+      return 2;
+    }
+  }
+  tbb::global_control gc(tbb::global_control::max_allowed_parallelism, std::max(1, o.threads));
+  std::string dir = o.store.empty() ? o.keep : o.store;
+  std::string tmp;
+  if (o.store.empty()) {
+    int r = WriteShapeStore(o, &dir, &tmp);
+    if (r != 0) return r;
+  }
+  auto info = vox::InspectStore(dir, false);
+  if (!info.ok()) return Fail(info.status().ToString());
+  if (!o.store.empty()) std::printf("%s", vox::FormatStoreInfo(*info).c_str());
+  const int levels = info->meta.levels;
+  const double n = double(int64_t(1) << levels), c = n / 2;
+
   // Decompression throughput: a 1-byte cache makes every fetch decompress.
   for (int threads : {1, o.threads}) {
+    if (o.cache_mb > 0) break;  // a single traced budget: keep the process clean
     vox::OpenOptions oo;
     oo.cache_bytes = 1;
     auto store = vox::Store::Open(dir, oo);
@@ -166,15 +229,19 @@ int main(int argc, char** argv) {
 
   // Cache hit rate while tracing a 512^2 perspective image, with Attributes().
   const int W = 512, H = 512;
-  for (double frac : {2.0, 0.5, 0.1, 0.02}) {
+  std::vector<double> fracs = {2.0, 0.5, 0.1, 0.02};
+  if (o.cache_mb > 0) fracs = {o.cache_mb * (1 << 20) / double(std::max<uint64_t>(1, info->decoded_bytes))};
+  for (double frac : fracs) {
     vox::OpenOptions oo;
     oo.cache_bytes = std::max<size_t>(1, size_t(double(info->decoded_bytes) * frac));
     auto store = vox::Store::Open(dir, oo);
     if (!store.ok()) return Fail(store.status().ToString());
-    auto tracer = vox::Tracer<>::Create((*store)->view(), std::min(levels, o.brick_level));
+    auto tracer = vox::Tracer<>::Create((*store)->view(), info->meta.brick_level);
     if (!tracer.ok()) return Fail(tracer.status().ToString());
     std::atomic<uint64_t> hits{0};
     std::atomic<bool> failed{false};
+    const uint64_t rss_before = RssAnon();
+    RssSampler sampler;
     auto t1 = Clock::now();
     const glm::dvec3 eye(c * 0.8, c * 1.1, -1.2 * n);
     tbb::parallel_for(0, H, [&](int y) {
@@ -191,13 +258,17 @@ int main(int argc, char** argv) {
     double s = Seconds(t1);
     if (failed) return Fail("tracing failed");
     vox::CacheStats cs = (*store)->cache_stats();
-    std::printf("trace 512^2 (cache %.0f%% of bricks = %s): %.2f M rays/s, %llu hits, cache hit "
+    std::printf("trace 512^2 (cache %.1f%% of bricks = %s): %.2f M rays/s, %llu hits, cache hit "
                 "rate %.4f (%llu hits, %llu misses, %llu evictions)\n",
                 frac * 100, (std::to_string(oo.cache_bytes >> 10) + " KiB").c_str(),
                 W * H / s / 1e6, (unsigned long long)hits.load(),
                 double(cs.hits) / double(std::max<uint64_t>(1, cs.hits + cs.misses)),
                 (unsigned long long)cs.hits, (unsigned long long)cs.misses,
                 (unsigned long long)cs.evictions);
+    std::printf("    peak anonymous RSS %.1f MiB (%.1f MiB before tracing; budget %.1f MiB, "
+                "resident top %.1f MiB)\n",
+                double(sampler.peak()) / (1 << 20), double(rss_before) / (1 << 20),
+                double(oo.cache_bytes) / (1 << 20), double((*store)->resident_bytes()) / (1 << 20));
   }
   if (!tmp.empty()) std::filesystem::remove_all(tmp);
   return 0;
