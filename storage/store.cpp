@@ -3,6 +3,8 @@
 #include <sys/stat.h>
 
 #include <atomic>
+#include <exception>
+#include <new>
 #include <cstring>
 
 #include <zstd.h>
@@ -90,6 +92,9 @@ class StoreImpl : public Store {
       } catch (const std::bad_alloc&) {
         b = ResourceExhaustedError("out of memory decoding brick " + std::to_string(id) +
                                    " of store '" + dir_ + "'");
+      } catch (const std::exception& e) {  // never leave single-flight waiters hanging
+        b = InternalError("decoding brick " + std::to_string(id) + " of store '" + dir_ +
+                          "': " + e.what());
       }
       if (!b.ok()) return b.status();
       size_t charge = (*b)->charge();
@@ -121,6 +126,14 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
   };
   // Copy the record out of the mapping (guarded against SIGBUS), then check it.
   thread_local std::vector<uint8_t> record, raw;
+  // Scratch grows to the largest brick seen; an outsized one is not kept.
+  struct Trim {
+    ~Trim() {
+      constexpr size_t kKeep = size_t(64) << 20;
+      if (record.capacity() > kKeep) std::vector<uint8_t>().swap(record);
+      if (raw.capacity() > kKeep) std::vector<uint8_t>().swap(raw);
+    }
+  } trim;
   record.resize(size_t(e.stored_size) + kTrailerSize);
   Status rs = bricks_->Read(e.offset, record.size(), record.data());
   if (!rs.ok()) return rs.WithContext("reading " + where());
