@@ -62,6 +62,9 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
     header.setTileDescription(Imf::TileDescription(tile, tile, Imf::ONE_LEVEL));
     header.lineOrder() = Imf::RANDOM_Y;
     header.compression() = Imf::ZIP_COMPRESSION;
+    // Tiles are compressed under the writer's lock: zlib's fastest level
+    // keeps that short (a few percent larger files than the default level).
+    header.zipCompressionLevel() = 1;
     for (int c = 0; c < kNumChannels; ++c)
       if (layers.Has(c)) header.channels().insert(kChannelNames[c], Imf::Channel(Imf::FLOAT));
     for (const auto& [k, v] : attrs) header.insert(k, Imf::StringAttribute(v));
