@@ -11,6 +11,7 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kMinTransmittance = 1e-6;
+constexpr double kScatterStepVoxels = 3.0;
 
 double RadicalInverse2(uint32_t k) {
   k = (k << 16) | (k >> 16);
@@ -405,7 +406,10 @@ glm::dvec3 Renderer::Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double
   const double sigma_t = v.absorption + v.scattering;
   const bool has_density = volume_->meta().has_density;
   double tau = 0.0;
-  glm::dvec3 scattered(0.0);
+  glm::dvec3 scattered(0.0), light_in(0.0);
+  double next_light_t = -kInf;
+  // Ray parameter per voxel along this ray (t is in world units).
+  const double scatter_step = kScatterStepVoxels * volume_->meta().voxel_size;
   *first_t = kInf;
   Status s = cx.tracer->Traverse(
       gr,
@@ -428,11 +432,16 @@ glm::dvec3 Renderer::Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double
         const double seg_tau = st * len;
         if (passes_.scattering) {
           // Light scattered towards the camera in this segment, with the
-          // light's transmittance from the segment's midpoint.
+          // light's transmittance from the segment's midpoint, re-evaluated
+          // once the ray has moved kScatterStepVoxels voxels from the last
+          // evaluation (as vdb_render's shadow step).
           const double mid = h.t + 0.5 * len;
+          if (mid >= next_light_t) {
           const glm::dvec3 p_g = gr.origin + mid * gr.dir;
           const glm::dvec3 p_w = xf_.GridToWorld(p_g);
-          glm::dvec3 in(0.0);
+          glm::dvec3& in = light_in;
+          in = glm::dvec3(0.0);
+          next_light_t = mid + scatter_step;
           for (const Light& l : scene_.lights) {
             if (l.intensity <= 0) continue;
             glm::dvec3 to_light;
@@ -448,8 +457,9 @@ glm::dvec3 Renderer::Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double
             double tl = l.shadows ? Transmittance(p_g, to_light, dist, cx) : 1.0;
             in += l.color * l.intensity * tl;
           }
+          }
           scattered += std::exp(-tau) * (1.0 - std::exp(-seg_tau)) * (v.scattering / sigma_t) *
-                       v.color * in;
+                       v.color * light_in;
         }
         tau += seg_tau;
         return !cx.failed() && std::exp(-tau) >= kMinTransmittance;

@@ -20,7 +20,8 @@
 // Fog: absorption on the exact DDA segments (each occupied voxel's entry and
 // exit t), extinction = (absorption + scattering) * density per world unit;
 // single scattering with isotropic phase, the light attenuated by a
-// transmittance ray to the light. A = 1 - transmittance. Integration stops
+// transmittance ray to the light, traced from the middle of an occupied
+// segment at most every 3 voxels along the ray. A = 1 - transmittance. Integration stops
 // once transmittance falls below 1e-6.
 //
 // Thread safety: a Renderer is immutable after Create; RenderTile is const
