@@ -26,6 +26,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -454,42 +455,75 @@ class GridIngest {
       if (!(len > 0) || !std::isfinite(len)) return glm::vec3(0.0f);
       return glm::vec3(float(gx / len), float(gy / len), float(gz / len));
     };
+    // One active voxel at leaf offset n (leaf-local lx, ly, lz).
+    auto visit = [&](const ValueT* d, const Coord& o, openvdb::Index n, int lx, int ly, int lz,
+                     bool check_region) {
+      const int64_t x = int64_t(o.x()) + lx, y = int64_t(o.y()) + ly, z = int64_t(o.z()) + lz;
+      if (check_region && (x < rmin[0] || x > rmax[0] || y < rmin[1] || y > rmax[1] ||
+                           z < rmin[2] || z > rmax[2]))
+        return;
+      const ValueT v = d[n];
+      if (!Occupied(v)) return;
+      BrickVoxel bv;
+      bv.x = uint32_t(x - rmin[0]);
+      bv.y = uint32_t(y - rmin[1]);
+      bv.z = uint32_t(z - rmin[2]);
+      const Coord ijk{int(x), int(y), int(z)};
+      if (level_set_) {
+        // Central differences; inside the leaf without the accessor.
+        double gx = (lx > 0 && lx < 7) ? double(d[n + 64]) - double(d[n - 64])
+                                        : double(acc.getValue(ijk.offsetBy(1, 0, 0))) -
+                                              double(acc.getValue(ijk.offsetBy(-1, 0, 0)));
+        double gy = (ly > 0 && ly < 7) ? double(d[n + 8]) - double(d[n - 8])
+                                        : double(acc.getValue(ijk.offsetBy(0, 1, 0))) -
+                                              double(acc.getValue(ijk.offsetBy(0, -1, 0)));
+        double gz = (lz > 0 && lz < 7) ? double(d[n + 1]) - double(d[n - 1])
+                                        : double(acc.getValue(ijk.offsetBy(0, 0, 1))) -
+                                              double(acc.getValue(ijk.offsetBy(0, 0, -1)));
+        bv.attr.normal = normal_from(gx, gy, gz);
+      } else {
+        bv.attr.density = float(v);
+      }
+      finish(bv, ijk);
+      out.push_back(bv);
+    };
+    // Fast path: bricks of at least 8^3 without tiles hold whole leaves
+    // (the origin is aligned to the brick size); visiting the leaves in
+    // Morton order and each leaf's voxels in Morton order gives the voxels
+    // in the writer's order without a sort.
+    const bool morton_walk = B_ >= 3 && bw.tiles.empty();
+    if (morton_walk) {
+      std::vector<std::pair<uint64_t, const LeafT*>> order;
+      order.reserve(bw.leaves.size());
+      uint64_t expected = 0;
+      for (uint32_t li_index : bw.leaves) {
+        const LeafT* leaf = leaves_[li_index].leaf;
+        const Coord o = leaf->origin();
+        order.push_back({Spread3(uint64_t(o.x() - rmin[0]) >> 3) |
+                             Spread3(uint64_t(o.y() - rmin[1]) >> 3) << 1 |
+                             Spread3(uint64_t(o.z() - rmin[2]) >> 3) << 2,
+                         leaf});
+        expected += leaf->onVoxelCount();
+      }
+      std::sort(order.begin(), order.end());
+      out.reserve(size_t(expected));
+      const auto& table = MortonLeafOrder();
+      for (const auto& [key, leaf] : order) {
+        const ValueT* d = leaf->buffer().data();  // loads the leaf in the tree
+        const Coord o = leaf->origin();
+        const auto& mask = leaf->getValueMask();
+        for (uint16_t n : table)
+          if (mask.isOn(n)) visit(d, o, n, n >> 6, (n >> 3) & 7, n & 7, false);
+      }
+      return out;
+    }
     for (uint32_t li_index : bw.leaves) {
-      const LeafInfo& li = leaves_[li_index];
-      const LeafT* leaf = li.leaf;
+      const LeafT* leaf = leaves_[li_index].leaf;
       const ValueT* d = leaf->buffer().data();  // loads the leaf in the tree
       const Coord o = leaf->origin();
       for (auto m = leaf->getValueMask().beginOn(); m; ++m) {
         const openvdb::Index n = m.pos();
-        const int lx = int(n >> 6), ly = int((n >> 3) & 7), lz = int(n & 7);
-        const int64_t x = int64_t(o.x()) + lx, y = int64_t(o.y()) + ly, z = int64_t(o.z()) + lz;
-        if (x < rmin[0] || x > rmax[0] || y < rmin[1] || y > rmax[1] || z < rmin[2] ||
-            z > rmax[2])
-          continue;
-        const ValueT v = d[n];
-        if (!Occupied(v)) continue;
-        BrickVoxel bv;
-        bv.x = uint32_t(x - rmin[0]);
-        bv.y = uint32_t(y - rmin[1]);
-        bv.z = uint32_t(z - rmin[2]);
-        const Coord ijk{int(x), int(y), int(z)};
-        if (level_set_) {
-          // Central differences; inside the leaf without the accessor.
-          double gx = (lx > 0 && lx < 7) ? double(d[n + 64]) - double(d[n - 64])
-                                          : double(acc.getValue(ijk.offsetBy(1, 0, 0))) -
-                                                double(acc.getValue(ijk.offsetBy(-1, 0, 0)));
-          double gy = (ly > 0 && ly < 7) ? double(d[n + 8]) - double(d[n - 8])
-                                          : double(acc.getValue(ijk.offsetBy(0, 1, 0))) -
-                                                double(acc.getValue(ijk.offsetBy(0, -1, 0)));
-          double gz = (lz > 0 && lz < 7) ? double(d[n + 1]) - double(d[n - 1])
-                                          : double(acc.getValue(ijk.offsetBy(0, 0, 1))) -
-                                                double(acc.getValue(ijk.offsetBy(0, 0, -1)));
-          bv.attr.normal = normal_from(gx, gy, gz);
-        } else {
-          bv.attr.density = float(v);
-        }
-        finish(bv, ijk);
-        out.push_back(bv);
+        visit(d, o, n, int(n >> 6), int((n >> 3) & 7), int(n & 7), true);
       }
     }
     for (uint32_t ti : bw.tiles) {
@@ -520,7 +554,52 @@ class GridIngest {
             out.push_back(bv);
           }
     }
+    SortMorton(&out);
     return out;
+  }
+
+  // Spreads the low 21 bits of v to every third bit.
+  static uint64_t Spread3(uint64_t v) {
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffULL;
+    v = (v | v << 16) & 0x1f0000ff0000ffULL;
+    v = (v | v << 8) & 0x100f00f00f00f00fULL;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+    v = (v | v << 2) & 0x1249249249249249ULL;
+    return v;
+  }
+
+  // Leaf offsets (x << 6 | y << 3 | z) of an 8^3 leaf in Morton order.
+  static const std::array<uint16_t, 512>& MortonLeafOrder() {
+    static const std::array<uint16_t, 512> table = [] {
+      std::array<uint16_t, 512> t{};
+      for (unsigned m = 0; m < 512; ++m) {
+        unsigned x = 0, y = 0, z = 0;
+        for (int b = 0; b < 3; ++b) {
+          x |= ((m >> (3 * b)) & 1) << b;
+          y |= ((m >> (3 * b + 1)) & 1) << b;
+          z |= ((m >> (3 * b + 2)) & 1) << b;
+        }
+        t[m] = uint16_t(x << 6 | y << 3 | z);
+      }
+      return t;
+    }();
+    return table;
+  }
+
+  // Puts a brick's voxels in the octree's Morton order (octal digit x | y<<1 |
+  // z<<2), which the writer builds its cells in, so its sort finds them sorted.
+  static void SortMorton(std::vector<BrickVoxel>* v) {
+    if (v->size() < 2) return;
+    std::vector<std::pair<uint64_t, uint32_t>> keys(v->size());
+    for (size_t i = 0; i < v->size(); ++i) {
+      const BrickVoxel& b = (*v)[i];
+      keys[i] = {Spread3(b.x) | Spread3(b.y) << 1 | Spread3(b.z) << 2, uint32_t(i)};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<BrickVoxel> sorted(v->size());
+    for (size_t i = 0; i < keys.size(); ++i) sorted[i] = (*v)[keys[i].second];
+    v->swap(sorted);
   }
 
   // Bricks go through a pipeline: the parallel stage builds a brick's voxels
