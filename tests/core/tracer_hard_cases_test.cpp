@@ -190,7 +190,8 @@ TEST(TracerHardCases, OriginsABillionVoxelsAway) {
                     : DenseVoxels(rng, 0.3, {n / 2 - 8, n / 2 - 8, n / 2 - 8}, 16);
     Scene s(voxels, levels, {levels, levels / 2}, {levels, levels / 2, levels - 3});
     std::vector<Ray> rays;
-    for (int i = 0; i < 2000; ++i) {
+    const int count = levels == 20 ? 800 : 2000;
+    for (int i = 0; i < count; ++i) {
       const Voxel& v = voxels[size_t(rng.Int(0, int64_t(voxels.size()) - 1))];
       if (i % 4 == 0) {
         // Lattice-exact: integer origin 10^9 away, power-of-two-friendly
@@ -209,7 +210,7 @@ TEST(TracerHardCases, OriginsABillionVoxelsAway) {
     }
     Stats st = CheckAll(s, rays, "origins 1e9 away, 2^" + std::to_string(levels));
     EXPECT_EQ(st.failures, 0);
-    EXPECT_GT(st.hits, 1500);
+    EXPECT_GT(st.hits, count * 3 / 4);
   }
 }
 
@@ -405,7 +406,8 @@ TEST(TracerHardCases, SingleStepAndTwoStepsGiveTheSameFirstHit) {
                        : DenseVoxels(rng, 0.2, {n / 2 - 10, n / 3 - 10, n / 4}, 20);
     Scene s(voxels, c.levels, {c.levels, c.levels / 2}, c.n1s);
     std::vector<Ray> rays;
-    for (int i = 0; i < 3000; ++i) {
+    const int count = c.levels == 20 ? 900 : 3000;  // 2^20 single-step rays are long
+    for (int i = 0; i < count; ++i) {
       const Voxel& v = voxels[size_t(rng.Int(0, int64_t(voxels.size()) - 1))];
       if (i % 3 == 0) {
         // Lattice rays: integer origin and direction, many ties.
