@@ -3,10 +3,13 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <atomic>
 #include <chrono>
 #include <cstring>
+#include <mutex>
+#include <set>
 #include <thread>
 
 #include "storage/page_cache.h"
@@ -177,13 +180,23 @@ TEST_F(StoreCache, SingleFlightUnderParallelFor) {
   auto ref = Store::Open(dir_ / "s", {});
   ASSERT_TRUE(ref.ok());
   std::atomic<int> bad{0};
-  // Many tasks ask for the same few bricks at once, then all of them.
-  tbb::parallel_for(0, 4000, [&](int i) {
-    uint32_t id = i < 2000 ? uint32_t(i % 4) : uint32_t(i % bricks);
-    auto b = (*s)->FetchBrick(id);
-    auto a = (*s)->Attributes(id, 0);
-    if (!b.ok() || !a.ok() || b->num_cells == 0) ++bad;
+  std::mutex mu;
+  std::set<std::thread::id> threads;
+  // Many tasks on 16 threads ask for the same few bricks at once, then all.
+  tbb::task_arena arena(16);
+  arena.execute([&] {
+    tbb::parallel_for(0, 4000, [&](int i) {
+      {
+        std::lock_guard<std::mutex> l(mu);
+        threads.insert(std::this_thread::get_id());
+      }
+      uint32_t id = i < 2000 ? uint32_t(i % 4) : uint32_t(i % bricks);
+      auto b = (*s)->FetchBrick(id);
+      auto a = (*s)->Attributes(id, 0);
+      if (!b.ok() || !a.ok() || b->num_cells == 0) ++bad;
+    });
   });
+  EXPECT_GT(threads.size(), 2u);
   EXPECT_EQ(bad.load(), 0);
   CacheStats cs = (*s)->cache_stats();
   EXPECT_EQ(cs.misses, bricks);  // one decompression per brick
