@@ -1,4 +1,4 @@
-// vox::PageCache<V>: a thread-safe LRU cache of immutable values charged in
+// vox::PageCache<V> and vox::ShardedPageCache<V>: a thread-safe LRU cache of immutable values charged in
 // bytes against a capacity, with single-flight loading: concurrent askers of
 // a missing key wait for one load instead of each loading it. A returned
 // shared_ptr pins its value: eviction drops only the cache's reference, so
@@ -9,6 +9,7 @@
 #ifndef VOX_STORAGE_PAGE_CACHE_H_
 #define VOX_STORAGE_PAGE_CACHE_H_
 
+#include <algorithm>
 #include <condition_variable>
 #include <cstdint>
 #include <list>
@@ -16,6 +17,7 @@
 #include <mutex>
 #include <unordered_map>
 #include <utility>
+#include <vector>
 
 #include "core/status.h"
 
@@ -157,6 +159,71 @@ class PageCache {
   std::unordered_map<uint64_t, std::shared_ptr<Flight>> flights_;
   size_t usage_ = 0;
   PageCacheCounters counters_;
+};
+
+// PageCache split into independent shards by key, each with an equal part of
+// the capacity, so threads working on different keys rarely share a lock
+// (LevelDB's ShardedLRUCache). The total charge never exceeds the capacity;
+// LRU order and single flight hold within each shard. Thread-safe.
+template <class V>
+class ShardedPageCache {
+ public:
+  using Value = typename PageCache<V>::Value;
+
+  // `shards` 0 picks as many as keep each shard at least `min_shard_bytes`,
+  // at most 16.
+  explicit ShardedPageCache(size_t capacity, size_t shards = 0,
+                            size_t min_shard_bytes = size_t(4) << 20)
+      : capacity_(capacity) {
+    if (shards == 0) shards = std::clamp<size_t>(capacity / min_shard_bytes, 1, 16);
+    for (size_t i = 0; i < shards; ++i) {
+      size_t part = capacity / shards + (i < capacity % shards ? 1 : 0);
+      shards_.push_back(std::make_unique<PageCache<V>>(part));
+    }
+  }
+
+  template <class Loader>
+  StatusOr<Value> GetOrLoad(uint64_t key, Loader&& load) {
+    return Shard(key).GetOrLoad(key, std::forward<Loader>(load));
+  }
+  Value Lookup(uint64_t key) { return Shard(key).Lookup(key); }
+  void Insert(uint64_t key, Value value, size_t charge) {
+    Shard(key).Insert(key, std::move(value), charge);
+  }
+  void Erase(uint64_t key) { Shard(key).Erase(key); }
+
+  size_t TotalCharge() const {
+    size_t t = 0;
+    for (const auto& s : shards_) t += s->TotalCharge();
+    return t;
+  }
+  size_t capacity() const { return capacity_; }
+  size_t num_shards() const { return shards_.size(); }
+
+  PageCacheCounters counters() const {
+    PageCacheCounters t;
+    for (const auto& s : shards_) {
+      PageCacheCounters c = s->counters();
+      t.hits += c.hits;
+      t.misses += c.misses;
+      t.joined += c.joined;
+      t.evictions += c.evictions;
+      t.charge += c.charge;
+      t.entries += c.entries;
+    }
+    t.capacity = capacity_;
+    return t;
+  }
+
+ private:
+  PageCache<V>& Shard(uint64_t key) {
+    // Neighbouring keys (bricks close in Morton order) land in different shards.
+    uint64_t h = key * 0x9E3779B97F4A7C15ull;
+    return *shards_[(h >> 32) % shards_.size()];
+  }
+
+  const size_t capacity_;
+  std::vector<std::unique_ptr<PageCache<V>>> shards_;
 };
 
 }  // namespace vox

@@ -113,7 +113,7 @@ class StoreImpl : public Store {
   std::vector<uint8_t> top_attr_;
   std::vector<BrickEntry> table_;
   std::unique_ptr<RandomAccessFile> bricks_;
-  PageCache<DecodedBrick> cache_;
+  ShardedPageCache<DecodedBrick> cache_;
   std::atomic<uint64_t> bytes_decompressed_{0};
 };
 

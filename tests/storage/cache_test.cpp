@@ -104,6 +104,39 @@ TEST(PageCache, SingleFlightUnderManyThreads) {
   EXPECT_GT(cc.joined, 0u);
 }
 
+TEST(ShardedPageCache, BudgetAcrossShardsAndSingleFlight) {
+  ShardedPageCache<int> c(1000, 8);
+  EXPECT_EQ(c.num_shards(), 8u);
+  for (int k = 0; k < 500; ++k) {
+    ASSERT_TRUE(c.GetOrLoad(k, [&] { return Make(k, 10); }).ok());
+    ASSERT_LE(c.TotalCharge(), 1000u);
+  }
+  PageCacheCounters cc = c.counters();
+  EXPECT_EQ(cc.misses, 500u);
+  EXPECT_EQ(cc.evictions, 500u - cc.entries);
+  EXPECT_GT(cc.entries, 50u);  // the shards together hold most of the budget
+  EXPECT_EQ(cc.capacity, 1000u);
+  // Automatic shard count: at least min_shard_bytes each, at most 16.
+  EXPECT_EQ(ShardedPageCache<int>(3 << 20).num_shards(), 1u);
+  EXPECT_EQ(ShardedPageCache<int>(40 << 20).num_shards(), 10u);
+  EXPECT_EQ(ShardedPageCache<int>(size_t(1) << 32).num_shards(), 16u);
+  // Single flight across threads still holds per key.
+  ShardedPageCache<int> d(1 << 20, 4);
+  std::atomic<int> loads{0};
+  std::vector<std::thread> ts;
+  for (int t = 0; t < 16; ++t)
+    ts.emplace_back([&] {
+      for (int k = 0; k < 32; ++k)
+        (void)d.GetOrLoad(k, [&] {
+          ++loads;
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+          return Make(k, 10);
+        });
+    });
+  for (auto& t : ts) t.join();
+  EXPECT_EQ(loads.load(), 32);
+}
+
 class StoreCache : public ::testing::Test {
  protected:
   void SetUp() override {
