@@ -2,10 +2,9 @@
 
 #include <cmath>
 #include <fstream>
-#include <sstream>
-
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "render/internal/json_fields.h"
 
@@ -26,9 +25,11 @@ Status Camera::Finalize(std::string_view source) {
   if (!Finite(look_at)) return err("look_at", "must be finite");
   if (!Finite(up)) return err("up", "must be finite");
   if (width < 1 || width > kMaxImageSide)
-    return err("width", "is " + std::to_string(width) + "; it must be in 1.." + std::to_string(kMaxImageSide));
+    return err("width", "is " + std::to_string(width) + "; it must be in 1.." +
+                            std::to_string(kMaxImageSide));
   if (height < 1 || height > kMaxImageSide)
-    return err("height", "is " + std::to_string(height) + "; it must be in 1.." + std::to_string(kMaxImageSide));
+    return err("height", "is " + std::to_string(height) + "; it must be in 1.." +
+                             std::to_string(kMaxImageSide));
   glm::dvec3 f = look_at - position;
   double flen = glm::length(f);
   if (!(flen > 0) || !std::isfinite(flen))
@@ -48,7 +49,8 @@ Status Camera::Finalize(std::string_view source) {
       return err("fov_deg", "must be in (0, 180) degrees");
     scale_x_ = std::tan(fov_deg * M_PI / 360.0);
   } else {
-    if (!std::isfinite(ortho_width) || !(ortho_width > 0)) return err("ortho_width", "must be positive");
+    if (!std::isfinite(ortho_width) || !(ortho_width > 0))
+      return err("ortho_width", "must be positive");
     scale_x_ = 0.5 * ortho_width;
   }
   scale_y_ = scale_x_ * double(height) / double(width);

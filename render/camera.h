@@ -16,10 +16,9 @@
 #ifndef VOX_RENDER_CAMERA_H_
 #define VOX_RENDER_CAMERA_H_
 
+#include <glm/vec3.hpp>
 #include <string>
 #include <string_view>
-
-#include <glm/vec3.hpp>
 
 #include "core/status.h"
 

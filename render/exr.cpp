@@ -1,5 +1,13 @@
 #include "render/exr.h"
 
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFloatAttribute.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfTileDescription.h>
+#include <OpenEXR/ImfTiledInputFile.h>
+#include <OpenEXR/ImfTiledOutputFile.h>
 #include <png.h>
 
 #include <algorithm>
@@ -9,22 +17,13 @@
 #include <fstream>
 #include <limits>
 
-#include <OpenEXR/ImfChannelList.h>
-#include <OpenEXR/ImfFloatAttribute.h>
-#include <OpenEXR/ImfFrameBuffer.h>
-#include <OpenEXR/ImfHeader.h>
-#include <OpenEXR/ImfStringAttribute.h>
-#include <OpenEXR/ImfTileDescription.h>
-#include <OpenEXR/ImfTiledInputFile.h>
-#include <OpenEXR/ImfTiledOutputFile.h>
-
 namespace vox {
 namespace {
 
 constexpr size_t kTimingsSlot = 1000;
 
-const char* const kChannelNames[kNumChannels] = {"R",   "G",   "B",       "A",       "Z",      "N.x",
-                                                 "N.y", "N.z", "voxel.i", "voxel.j", "voxel.k"};
+const char* const kChannelNames[kNumChannels] = {
+    "R", "G", "B", "A", "Z", "N.x", "N.y", "N.z", "voxel.i", "voxel.j", "voxel.k"};
 
 Imf::Slice TileSlice(float* base, int stride) {
   return Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(base), sizeof(float),
@@ -104,7 +103,8 @@ Status TiledExrWriter::Close() {
   return OkStatus();
 }
 
-Status PatchTimings(const std::string& path, double render_seconds, const std::string& timings_json) {
+Status PatchTimings(const std::string& path, double render_seconds,
+                    const std::string& timings_json) {
   if (timings_json.size() > kTimingsSlot)
     return InternalError("timings JSON longer than its header slot");
   std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
@@ -115,7 +115,8 @@ Status PatchTimings(const std::string& path, double render_seconds, const std::s
   f.clear();
   auto patch = [&](const std::string& key, const char* bytes, size_t n) -> Status {
     size_t pos = head.find(key);
-    if (pos == std::string::npos) return CorruptionError(path + ": header slot for timings not found");
+    if (pos == std::string::npos)
+      return CorruptionError(path + ": header slot for timings not found");
     uint32_t size = 0;
     std::memcpy(&size, head.data() + pos + key.size(), 4);  // little-endian (x86, EXR)
     if (size != n) return CorruptionError(path + ": header slot for timings has the wrong size");
@@ -124,9 +125,11 @@ Status PatchTimings(const std::string& path, double render_seconds, const std::s
     return OkStatus();
   };
   float secs = float(render_seconds);
-  VOX_RETURN_IF_ERROR(patch(std::string("renderTimeSeconds\0float\0", 24), reinterpret_cast<char*>(&secs), 4));
+  VOX_RETURN_IF_ERROR(
+      patch(std::string("renderTimeSeconds\0float\0", 24), reinterpret_cast<char*>(&secs), 4));
   std::string padded = timings_json + std::string(kTimingsSlot - timings_json.size(), ' ');
-  VOX_RETURN_IF_ERROR(patch(std::string("vox:timings\0string\0", 19), padded.data(), padded.size()));
+  VOX_RETURN_IF_ERROR(
+      patch(std::string("vox:timings\0string\0", 19), padded.data(), padded.size()));
   f.flush();
   if (!f) return IoError(path + ": writing timings failed");
   return OkStatus();
@@ -141,11 +144,14 @@ ExrInfo InfoFromFile(const Imf::TiledInputFile& in) {
   info.width = dw.max.x - dw.min.x + 1;
   info.height = dw.max.y - dw.min.y + 1;
   info.tile = int(in.tileXSize());
-  for (auto it = h.channels().begin(); it != h.channels().end(); ++it) info.channels.push_back(it.name());
+  for (auto it = h.channels().begin(); it != h.channels().end(); ++it)
+    info.channels.push_back(it.name());
   for (auto it = h.begin(); it != h.end(); ++it) {
-    if (auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) info.attrs[it.name()] = s->value();
+    if (auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute()))
+      info.attrs[it.name()] = s->value();
     if (std::strcmp(it.name(), "renderTimeSeconds") == 0)
-      if (auto* f = dynamic_cast<const Imf::FloatAttribute*>(&it.attribute())) info.render_seconds = f->value();
+      if (auto* f = dynamic_cast<const Imf::FloatAttribute*>(&it.attribute()))
+        info.render_seconds = f->value();
   }
   info.complete = in.isComplete();
   return info;
@@ -167,15 +173,17 @@ StatusOr<ExrImage> ReadExr(const std::string& path) {
     Imf::TiledInputFile in(path.c_str());
     ExrImage img;
     img.info = InfoFromFile(in);
-    if (!img.info.complete) return CorruptionError(path + ": EXR is missing tiles (a partial render?)");
+    if (!img.info.complete)
+      return CorruptionError(path + ": EXR is missing tiles (a partial render?)");
     const auto& dw = in.header().dataWindow();
     Imf::FrameBuffer fb;
     const size_t w = size_t(img.info.width), h = size_t(img.info.height);
     for (const std::string& c : img.info.channels) {
       auto& v = img.pixels[c];
       v.assign(w * h, 0.0f);
-      char* base = reinterpret_cast<char*>(v.data()) -
-                   (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * ptrdiff_t(w)) * ptrdiff_t(sizeof(float));
+      char* base =
+          reinterpret_cast<char*>(v.data()) -
+          (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * ptrdiff_t(w)) * ptrdiff_t(sizeof(float));
       fb.insert(c, Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * w));
     }
     in.setFrameBuffer(fb);
@@ -211,7 +219,9 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
   try {
     Imf::TiledInputFile in(exr_path.c_str());
     ExrInfo info = InfoFromFile(in);
-    if (!info.complete) return InvalidArgumentError(exr_path + ": a partial EXR has no preview; merge the parts first");
+    if (!info.complete)
+      return InvalidArgumentError(exr_path +
+                                  ": a partial EXR has no preview; merge the parts first");
     const auto& dw = in.header().dataWindow();
     const int w = info.width, tile = int(in.tileYSize());
     std::vector<float> band[3];
@@ -237,7 +247,8 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
       Imf::FrameBuffer fb;
       for (int c = 0; c < 3; ++c) {
         char* base = reinterpret_cast<char*>(band[c].data()) -
-                     (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y + y0) * ptrdiff_t(w)) * ptrdiff_t(sizeof(float));
+                     (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y + y0) * ptrdiff_t(w)) *
+                         ptrdiff_t(sizeof(float));
         fb.insert(names[c], Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(w)));
       }
       in.setFrameBuffer(fb);

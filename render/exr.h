@@ -17,21 +17,33 @@
 #ifndef VOX_RENDER_EXR_H_
 #define VOX_RENDER_EXR_H_
 
+#include <OpenEXR/ImfForward.h>
+
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
 
-#include <OpenEXR/ImfForward.h>
-
 #include "core/status.h"
 #include "render/tiles.h"
 
-
 namespace vox {
 
-enum ChannelId { kChR, kChG, kChB, kChA, kChZ, kChNx, kChNy, kChNz, kChVi, kChVj, kChVk, kNumChannels };
+enum ChannelId {
+  kChR,
+  kChG,
+  kChB,
+  kChA,
+  kChZ,
+  kChNx,
+  kChNy,
+  kChNz,
+  kChVi,
+  kChVj,
+  kChVk,
+  kNumChannels
+};
 const char* ChannelName(int c);
 
 struct ImageLayers {
@@ -79,7 +91,8 @@ class TiledExrWriter {
 
 // Writes renderTimeSeconds and vox:timings (JSON, at most 1000 bytes) into
 // the reserved header slots of a closed file written by TiledExrWriter.
-Status PatchTimings(const std::string& path, double render_seconds, const std::string& timings_json);
+Status PatchTimings(const std::string& path, double render_seconds,
+                    const std::string& timings_json);
 
 // Header of an EXR written by vox.
 struct ExrInfo {

@@ -1,14 +1,14 @@
 #include "render/frame.h"
 
-#include <atomic>
-#include <chrono>
-#include <mutex>
-#include <thread>
-
-#include <nlohmann/json.hpp>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
 
 namespace vox {
 namespace {
@@ -53,7 +53,8 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
     VOX_ASSIGN_OR_RETURN(writer, TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
                                                         options.tile_size, img_layers, attrs));
   }
-  int threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+  int threads = options.threads > 0 ? options.threads
+                                    : int(std::max(1u, std::thread::hardware_concurrency()));
   stats->threads = threads;
   stats->tiles_total = end - begin;
   stats->cache_start = volume->cache_stats();
@@ -102,7 +103,8 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
         if (!s.ok()) {
           std::lock_guard<std::mutex> lock(err_mu);
           if (first_error.ok())
-            first_error = s.WithContext("tile (" + std::to_string(rect.tx) + ", " + std::to_string(rect.ty) + ")");
+            first_error = s.WithContext("tile (" + std::to_string(rect.tx) + ", " +
+                                        std::to_string(rect.ty) + ")");
           abort = true;
           return;
         }
@@ -150,21 +152,31 @@ std::string StatsJson(const Renderer& renderer, const FrameStats& st,
   rays["total"] = total;
   const TraceCounters& t = c.trace;
   json j;
-  j["image"] = {{"width", renderer.camera().width}, {"height", renderer.camera().height},
-                {"pixels", c.pixels},               {"hit_pixels", c.hit_pixels},
-                {"tiles", st.tiles},                {"tiles_total", st.tiles_total},
+  j["image"] = {{"width", renderer.camera().width},
+                {"height", renderer.camera().height},
+                {"pixels", c.pixels},
+                {"hit_pixels", c.hit_pixels},
+                {"tiles", st.tiles},
+                {"tiles_total", st.tiles_total},
                 {"samples_per_pixel", renderer.scene().samples_per_pixel}};
-  j["passes"] = {{"shading", renderer.passes().shading},     {"shadows", renderer.passes().shadows},
-                 {"reflection", renderer.passes().reflection}, {"refraction", renderer.passes().refraction},
-                 {"volume", renderer.passes().volume},       {"scattering", renderer.passes().scattering}};
+  j["passes"] = {
+      {"shading", renderer.passes().shading},       {"shadows", renderer.passes().shadows},
+      {"reflection", renderer.passes().reflection}, {"refraction", renderer.passes().refraction},
+      {"volume", renderer.passes().volume},         {"scattering", renderer.passes().scattering}};
   j["split"] = {{"n1", renderer.n1()}, {"n2", renderer.n2()}};
   j["rays"] = rays;
-  j["dda"] = {{"moves", t.total_moves()},         {"moves_x", t.moves[0]},
-              {"moves_y", t.moves[1]},            {"moves_z", t.moves[2]},
-              {"driving_moves", t.driving_moves}, {"passive_moves", t.passive_moves},
-              {"skips", t.skips},                 {"cells_visited", t.cells_visited},
-              {"transitions", t.transitions},     {"brick_fetches", t.brick_fetches},
-              {"traversals", t.rays},             {"hits", t.hits}};
+  j["dda"] = {{"moves", t.total_moves()},
+              {"moves_x", t.moves[0]},
+              {"moves_y", t.moves[1]},
+              {"moves_z", t.moves[2]},
+              {"driving_moves", t.driving_moves},
+              {"passive_moves", t.passive_moves},
+              {"skips", t.skips},
+              {"cells_visited", t.cells_visited},
+              {"transitions", t.transitions},
+              {"brick_fetches", t.brick_fetches},
+              {"traversals", t.rays},
+              {"hits", t.hits}};
   j["attribute_lookups"] = c.attribute_lookups;
   const CacheStats& a = st.cache_start;
   const CacheStats& b = st.cache_end;

@@ -26,7 +26,7 @@ namespace vox {
 
 struct FrameOptions {
   std::string exr_path;  // empty: render without writing (benchmarks)
-  int threads = 0;  // 0: all cores
+  int threads = 0;       // 0: all cores
   int tile_size = 64;
   PartSpec part;
   ProgressMode progress = ProgressMode::kQuiet;

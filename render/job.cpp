@@ -1,7 +1,7 @@
 #include "render/job.h"
 
-#include <chrono>
 #include <charconv>
+#include <chrono>
 #include <fstream>
 
 #include "core/tracer.h"
@@ -14,13 +14,17 @@
 namespace vox {
 Status RunRenderJob(const RenderJobOptions& o) {
   using Clock = std::chrono::steady_clock;
-  auto secs = [](Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); };
+  auto secs = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double>(b - a).count();
+  };
   const auto t_start = Clock::now();
   if (o.tile_size < 8 || o.tile_size > 4096)
-    return InvalidArgumentError("--tile-size " + std::to_string(o.tile_size) + ": must be in 8..4096");
+    return InvalidArgumentError("--tile-size " + std::to_string(o.tile_size) +
+                                ": must be in 8..4096");
   if (o.threads < 0) return InvalidArgumentError("--threads must not be negative");
   if (!o.preview_path.empty() && !o.part.whole())
-    return InvalidArgumentError("--preview needs the whole image; with --tiles, preview the vox-merge output");
+    return InvalidArgumentError(
+        "--preview needs the whole image; with --tiles, preview the vox-merge output");
   OpenOptions open;
   open.cache_bytes = o.cache_mb << 20;
   VOX_ASSIGN_OR_RETURN(auto volume, StoreVolume::Open(o.store_dir, open));
@@ -82,10 +86,13 @@ Status RunRenderJob(const RenderJobOptions& o) {
   if (!o.quiet) {
     uint64_t total = 0;
     for (int k = 0; k < kNumRayKinds; ++k) total += stats.counters.rays[k];
-    fprintf(o.log, "vox-render: %s (%dx%d, part %s, split %s, passes %s): %.3f s, %llu rays, %.2fM rays/s\n",
-            o.exr_path.c_str(), camera.width, camera.height, o.part.ToString().c_str(),
-            renderer->SplitString().c_str(), renderer->passes().ToString().c_str(), stats.render_seconds,
-            (unsigned long long)total, stats.render_seconds > 0 ? total / stats.render_seconds / 1e6 : 0.0);
+    fprintf(
+        o.log,
+        "vox-render: %s (%dx%d, part %s, split %s, passes %s): %.3f s, %llu rays, %.2fM rays/s\n",
+        o.exr_path.c_str(), camera.width, camera.height, o.part.ToString().c_str(),
+        renderer->SplitString().c_str(), renderer->passes().ToString().c_str(),
+        stats.render_seconds, (unsigned long long)total,
+        stats.render_seconds > 0 ? total / stats.render_seconds / 1e6 : 0.0);
   }
   return OkStatus();
 }

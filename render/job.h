@@ -19,8 +19,8 @@ namespace vox {
 
 struct RenderJobOptions {
   std::string store_dir;
-  std::string camera_path;   // empty: DefaultCamera over the store's bbox
-  std::string scene_path;    // empty: default scene
+  std::string camera_path;  // empty: DefaultCamera over the store's bbox
+  std::string scene_path;   // empty: default scene
   std::string exr_path = "render.exr";
   std::string preview_path;  // empty: none
   std::string stats_path;    // empty: none

@@ -1,10 +1,10 @@
 #include "render/merge.h"
 
-#include <algorithm>
-#include <map>
-
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfTiledInputFile.h>
+
+#include <algorithm>
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include "render/exr.h"
@@ -24,7 +24,8 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
     if (it == info.attrs.end())
       return InvalidArgumentError(p + ": not a vox-render output (no vox:part attribute)");
     auto spec = ParsePartSpec(it->second);
-    if (!spec.ok()) return InvalidArgumentError(p + ": bad vox:part attribute '" + it->second + "'");
+    if (!spec.ok())
+      return InvalidArgumentError(p + ": bad vox:part attribute '" + it->second + "'");
     if (info.attrs["vox:tileOrder"] != "morton")
       return UnsupportedError(p + ": unknown tile order '" + info.attrs["vox:tileOrder"] + "'");
     infos.push_back(std::move(info));
@@ -41,7 +42,8 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
     if (o.width != ref.width || o.height != ref.height)
       return differ("image size", std::to_string(ref.width) + "x" + std::to_string(ref.height),
                     std::to_string(o.width) + "x" + std::to_string(o.height));
-    if (o.tile != ref.tile) return differ("tile size", std::to_string(ref.tile), std::to_string(o.tile));
+    if (o.tile != ref.tile)
+      return differ("tile size", std::to_string(ref.tile), std::to_string(o.tile));
     if (o.channels != ref.channels) return differ("channel list", "", "");
     for (const char* key : {"vox:camera", "vox:scene", "vox:split", "vox:store", "vox:passes"}) {
       auto a = ref.attrs.find(key), b = o.attrs.find(key);
@@ -76,8 +78,8 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
   attrs["vox:part"] = "1/1";
   attrs["vox:mergedFrom"] = std::to_string(n) + " parts";
   const TileLayout layout(ref.width, ref.height, ref.tile);
-  VOX_ASSIGN_OR_RETURN(auto writer,
-                       TiledExrWriter::Create(out_path, ref.width, ref.height, ref.tile, layers, attrs));
+  VOX_ASSIGN_OR_RETURN(auto writer, TiledExrWriter::Create(out_path, ref.width, ref.height,
+                                                           ref.tile, layers, attrs));
   TileBuffer buf;
   buf.Allocate(ref.tile, layers);
   MergeResult res;
@@ -94,9 +96,9 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
       Imf::FrameBuffer fb;
       for (int c = 0; c < kNumChannels; ++c)
         if (layers.Has(c))
-          fb.insert(ChannelName(c), Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(buf.ch[c].data()),
-                                               sizeof(float), sizeof(float) * size_t(buf.size), 1, 1,
-                                               0.0, true, true));
+          fb.insert(ChannelName(c),
+                    Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(buf.ch[c].data()), sizeof(float),
+                               sizeof(float) * size_t(buf.size), 1, 1, 0.0, true, true));
       in.setFrameBuffer(fb);
       for (int64_t t = begin; t < end; ++t) {
         const TileRect& r = layout.order()[size_t(t)];

@@ -19,19 +19,26 @@ namespace {
 
 std::string Human(double v) {
   char buf[32];
-  if (v >= 1e9) snprintf(buf, sizeof buf, "%.2fG", v / 1e9);
-  else if (v >= 1e6) snprintf(buf, sizeof buf, "%.2fM", v / 1e6);
-  else if (v >= 1e3) snprintf(buf, sizeof buf, "%.1fk", v / 1e3);
-  else snprintf(buf, sizeof buf, "%.0f", v);
+  if (v >= 1e9)
+    snprintf(buf, sizeof buf, "%.2fG", v / 1e9);
+  else if (v >= 1e6)
+    snprintf(buf, sizeof buf, "%.2fM", v / 1e6);
+  else if (v >= 1e3)
+    snprintf(buf, sizeof buf, "%.1fk", v / 1e3);
+  else
+    snprintf(buf, sizeof buf, "%.0f", v);
   return buf;
 }
 
 std::string Duration(double s) {
   char buf[32];
   if (!std::isfinite(s)) return "?";
-  if (s >= 3600) snprintf(buf, sizeof buf, "%dh%02dm", int(s / 3600), int(std::fmod(s, 3600) / 60));
-  else if (s >= 60) snprintf(buf, sizeof buf, "%dm%02ds", int(s / 60), int(std::fmod(s, 60)));
-  else snprintf(buf, sizeof buf, "%.1fs", s);
+  if (s >= 3600)
+    snprintf(buf, sizeof buf, "%dh%02dm", int(s / 3600), int(std::fmod(s, 3600) / 60));
+  else if (s >= 60)
+    snprintf(buf, sizeof buf, "%dm%02ds", int(s / 60), int(std::fmod(s, 60)));
+  else
+    snprintf(buf, sizeof buf, "%.1fs", s);
   return buf;
 }
 
@@ -41,11 +48,14 @@ std::string Progress::Line(const ProgressSnapshot& s, double elapsed) {
   double frac = s.tiles_total > 0 ? double(s.tiles_done) / double(s.tiles_total) : 1.0;
   double rate = elapsed > 0 ? double(s.rays) / elapsed : 0.0;
   uint64_t lookups = s.cache_hits + s.cache_misses;
-  std::string cache = lookups > 0 ? std::to_string(int(std::lround(100.0 * double(s.cache_hits) / double(lookups)))) + "%"
-                                  : "-";
+  std::string cache =
+      lookups > 0
+          ? std::to_string(int(std::lround(100.0 * double(s.cache_hits) / double(lookups)))) + "%"
+          : "-";
   double left = frac > 0 ? elapsed * (1.0 - frac) / frac : INFINITY;
   char buf[256];
-  snprintf(buf, sizeof buf, "tiles %lld/%lld (%3.0f%%)  %s rays/s  cache hits %s  elapsed %s  left %s",
+  snprintf(buf, sizeof buf,
+           "tiles %lld/%lld (%3.0f%%)  %s rays/s  cache hits %s  elapsed %s  left %s",
            (long long)s.tiles_done, (long long)s.tiles_total, 100.0 * frac, Human(rate).c_str(),
            cache.c_str(), Duration(elapsed).c_str(), Duration(left).c_str());
   return buf;
@@ -57,7 +67,8 @@ void Progress::Draw(const ProgressSnapshot& s, double elapsed) {
     const int width = 24;
     double frac = s.tiles_total > 0 ? double(s.tiles_done) / double(s.tiles_total) : 1.0;
     int filled = int(frac * width);
-    std::string bar = "[" + std::string(size_t(filled), '#') + std::string(size_t(width - filled), '-') + "] ";
+    std::string bar =
+        "[" + std::string(size_t(filled), '#') + std::string(size_t(width - filled), '-') + "] ";
     fprintf(out_, "\r%s%s\033[K", bar.c_str(), line.c_str());
   } else {
     fprintf(out_, "%s\n", line.c_str());

@@ -2,9 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-
 #include <glm/geometric.hpp>
+#include <limits>
 
 namespace vox {
 namespace {
@@ -84,7 +83,8 @@ struct Renderer::ThreadState {
   RenderTracer tracer;
 };
 
-std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> Renderer::NewThreadState() const {
+std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> Renderer::NewThreadState()
+    const {
   std::unique_ptr<ThreadState, ThreadStateDeleter> ts(new ThreadState());
   OctreeView view = volume_->view();
   if (view.bricks != nullptr) {
@@ -119,7 +119,8 @@ struct Renderer::Sample {
 };
 
 StatusOr<std::unique_ptr<Renderer>> Renderer::Create(RenderVolume* volume, const Camera& camera,
-                                                     const Scene& scene, const RenderOptions& options) {
+                                                     const Scene& scene,
+                                                     const RenderOptions& options) {
   const StoreMeta& meta = volume->meta();
   OctreeView view = volume->view();
   int n1 = options.n1 > 0 ? options.n1 : DefaultSplit(view.levels);
@@ -206,7 +207,8 @@ bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit) co
   return found;
 }
 
-bool Renderer::Occluded(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max, Ctx& cx) const {
+bool Renderer::Occluded(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max,
+                        Ctx& cx) const {
   Ray gr{origin_g, xf_.world_to_grid_linear * dir_w};
   ++cx.c->rays[kRayShadow];
   Hit h;
@@ -292,7 +294,8 @@ glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const 
       if (glm::dot(t, t) > 0) {
         color += m.transmit * base * Refract(p_g, p_w, glm::normalize(t), depth + 1, cx);
       } else {
-        color += m.transmit * Radiance(p_g, p_w, glm::reflect(dir_w, n), depth + 1, kRayReflection, cx);
+        color +=
+            m.transmit * Radiance(p_g, p_w, glm::reflect(dir_w, n), depth + 1, kRayReflection, cx);
       }
     }
   }
@@ -437,26 +440,26 @@ glm::dvec3 Renderer::Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double
           // evaluation (as vdb_render's shadow step).
           const double mid = h.t + 0.5 * len;
           if (mid >= next_light_t) {
-          const glm::dvec3 p_g = gr.origin + mid * gr.dir;
-          const glm::dvec3 p_w = xf_.GridToWorld(p_g);
-          glm::dvec3& in = light_in;
-          in = glm::dvec3(0.0);
-          next_light_t = mid + scatter_step;
-          for (const Light& l : scene_.lights) {
-            if (l.intensity <= 0) continue;
-            glm::dvec3 to_light;
-            double dist = kInf;
-            if (l.type == Light::Type::kDirectional) {
-              to_light = -l.direction;
-            } else {
-              to_light = l.position - p_w;
-              dist = glm::length(to_light);
-              if (!(dist > 0)) continue;
-              to_light /= dist;
+            const glm::dvec3 p_g = gr.origin + mid * gr.dir;
+            const glm::dvec3 p_w = xf_.GridToWorld(p_g);
+            glm::dvec3& in = light_in;
+            in = glm::dvec3(0.0);
+            next_light_t = mid + scatter_step;
+            for (const Light& l : scene_.lights) {
+              if (l.intensity <= 0) continue;
+              glm::dvec3 to_light;
+              double dist = kInf;
+              if (l.type == Light::Type::kDirectional) {
+                to_light = -l.direction;
+              } else {
+                to_light = l.position - p_w;
+                dist = glm::length(to_light);
+                if (!(dist > 0)) continue;
+                to_light /= dist;
+              }
+              double tl = l.shadows ? Transmittance(p_g, to_light, dist, cx) : 1.0;
+              in += l.color * l.intensity * tl;
             }
-            double tl = l.shadows ? Transmittance(p_g, to_light, dist, cx) : 1.0;
-            in += l.color * l.intensity * tl;
-          }
           }
           scattered += std::exp(-tau) * (1.0 - std::exp(-seg_tau)) * (v.scattering / sigma_t) *
                        v.color * light_in;

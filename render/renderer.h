@@ -48,10 +48,10 @@ enum RayKind { kRayPrimary, kRayShadow, kRayReflection, kRayRefraction, kRayVolu
 const char* RayKindName(int kind);
 
 struct RenderCounters {
-  TraceCounters trace;           // all rays' DDA work
+  TraceCounters trace;  // all rays' DDA work
   uint64_t rays[kNumRayKinds] = {};
   uint64_t pixels = 0;
-  uint64_t hit_pixels = 0;       // pixels with at least one primary hit (or fog)
+  uint64_t hit_pixels = 0;  // pixels with at least one primary hit (or fog)
   uint64_t attribute_lookups = 0;
   void Add(const RenderCounters& o);
 };
@@ -84,7 +84,8 @@ class Renderer {
  public:
   // `volume` must outlive the renderer.
   static StatusOr<std::unique_ptr<Renderer>> Create(RenderVolume* volume, const Camera& camera,
-                                                    const Scene& scene, const RenderOptions& options);
+                                                    const Scene& scene,
+                                                    const RenderOptions& options);
 
   // Per-thread state (a small pinned-brick table in front of the volume's
   // cache); optional, for speed. Use one per thread; release it before the
@@ -126,7 +127,8 @@ class Renderer {
                      int depth, Ctx& cx) const;
   glm::dvec3 Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double* transmittance,
                  double* first_t) const;
-  double Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max, Ctx& cx) const;
+  double Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max,
+                       Ctx& cx) const;
   bool Occluded(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max, Ctx& cx) const;
   bool FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit) const;
   glm::dvec3 WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a) const;

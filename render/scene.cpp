@@ -35,20 +35,24 @@ Status ParseMaterial(const json& m, std::string_view file, const std::string& pr
         prefix));
   } else {
     VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(
-        m, {"color", "diffuse", "specular", "shininess", "reflect", "transmit", "ior"}, file, prefix));
+        m, {"color", "diffuse", "specular", "shininess", "reflect", "transmit", "ior"}, file,
+        prefix));
   }
   VOX_RETURN_IF_ERROR(ReadColor(m, "color", file, prefix, &out->color));
   struct {
     const char* key;
     double* v;
-  } nums[] = {{"diffuse", &out->diffuse},   {"specular", &out->specular}, {"shininess", &out->shininess},
-              {"reflect", &out->reflect},   {"transmit", &out->transmit}, {"ior", &out->ior}};
+  } nums[] = {{"diffuse", &out->diffuse},     {"specular", &out->specular},
+              {"shininess", &out->shininess}, {"reflect", &out->reflect},
+              {"transmit", &out->transmit},   {"ior", &out->ior}};
   for (auto& n : nums) {
     VOX_RETURN_IF_ERROR(jf::GetNumber(m, n.key, file, prefix, false, n.v));
     VOX_RETURN_IF_ERROR(NonNegative(file, jf::Join(prefix, n.key), *n.v));
   }
-  if (out->reflect > 1) return jf::FieldError(file, jf::Join(prefix, "reflect"), "must be in [0, 1]");
-  if (out->transmit > 1) return jf::FieldError(file, jf::Join(prefix, "transmit"), "must be in [0, 1]");
+  if (out->reflect > 1)
+    return jf::FieldError(file, jf::Join(prefix, "reflect"), "must be in [0, 1]");
+  if (out->transmit > 1)
+    return jf::FieldError(file, jf::Join(prefix, "transmit"), "must be in [0, 1]");
   if (out->reflect + out->transmit > 1)
     return jf::FieldError(file, jf::Join(prefix, "transmit"), "plus reflect must not exceed 1");
   if (!(out->ior > 0)) return jf::FieldError(file, jf::Join(prefix, "ior"), "must be positive");
@@ -65,10 +69,12 @@ Status ParseLight(const json& l, std::string_view file, const std::string& prefi
     out->type = Light::Type::kDirectional;
     VOX_RETURN_IF_ERROR(jf::GetVec3(l, "direction", file, prefix, true, &out->direction));
     double len = glm::length(out->direction);
-    if (!(len > 0)) return jf::FieldError(file, jf::Join(prefix, "direction"), "is the zero vector");
+    if (!(len > 0))
+      return jf::FieldError(file, jf::Join(prefix, "direction"), "is the zero vector");
     out->direction /= len;
     if (l.contains("position"))
-      return jf::FieldError(file, jf::Join(prefix, "position"), "does not apply to a directional light");
+      return jf::FieldError(file, jf::Join(prefix, "position"),
+                            "does not apply to a directional light");
   } else if (type == "point") {
     out->type = Light::Type::kPoint;
     VOX_RETURN_IF_ERROR(jf::GetVec3(l, "position", file, prefix, true, &out->position));
@@ -90,8 +96,8 @@ Status ParseLight(const json& l, std::string_view file, const std::string& prefi
 StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
   VOX_ASSIGN_OR_RETURN(json j, jf::Parse(json_text, file));
   VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(j,
-                                         {"background", "ambient", "lights", "material", "materials",
-                                          "volume", "max_depth", "samples_per_pixel"},
+                                         {"background", "ambient", "lights", "material",
+                                          "materials", "volume", "max_depth", "samples_per_pixel"},
                                          file, ""));
   Scene s;
   if (auto it = j.find("background"); it != j.end()) {
@@ -101,9 +107,11 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
     } else if (it->is_object()) {
       VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(*it, {"top", "bottom"}, file, "background"));
       VOX_RETURN_IF_ERROR(jf::GetVec3(*it, "top", file, "background", true, &s.background_top));
-      VOX_RETURN_IF_ERROR(jf::GetVec3(*it, "bottom", file, "background", true, &s.background_bottom));
+      VOX_RETURN_IF_ERROR(
+          jf::GetVec3(*it, "bottom", file, "background", true, &s.background_bottom));
     } else {
-      return jf::FieldError(file, "background", "must be [r,g,b] or {\"top\":[r,g,b], \"bottom\":[r,g,b]}");
+      return jf::FieldError(file, "background",
+                            "must be [r,g,b] or {\"top\":[r,g,b], \"bottom\":[r,g,b]}");
     }
   }
   VOX_RETURN_IF_ERROR(ReadColor(j, "ambient", file, "", &s.ambient));
@@ -136,15 +144,19 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
   }
   if (auto it = j.find("volume"); it != j.end()) {
     if (!it->is_object()) return jf::FieldError(file, "volume", "must be an object");
-    VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(*it, {"absorption", "scattering", "color"}, file, "volume"));
-    VOX_RETURN_IF_ERROR(jf::GetNumber(*it, "absorption", file, "volume", false, &s.volume.absorption));
+    VOX_RETURN_IF_ERROR(
+        jf::CheckKnownKeys(*it, {"absorption", "scattering", "color"}, file, "volume"));
+    VOX_RETURN_IF_ERROR(
+        jf::GetNumber(*it, "absorption", file, "volume", false, &s.volume.absorption));
     VOX_RETURN_IF_ERROR(NonNegative(file, "volume.absorption", s.volume.absorption));
-    VOX_RETURN_IF_ERROR(jf::GetNumber(*it, "scattering", file, "volume", false, &s.volume.scattering));
+    VOX_RETURN_IF_ERROR(
+        jf::GetNumber(*it, "scattering", file, "volume", false, &s.volume.scattering));
     VOX_RETURN_IF_ERROR(NonNegative(file, "volume.scattering", s.volume.scattering));
     VOX_RETURN_IF_ERROR(ReadColor(*it, "color", file, "volume", &s.volume.color));
   }
   VOX_RETURN_IF_ERROR(jf::GetInt(j, "max_depth", file, "", false, 0, 16, &s.max_depth));
-  VOX_RETURN_IF_ERROR(jf::GetInt(j, "samples_per_pixel", file, "", false, 1, 1024, &s.samples_per_pixel));
+  VOX_RETURN_IF_ERROR(
+      jf::GetInt(j, "samples_per_pixel", file, "", false, 1, 1024, &s.samples_per_pixel));
   return s;
 }
 
@@ -156,8 +168,12 @@ StatusOr<Scene> LoadScene(const std::string& path) {
 std::string Scene::ToJson() const {
   auto v = [](const glm::dvec3& x) { return json::array({x.x, x.y, x.z}); };
   auto mat = [&](const Material& m) {
-    return json{{"color", v(m.color)},     {"diffuse", m.diffuse}, {"specular", m.specular},
-                {"shininess", m.shininess}, {"reflect", m.reflect}, {"transmit", m.transmit},
+    return json{{"color", v(m.color)},
+                {"diffuse", m.diffuse},
+                {"specular", m.specular},
+                {"shininess", m.shininess},
+                {"reflect", m.reflect},
+                {"transmit", m.transmit},
                 {"ior", m.ior}};
   };
   json j;
@@ -184,7 +200,8 @@ std::string Scene::ToJson() const {
     regs.push_back(o);
   }
   if (!regions.empty()) j["materials"] = regs;
-  j["volume"] = {{"absorption", volume.absorption}, {"scattering", volume.scattering},
+  j["volume"] = {{"absorption", volume.absorption},
+                 {"scattering", volume.scattering},
                  {"color", v(volume.color)}};
   j["max_depth"] = max_depth;
   j["samples_per_pixel"] = samples_per_pixel;

@@ -29,11 +29,10 @@
 #ifndef VOX_RENDER_SCENE_H_
 #define VOX_RENDER_SCENE_H_
 
+#include <glm/vec3.hpp>
 #include <string>
 #include <string_view>
 #include <vector>
-
-#include <glm/vec3.hpp>
 
 #include "core/status.h"
 
@@ -85,8 +84,8 @@ struct Scene {
   // The material at world point p.
   const Material& MaterialAt(const glm::dvec3& p) const {
     for (const MaterialRegion& r : regions)
-      if (p.x >= r.min.x && p.y >= r.min.y && p.z >= r.min.z && p.x <= r.max.x &&
-          p.y <= r.max.y && p.z <= r.max.z)
+      if (p.x >= r.min.x && p.y >= r.min.y && p.z >= r.min.z && p.x <= r.max.x && p.y <= r.max.y &&
+          p.z <= r.max.z)
         return r.material;
     return material;
   }

@@ -14,7 +14,8 @@ namespace vox {
 
 class StoreVolume : public RenderVolume {
  public:
-  static StatusOr<std::unique_ptr<StoreVolume>> Open(const std::string& dir, const OpenOptions& options);
+  static StatusOr<std::unique_ptr<StoreVolume>> Open(const std::string& dir,
+                                                     const OpenOptions& options);
   explicit StoreVolume(std::unique_ptr<Store> store, std::string dir)
       : store_(std::move(store)), dir_(std::move(dir)) {}
 

@@ -2,9 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-
 #include <glm/matrix.hpp>
+#include <limits>
 
 namespace vox {
 
@@ -69,7 +68,8 @@ StatusOr<std::unique_ptr<MemoryVolume>> MemoryVolume::Create(StoreMeta meta,
     lo = glm::min(lo, g);
     hi = glm::max(hi, g);
   }
-  VOX_ASSIGN_OR_RETURN(vol->tree_, MemoryOctree::Build(std::move(sorted), meta.levels, meta.brick_level));
+  VOX_ASSIGN_OR_RETURN(vol->tree_,
+                       MemoryOctree::Build(std::move(sorted), meta.levels, meta.brick_level));
   if (vol->tree_->voxels().size() != count)
     return InternalError("memory octree changed the voxel count");
   meta.voxel_count = count;

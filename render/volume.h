@@ -8,13 +8,12 @@
 #ifndef VOX_RENDER_VOLUME_H_
 #define VOX_RENDER_VOLUME_H_
 
-#include <memory>
-#include <string>
-#include <vector>
-
 #include <glm/mat3x3.hpp>
 #include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
+#include <memory>
+#include <string>
+#include <vector>
 
 #include "core/octree.h"
 #include "core/status.h"
@@ -43,11 +42,15 @@ struct GridTransform {
   glm::dvec3 world_to_grid_offset{0.0};
   glm::dmat3 grid_to_world_linear{1.0};
   glm::dvec3 grid_to_world_offset{0.0};
-  glm::dmat3 normal_to_world{1.0};       // inverse transpose of M's linear part
+  glm::dmat3 normal_to_world{1.0};  // inverse transpose of M's linear part
 
   static StatusOr<GridTransform> FromMeta(const StoreMeta& meta);
-  glm::dvec3 WorldToGrid(const glm::dvec3& w) const { return world_to_grid_linear * w + world_to_grid_offset; }
-  glm::dvec3 GridToWorld(const glm::dvec3& g) const { return grid_to_world_linear * g + grid_to_world_offset; }
+  glm::dvec3 WorldToGrid(const glm::dvec3& w) const {
+    return world_to_grid_linear * w + world_to_grid_offset;
+  }
+  glm::dvec3 GridToWorld(const glm::dvec3& g) const {
+    return grid_to_world_linear * g + grid_to_world_offset;
+  }
 };
 
 // World-space box of the occupied voxels (meta bbox), for the default camera.

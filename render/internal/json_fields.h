@@ -5,12 +5,11 @@
 #define VOX_RENDER_INTERNAL_JSON_FIELDS_H_
 
 #include <cmath>
+#include <glm/vec3.hpp>
 #include <initializer_list>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
-
-#include <glm/vec3.hpp>
-#include <nlohmann/json.hpp>
 
 #include "core/status.h"
 
@@ -39,7 +38,8 @@ inline StatusOr<json> Parse(std::string_view text, std::string_view file) {
     }
     return InvalidArgumentError(std::string(file) + ": not valid JSON");
   }
-  if (!j.is_object()) return InvalidArgumentError(std::string(file) + ": top level must be a JSON object");
+  if (!j.is_object())
+    return InvalidArgumentError(std::string(file) + ": top level must be a JSON object");
   return j;
 }
 
@@ -53,7 +53,8 @@ inline Status CheckKnownKeys(const json& obj, std::initializer_list<std::string_
   return OkStatus();
 }
 
-inline Status ReadNumber(const json& v, std::string_view file, const std::string& field, double* out) {
+inline Status ReadNumber(const json& v, std::string_view file, const std::string& field,
+                         double* out) {
   if (!v.is_number()) return FieldError(file, field, "must be a number");
   double d = v.get<double>();
   if (!std::isfinite(d)) return FieldError(file, field, "must be a finite number");
@@ -61,8 +62,10 @@ inline Status ReadNumber(const json& v, std::string_view file, const std::string
   return OkStatus();
 }
 
-inline Status ReadVec3(const json& v, std::string_view file, const std::string& field, glm::dvec3* out) {
-  if (!v.is_array() || v.size() != 3) return FieldError(file, field, "must be an array of 3 numbers");
+inline Status ReadVec3(const json& v, std::string_view file, const std::string& field,
+                       glm::dvec3* out) {
+  if (!v.is_array() || v.size() != 3)
+    return FieldError(file, field, "must be an array of 3 numbers");
   for (int a = 0; a < 3; ++a)
     VOX_RETURN_IF_ERROR(ReadNumber(v[a], file, field + "[" + std::to_string(a) + "]", &(*out)[a]));
   return OkStatus();
@@ -73,14 +76,16 @@ inline Status ReadVec3(const json& v, std::string_view file, const std::string& 
 inline Status GetNumber(const json& obj, std::string_view key, std::string_view file,
                         const std::string& prefix, bool required, double* out) {
   auto it = obj.find(key);
-  if (it == obj.end()) return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
+  if (it == obj.end())
+    return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
   return ReadNumber(*it, file, Join(prefix, key), out);
 }
 
 inline Status GetVec3(const json& obj, std::string_view key, std::string_view file,
                       const std::string& prefix, bool required, glm::dvec3* out) {
   auto it = obj.find(key);
-  if (it == obj.end()) return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
+  if (it == obj.end())
+    return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
   return ReadVec3(*it, file, Join(prefix, key), out);
 }
 
@@ -94,8 +99,9 @@ inline Status GetInt(const json& obj, std::string_view key, std::string_view fil
     return FieldError(file, field, "must be an integer");
   double d = it->get<double>();
   if (d < double(lo) || d > double(hi))
-    return FieldError(file, field, "is " + it->dump() + "; it must be in " + std::to_string(lo) +
-                                       ".." + std::to_string(hi));
+    return FieldError(
+        file, field,
+        "is " + it->dump() + "; it must be in " + std::to_string(lo) + ".." + std::to_string(hi));
   *out = int(d);
   return OkStatus();
 }
@@ -112,7 +118,8 @@ inline Status GetBool(const json& obj, std::string_view key, std::string_view fi
 inline Status GetString(const json& obj, std::string_view key, std::string_view file,
                         const std::string& prefix, bool required, std::string* out) {
   auto it = obj.find(key);
-  if (it == obj.end()) return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
+  if (it == obj.end())
+    return required ? FieldError(file, Join(prefix, key), "is missing") : OkStatus();
   if (!it->is_string()) return FieldError(file, Join(prefix, key), "must be a string");
   *out = it->get<std::string>();
   return OkStatus();

@@ -1,9 +1,9 @@
 // cam.json and scene.json: parsing, validation messages, ray geometry.
-#include <cmath>
-#include <string>
-
-#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
+
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <string>
 
 #include "render/camera.h"
 #include "render/scene.h"
@@ -58,22 +58,47 @@ TEST(CameraTest, ErrorsNameTheField) {
   ExpectCameraError(R"({"look_at":[0,0,0], "fov_deg":40, "width":4, "height":4})", "position");
   ExpectCameraError(R"({"position":[0,0,1], "fov_deg":40, "width":4, "height":4})", "look_at");
   ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "width":4, "height":4})", "fov_deg");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "height":4})", "width");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":"4", "height":4})", "width");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":0, "height":4})", "width");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":0})", "height");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4.5, "height":4})", "width");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "up":[0,0,2], "fov_deg":40, "width":4, "height":4})", "up");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "up":[0,0,0], "fov_deg":40, "width":4, "height":4})", "up");
-  ExpectCameraError(R"({"position":[1e999,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4})", "1e999");
-  ExpectCameraError(R"({"position":["NaN",0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4})", "position[0]");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,1], "fov_deg":40, "width":4, "height":4})", "look_at");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":180, "width":4, "height":4})", "fov_deg");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4, "projection":"fisheye"})", "projection");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "width":4, "height":4, "projection":"orthographic"})", "ortho_width");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "ortho_width":-1, "width":4, "height":4, "projection":"orthographic"})", "ortho_width");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4, "fov":3})", "fov");
-  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4,)", "JSON");
+  ExpectCameraError(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "height":4})",
+                    "width");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":"4", "height":4})", "width");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":0, "height":4})", "width");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":0})", "height");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4.5, "height":4})", "width");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "up":[0,0,2], "fov_deg":40, "width":4, "height":4})",
+      "up");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "up":[0,0,0], "fov_deg":40, "width":4, "height":4})",
+      "up");
+  ExpectCameraError(
+      R"({"position":[1e999,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4})",
+      "1e999");
+  ExpectCameraError(
+      R"({"position":["NaN",0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4})",
+      "position[0]");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,1], "fov_deg":40, "width":4, "height":4})", "look_at");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":180, "width":4, "height":4})",
+      "fov_deg");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4, "projection":"fisheye"})",
+      "projection");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "width":4, "height":4, "projection":"orthographic"})",
+      "ortho_width");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "ortho_width":-1, "width":4, "height":4, "projection":"orthographic"})",
+      "ortho_width");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4, "fov":3})",
+      "fov");
+  ExpectCameraError(
+      R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4,)", "JSON");
   ExpectCameraError(R"([1,2,3])", "object");
 }
 
@@ -149,9 +174,11 @@ TEST(SceneTest, ErrorsNameTheField) {
   ExpectSceneError(R"({"lights": [{"direction":[0,1,0]}]})", "lights[0].type");
   ExpectSceneError(R"({"lights": [{"type":"spot"}]})", "lights[0].type");
   ExpectSceneError(R"({"lights": [{"type":"directional"}]})", "lights[0].direction");
-  ExpectSceneError(R"({"lights": [{"type":"directional", "direction":[0,0,0]}]})", "lights[0].direction");
+  ExpectSceneError(R"({"lights": [{"type":"directional", "direction":[0,0,0]}]})",
+                   "lights[0].direction");
   ExpectSceneError(R"({"lights": [{"type":"point", "position":[0,0]}]})", "lights[0].position");
-  ExpectSceneError(R"({"lights": [{"type":"point", "position":[0,0,0], "shadows":1}]})", "lights[0].shadows");
+  ExpectSceneError(R"({"lights": [{"type":"point", "position":[0,0,0], "shadows":1}]})",
+                   "lights[0].shadows");
   ExpectSceneError(R"({"material": {"reflect": 2}})", "material.reflect");
   ExpectSceneError(R"({"material": {"reflect": 0.6, "transmit": 0.6}})", "material.transmit");
   ExpectSceneError(R"({"material": {"ior": 0}})", "material.ior");

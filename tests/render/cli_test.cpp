@@ -1,6 +1,7 @@
 // vox-render and vox-merge end to end on a store written with StoreWriter:
 // outputs, --stats, --tiles + vox-merge, and the error exits for bad camera
 // and scene files.
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -8,8 +9,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include "render/exr.h"
@@ -84,12 +83,14 @@ class CliTest : public ::testing::Test {
 };
 fs::path* CliTest::dir_ = nullptr;
 
-const char kCam[] = R"({"position":[0,3,20], "look_at":[0,0,0], "up":[0,1,0], "fov_deg":40, "width":64, "height":48, "projection":"perspective"})";
+const char kCam[] =
+    R"({"position":[0,3,20], "look_at":[0,0,0], "up":[0,1,0], "fov_deg":40, "width":64, "height":48, "projection":"perspective"})";
 
 TEST_F(CliTest, RendersExrPreviewAndStats) {
   std::string cam = Write("cam.json", kCam);
-  RunResult r = Exec(Render("--cam " + cam + " -o " + Path("a.exr") + " --preview " + Path("a.png") +
-                           " --stats " + Path("a.json") + " --threads 2 --tile-size 16 --quiet"));
+  RunResult r =
+      Exec(Render("--cam " + cam + " -o " + Path("a.exr") + " --preview " + Path("a.png") +
+                  " --stats " + Path("a.json") + " --threads 2 --tile-size 16 --quiet"));
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(r.output, "");  // --quiet
   EXPECT_TRUE(fs::exists(Path("a.png")));
@@ -115,7 +116,8 @@ TEST_F(CliTest, RendersExrPreviewAndStats) {
 TEST_F(CliTest, DefaultCameraAndPlainProgress) {
   RunResult r = Exec(Render("-o " + Path("d.exr") + " --size 40x30 --single-step --threads 1"));
   ASSERT_EQ(r.code, 0) << r.output;
-  EXPECT_NE(r.output.find("tiles 1/1"), std::string::npos) << r.output;  // plain lines, not a terminal
+  EXPECT_NE(r.output.find("tiles 1/1"), std::string::npos)
+      << r.output;  // plain lines, not a terminal
   auto img = ReadExr(Path("d.exr"));
   ASSERT_TRUE(img.ok());
   EXPECT_EQ(img->info.width, 40);
@@ -130,12 +132,16 @@ TEST_F(CliTest, DefaultCameraAndPlainProgress) {
 
 TEST_F(CliTest, TilesAndMergeEqualTheFullRender) {
   std::string cam = Write("cam.json", kCam);
-  ASSERT_EQ(Exec(Render("--cam " + cam + " -o " + Path("full.exr") + " --tile-size 16 --quiet --split 3+3")).code, 0);
+  ASSERT_EQ(Exec(Render("--cam " + cam + " -o " + Path("full.exr") +
+                        " --tile-size 16 --quiet --split 3+3"))
+                .code,
+            0);
   std::string parts;
   for (int i = 1; i <= 3; ++i) {
     std::string p = Path("p" + std::to_string(i) + ".exr");
-    RunResult r = Exec(Render("--cam " + cam + " -o " + p + " --tile-size 16 --quiet --split 3 --tiles " +
-                             std::to_string(i) + "/3"));
+    RunResult r =
+        Exec(Render("--cam " + cam + " -o " + p + " --tile-size 16 --quiet --split 3 --tiles " +
+                    std::to_string(i) + "/3"));
     ASSERT_EQ(r.code, 0) << r.output;
     parts += " " + p;
   }
@@ -145,10 +151,11 @@ TEST_F(CliTest, TilesAndMergeEqualTheFullRender) {
   auto merged = ReadExr(Path("merged.exr"));
   ASSERT_TRUE(full.ok() && merged.ok());
   for (const auto& [name, pixels] : full->pixels)
-    EXPECT_EQ(std::memcmp(pixels.data(), merged->pixels[name].data(), pixels.size() * 4), 0) << name;
+    EXPECT_EQ(std::memcmp(pixels.data(), merged->pixels[name].data(), pixels.size() * 4), 0)
+        << name;
   // A missing part is refused.
-  RunResult bad = Exec(std::string(VOX_MERGE_BIN) + " " + Path("p1.exr") + " " + Path("p3.exr") + " -o " +
-                      Path("bad.exr"));
+  RunResult bad = Exec(std::string(VOX_MERGE_BIN) + " " + Path("p1.exr") + " " + Path("p3.exr") +
+                       " -o " + Path("bad.exr"));
   EXPECT_NE(bad.code, 0);
   EXPECT_NE(bad.output.find("part 2/3 is missing"), std::string::npos) << bad.output;
 }
@@ -159,11 +166,16 @@ TEST_F(CliTest, BadCameraFilesNameTheFieldAndFail) {
     const char* field;
   } cases[] = {
       {R"({"look_at":[0,0,0], "fov_deg":40, "width":64, "height":48})", "'position' is missing"},
-      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":"wide", "width":64, "height":48})", "'fov_deg' must be a number"},
-      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40, "width":0, "height":48})", "'width'"},
-      {R"({"position":[0,3,20], "look_at":[0,0,0], "up":[0,6,40], "fov_deg":40, "width":64, "height":48})", "'up' is parallel"},
-      {R"({"position":[0,3,"NaN"], "look_at":[0,0,0], "fov_deg":40, "width":64, "height":48})", "'position[2]'"},
-      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40, "width":64, "height":48, "projection":"cylindrical"})", "'projection'"},
+      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":"wide", "width":64, "height":48})",
+       "'fov_deg' must be a number"},
+      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40, "width":0, "height":48})",
+       "'width'"},
+      {R"({"position":[0,3,20], "look_at":[0,0,0], "up":[0,6,40], "fov_deg":40, "width":64, "height":48})",
+       "'up' is parallel"},
+      {R"({"position":[0,3,"NaN"], "look_at":[0,0,0], "fov_deg":40, "width":64, "height":48})",
+       "'position[2]'"},
+      {R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40, "width":64, "height":48, "projection":"cylindrical"})",
+       "'projection'"},
   };
   int k = 0;
   for (const Case& c : cases) {
@@ -174,7 +186,8 @@ TEST_F(CliTest, BadCameraFilesNameTheFieldAndFail) {
     EXPECT_NE(r.output.find(cam), std::string::npos) << r.output;
   }
   std::string scene = Write("bad_scene.json", R"({"lights":[{"type":"directional"}]})");
-  RunResult r = Exec(Render("--cam " + Write("cam.json", kCam) + " --scene " + scene + " -o " + Path("x.exr")));
+  RunResult r = Exec(
+      Render("--cam " + Write("cam.json", kCam) + " --scene " + scene + " -o " + Path("x.exr")));
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("lights[0].direction"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find(scene), std::string::npos) << r.output;

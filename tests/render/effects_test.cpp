@@ -1,10 +1,10 @@
 // One test per effect on small generated scenes, checked against geometry
 // computed independently of the renderer.
-#include <cmath>
-#include <limits>
-
-#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
+
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <limits>
 
 #include "render/renderer.h"
 #include "tests/render/render_util.h"
@@ -113,14 +113,17 @@ TEST(EffectsTest, NoShadowRaysWithoutShadowCastingLights) {
   auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet), {Sphere({16, 16, 16}, 9)});
   ASSERT_TRUE(vol);
   Camera cam = Persp({16, 16, 60}, {16, 16, 16}, 30, 32, 32);
-  for (const char* scene : {R"({"lights":[]})",
-                            R"({"lights":[{"type":"directional","direction":[0,0,-1],"shadows":false}]})",
-                            R"({"lights":[{"type":"point","position":[0,40,40],"shadows":false}]})"}) {
+  for (const char* scene :
+       {R"({"lights":[]})",
+        R"({"lights":[{"type":"directional","direction":[0,0,-1],"shadows":false}]})",
+        R"({"lights":[{"type":"point","position":[0,40,40],"shadows":false}]})"}) {
     Rendered r = Render(vol.get(), cam, ParseOrDie(scene));
     EXPECT_FALSE(r.passes.shadows) << scene;
     EXPECT_GT(r.counters.hit_pixels, 100u);
     EXPECT_EQ(r.counters.rays[kRayShadow], 0u) << scene;
-    EXPECT_EQ(r.counters.rays[kRayReflection] + r.counters.rays[kRayRefraction] + r.counters.rays[kRayVolume], 0u);
+    EXPECT_EQ(r.counters.rays[kRayReflection] + r.counters.rays[kRayRefraction] +
+                  r.counters.rays[kRayVolume],
+              0u);
     // Only primary rays were traversed.
     EXPECT_EQ(r.counters.trace.rays, r.counters.rays[kRayPrimary]);
   }
@@ -150,12 +153,13 @@ TEST(EffectsTest, ShadowFallsWhereGeometrySays) {
   // the cube's shadow on the floor top (y = 4) covers x in [20,36), z in [12,20).
   Part floor = Box({0, 0, 0}, {32, 4, 32});
   floor.normal = [](const glm::dvec3&) { return glm::dvec3(0, 1, 0); };
-  auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet), {floor, Box({12, 12, 12}, {20, 20, 20})});
+  auto vol =
+      MakeVolume(TestMeta(5, GridClass::kLevelSet), {floor, Box({12, 12, 12}, {20, 20, 20})});
   ASSERT_TRUE(vol);
   // Looking straight down; pixel (i, j) sees world x = i + 0.5, z = j + 0.5.
   Camera cam = Ortho({16, 30, 16}, {16, 0, 16}, {0, 0, -1}, 32, 32, 32);
-  Rendered r = Render(vol.get(), cam,
-                      ParseOrDie(R"({"lights":[{"type":"directional","direction":[1,-1,0]}],
+  Rendered r =
+      Render(vol.get(), cam, ParseOrDie(R"({"lights":[{"type":"directional","direction":[1,-1,0]}],
                                      "ambient":[0.1,0.1,0.1],
                                      "material":{"color":[1,1,1],"diffuse":1,"specular":0}})"));
   const float dark = 0.1f, lit = float(0.1 + std::sqrt(0.5));
@@ -186,8 +190,9 @@ TEST(EffectsTest, MirrorShowsTheReflectedObject) {
                         {floor, Sphere(c, 5, glm::vec3(1, 0, 0))}, /*has_color=*/true);
   ASSERT_TRUE(vol);
   Camera cam = Persp({16, 10, 40}, {16, 5, 16}, 50, 64, 64);
-  Rendered r = Render(vol.get(), cam,
-                      ParseOrDie(R"({"lights":[{"type":"directional","direction":[0,-1,-1],"shadows":false}],
+  Rendered r =
+      Render(vol.get(), cam,
+             ParseOrDie(R"({"lights":[{"type":"directional","direction":[0,-1,-1],"shadows":false}],
                                      "background":[0.2,0.4,0.8],
                                      "material":{"specular":0},
                                      "materials":[{"box":{"min":[-1,-1,-1],"max":[33,4.001,33]},
@@ -229,8 +234,9 @@ TEST(EffectsTest, ReflectionDepthIsRespected) {
   ASSERT_TRUE(vol);
   Camera cam = Persp({16.2, 15.7, 16.1}, {3, 11, 2}, 90, 16, 16);
   for (int depth = 0; depth <= 3; ++depth) {
-    std::string json = R"({"lights":[], "material":{"reflect":1,"diffuse":0,"specular":0}, "max_depth":)" +
-                       std::to_string(depth) + "}";
+    std::string json =
+        R"({"lights":[], "material":{"reflect":1,"diffuse":0,"specular":0}, "max_depth":)" +
+        std::to_string(depth) + "}";
     Rendered r = Render(vol.get(), cam, ParseOrDie(json.c_str()));
     EXPECT_EQ(r.passes.reflection, depth > 0);
     EXPECT_EQ(r.counters.hit_pixels, 256u);
@@ -288,8 +294,10 @@ TEST(EffectsTest, FogCubeTransmittanceIsExponential) {
   auto vol = MakeVolume(TestMeta(5, GridClass::kFogVolume, 0.5), {cube});
   ASSERT_TRUE(vol);
   Camera cam = Persp({9, 10.5, 25}, {8, 8, 8}, 40, 48, 48);
-  Rendered r = Render(vol.get(), cam,
-                      ParseOrDie(R"({"lights":[], "background":[1,1,1], "volume":{"absorption":0.3,"scattering":0}})"));
+  Rendered r = Render(
+      vol.get(), cam,
+      ParseOrDie(
+          R"({"lights":[], "background":[1,1,1], "volume":{"absorption":0.3,"scattering":0}})"));
   EXPECT_TRUE(r.passes.volume);
   EXPECT_FALSE(r.passes.shading);
   EXPECT_FALSE(r.passes.scattering);
@@ -306,8 +314,8 @@ TEST(EffectsTest, FogCubeTransmittanceIsExponential) {
     }
   EXPECT_GT(inside, 300);
   // With a light, single scattering adds light and traces transmittance rays.
-  Rendered lit = Render(vol.get(), cam,
-                        ParseOrDie(R"({"lights":[{"type":"directional","direction":[0,-1,0]}],
+  Rendered lit =
+      Render(vol.get(), cam, ParseOrDie(R"({"lights":[{"type":"directional","direction":[0,-1,0]}],
                                        "background":[0,0,0], "volume":{"absorption":0.1,"scattering":0.4}})"));
   EXPECT_TRUE(lit.passes.scattering);
   EXPECT_GT(lit.counters.rays[kRayVolume], 0u);
@@ -331,7 +339,8 @@ TEST(EffectsTest, LevelSetsAreNeverIntegrated) {
 }
 
 TEST(EffectsTest, SplitDoesNotChangeTheImage) {
-  auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet), {Sphere({15, 17, 16}, 11), Box({2, 2, 2}, {9, 30, 6})});
+  auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet),
+                        {Sphere({15, 17, 16}, 11), Box({2, 2, 2}, {9, 30, 6})});
   ASSERT_TRUE(vol);
   Camera cam = Persp({40, 30, 50}, {16, 16, 16}, 40, 48, 48);
   Scene scene = ParseOrDie(R"({"lights":[{"type":"directional","direction":[-1,-1,-1]}]})");

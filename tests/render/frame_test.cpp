@@ -1,17 +1,17 @@
 // RenderFrame to tiled EXR: round trip through OpenEXR, header contents,
 // split renders merged bit for bit, merge refusing parts that do not belong
 // together, the PNG preview and the progress line.
+#include "render/frame.h"
+
+#include <gtest/gtest.h>
 #include <png.h>
 #include <unistd.h>
 
 #include <cstring>
 #include <filesystem>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include "render/exr.h"
-#include "render/frame.h"
 #include "render/merge.h"
 #include "render/progress.h"
 #include "tests/render/render_util.h"
@@ -31,7 +31,8 @@ class FrameTest : public ::testing::Test {
   void SetUp() override {
     dir_ = fs::temp_directory_path() / ("vox_frame_test_" + std::to_string(getpid()));
     fs::create_directories(dir_);
-    vol_ = MakeVolume(TestMeta(5, GridClass::kLevelSet), {Sphere({15, 17, 16}, 10), Box({2, 2, 2}, {8, 28, 6})});
+    vol_ = MakeVolume(TestMeta(5, GridClass::kLevelSet),
+                      {Sphere({15, 17, 16}, 10), Box({2, 2, 2}, {8, 28, 6})});
     ASSERT_TRUE(vol_);
     cam_.position = {40, 30, 50};
     cam_.look_at = {16, 16, 16};
@@ -145,7 +146,8 @@ TEST_F(FrameTest, PartsMergeBitForBitIntoTheFullRender) {
   ASSERT_TRUE(full.ok() && merged.ok());
   ASSERT_EQ(full->pixels.size(), merged->pixels.size());
   for (const auto& [name, pixels] : full->pixels)
-    EXPECT_EQ(std::memcmp(pixels.data(), merged->pixels[name].data(), pixels.size() * 4), 0) << name;
+    EXPECT_EQ(std::memcmp(pixels.data(), merged->pixels[name].data(), pixels.size() * 4), 0)
+        << name;
   EXPECT_EQ(merged->info.attrs["vox:camera"], full->info.attrs["vox:camera"]);
 
   // Refusals, each naming the culprit.

@@ -17,7 +17,8 @@ struct Image {
   float at(const std::string& c, int x, int y) const { return ch.at(c)[size_t(y) * width + x]; }
 };
 
-inline Status RenderToMemory(const Renderer& r, Image* img, RenderCounters* counters, int tile = 16) {
+inline Status RenderToMemory(const Renderer& r, Image* img, RenderCounters* counters,
+                             int tile = 16) {
   const int w = r.camera().width, h = r.camera().height;
   img->width = w;
   img->height = h;

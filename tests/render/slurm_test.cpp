@@ -3,6 +3,7 @@
 // a frame in 3 array tasks plus a dependent merge (sbatch --wait), check the
 // merged EXR equals a direct render bit for bit, stop the cluster. Skipped
 // when the tool is absent. Labelled long;slurm.
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -10,8 +11,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-
-#include <gtest/gtest.h>
 
 #include "render/exr.h"
 #include "tests/render/store_util.h"
@@ -63,7 +62,8 @@ TEST(SlurmTest, JobArrayRendersAndMergesOneFrame) {
   const std::string store = (dir / "store").string();
   ASSERT_TRUE(testing::WriteStore(store, meta, voxels).ok());
   const std::string cam = (dir / "cam.json").string();
-  std::ofstream(cam) << R"({"position":[3.2,5,9], "look_at":[3.2,3.2,3.2], "fov_deg":40, "width":96, "height":72})";
+  std::ofstream(cam)
+      << R"({"position":[3.2,5,9], "look_at":[3.2,3.2,3.2], "fov_deg":40, "width":96, "height":72})";
   const std::string render = VOX_RENDER_BIN, merge = VOX_MERGE_BIN;
   ASSERT_EQ(Sh(render + " " + store + " --cam " + cam + " -o " + (dir / "full.exr").string() +
                " --tile-size 16 --quiet"),
@@ -73,10 +73,12 @@ TEST(SlurmTest, JobArrayRendersAndMergesOneFrame) {
   ASSERT_EQ(Sh(tool + " start"), 0) << "could not start the one-node cluster";
   cluster.started = true;
   const std::string out = (dir / "split.exr").string();
-  int rc = Sh("VOX_RENDER=" + render + " VOX_MERGE=" + merge + " " + VOX_SLURM_SUBMIT + " --wait --preview " +
-              (dir / "split.png").string() + " " + store + " " + cam + " " + out + " 3 --tile-size 16");
+  int rc = Sh("VOX_RENDER=" + render + " VOX_MERGE=" + merge + " " + VOX_SLURM_SUBMIT +
+              " --wait --preview " + (dir / "split.png").string() + " " + store + " " + cam + " " +
+              out + " 3 --tile-size 16");
   ASSERT_EQ(rc, 0) << "see the logs in " << dir / "split.parts";
-  for (int i = 1; i <= 3; ++i) EXPECT_TRUE(fs::exists(dir / "split.parts" / ("part-" + std::to_string(i) + "-of-3.exr")));
+  for (int i = 1; i <= 3; ++i)
+    EXPECT_TRUE(fs::exists(dir / "split.parts" / ("part-" + std::to_string(i) + "-of-3.exr")));
   EXPECT_TRUE(fs::exists(dir / "split.png"));
   auto full = ReadExr((dir / "full.exr").string());
   auto split = ReadExr(out);

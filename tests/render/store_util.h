@@ -14,7 +14,8 @@
 namespace vox::testing {
 
 // `meta` as for MemoryVolume; the voxels are grid coordinates.
-inline Status WriteStore(const std::string& dir, StoreMeta meta, const std::vector<MemoryVoxel>& voxels) {
+inline Status WriteStore(const std::string& dir, StoreMeta meta,
+                         const std::vector<MemoryVoxel>& voxels) {
   const int sub = meta.levels - meta.brick_level;
   std::map<std::tuple<uint64_t, uint64_t, uint64_t>, std::vector<BrickVoxel>> bricks;
   const uint64_t mask = (uint64_t(1) << sub) - 1;
@@ -30,7 +31,8 @@ inline Status WriteStore(const std::string& dir, StoreMeta meta, const std::vect
   wo.force = true;
   VOX_ASSIGN_OR_RETURN(auto writer, StoreWriter::Create(dir, meta, wo));
   for (auto& [coord, list] : bricks)
-    VOX_RETURN_IF_ERROR(writer->AddBrick({std::get<0>(coord), std::get<1>(coord), std::get<2>(coord)}, std::move(list)));
+    VOX_RETURN_IF_ERROR(writer->AddBrick(
+        {std::get<0>(coord), std::get<1>(coord), std::get<2>(coord)}, std::move(list)));
   return writer->Finish();
 }
 

@@ -5,10 +5,9 @@
 #define VOX_TESTS_RENDER_TEST_VOLUMES_H_
 
 #include <functional>
+#include <glm/gtc/matrix_transform.hpp>
 #include <memory>
 #include <vector>
-
-#include <glm/gtc/matrix_transform.hpp>
 
 #include "render/volume.h"
 
@@ -37,7 +36,8 @@ inline StoreMeta TestMeta(int levels, GridClass cls, double voxel = 1.0) {
   return m;
 }
 
-inline std::unique_ptr<MemoryVolume> MakeVolume(const StoreMeta& meta, const std::vector<Part>& parts,
+inline std::unique_ptr<MemoryVolume> MakeVolume(const StoreMeta& meta,
+                                                const std::vector<Part>& parts,
                                                 bool has_color = false) {
   StoreMeta m = meta;
   m.has_color = has_color;
@@ -73,7 +73,8 @@ inline Part Sphere(glm::dvec3 c, double r, glm::vec3 color = glm::vec3(1.0f)) {
 }
 
 // Axis-aligned world box [lo, hi] with the normal of the nearest face.
-inline Part Box(glm::dvec3 lo, glm::dvec3 hi, glm::vec3 color = glm::vec3(1.0f), bool normals = true) {
+inline Part Box(glm::dvec3 lo, glm::dvec3 hi, glm::vec3 color = glm::vec3(1.0f),
+                bool normals = true) {
   Part p;
   p.inside = [=](const glm::dvec3& q) {
     return q.x >= lo.x && q.y >= lo.y && q.z >= lo.z && q.x <= hi.x && q.y <= hi.y && q.z <= hi.z;
@@ -83,8 +84,16 @@ inline Part Box(glm::dvec3 lo, glm::dvec3 hi, glm::vec3 color = glm::vec3(1.0f),
       double best = 1e300;
       glm::dvec3 n(0.0);
       for (int a = 0; a < 3; ++a) {
-        if (q[a] - lo[a] < best) { best = q[a] - lo[a]; n = glm::dvec3(0.0); n[a] = -1; }
-        if (hi[a] - q[a] < best) { best = hi[a] - q[a]; n = glm::dvec3(0.0); n[a] = 1; }
+        if (q[a] - lo[a] < best) {
+          best = q[a] - lo[a];
+          n = glm::dvec3(0.0);
+          n[a] = -1;
+        }
+        if (hi[a] - q[a] < best) {
+          best = hi[a] - q[a];
+          n = glm::dvec3(0.0);
+          n[a] = 1;
+        }
       }
       return n;
     };

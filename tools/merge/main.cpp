@@ -52,7 +52,8 @@ int main(int argc, char** argv) {
     return 1;
   }
   if (!quiet)
-    fprintf(stderr, "vox-merge: %s from %d parts (%lld tiles); render time %.3f s max, %.3f s total\n",
+    fprintf(stderr,
+            "vox-merge: %s from %d parts (%lld tiles); render time %.3f s max, %.3f s total\n",
             out.c_str(), result.parts, (long long)result.tiles, result.max_render_seconds,
             result.sum_render_seconds);
   return 0;

@@ -1,8 +1,8 @@
 // vox-render: renders a vox store to a tiled OpenEXR by discrete ray tracing.
 // Parses flags into RenderJobOptions and calls vox::RunRenderJob.
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
-#include <cerrno>
 #include <cstring>
 #include <string>
 
@@ -17,7 +17,8 @@ const char kUsage[] =
     "                  [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
     "                  [--layers normal,voxel] [--size WxH]\n"
     "  --cam        camera JSON (world space of the source VDB); without it a default\n"
-    "               camera frames the whole volume (--size sets its image size, default 1024x1024)\n"
+    "               camera frames the whole volume (--size sets its image size, default "
+    "1024x1024)\n"
     "  --scene      lights, materials, background, volume, max_depth, samples_per_pixel\n"
     "  -o           output EXR (default render.exr); channels R G B A Z\n"
     "  --layers     extra EXR layers: normal (N.x N.y N.z), voxel (voxel.i voxel.j voxel.k)\n"
@@ -69,20 +70,29 @@ int main(int argc, char** argv) {
                a == "--stats" || a == "--layers" || a == "--size") {
       const char* v = value(a.c_str());
       if (!v) return Usage(a + " needs a value");
-      if (a == "--cam") o.camera_path = v;
-      else if (a == "--scene") o.scene_path = v;
-      else if (a == "-o") o.exr_path = v;
-      else if (a == "--preview") o.preview_path = v;
-      else if (a == "--split") o.split = v;
-      else if (a == "--stats") o.stats_path = v;
+      if (a == "--cam")
+        o.camera_path = v;
+      else if (a == "--scene")
+        o.scene_path = v;
+      else if (a == "-o")
+        o.exr_path = v;
+      else if (a == "--preview")
+        o.preview_path = v;
+      else if (a == "--split")
+        o.split = v;
+      else if (a == "--stats")
+        o.stats_path = v;
       else if (a == "--cache-mb") {
         int mb = 0;
-        if (!ParseInt(v, 1, 1 << 22, &mb)) return Usage(std::string("--cache-mb '") + v + "': expected a positive integer");
+        if (!ParseInt(v, 1, 1 << 22, &mb))
+          return Usage(std::string("--cache-mb '") + v + "': expected a positive integer");
         o.cache_mb = size_t(mb);
       } else if (a == "--threads") {
-        if (!ParseInt(v, 0, 4096, &o.threads)) return Usage(std::string("--threads '") + v + "': expected 0..4096");
+        if (!ParseInt(v, 0, 4096, &o.threads))
+          return Usage(std::string("--threads '") + v + "': expected 0..4096");
       } else if (a == "--tile-size") {
-        if (!ParseInt(v, 8, 4096, &o.tile_size)) return Usage(std::string("--tile-size '") + v + "': expected 8..4096");
+        if (!ParseInt(v, 8, 4096, &o.tile_size))
+          return Usage(std::string("--tile-size '") + v + "': expected 8..4096");
       } else if (a == "--tiles") {
         auto part = vox::ParsePartSpec(v);
         if (!part.ok()) return Usage(part.status().message());
@@ -92,17 +102,22 @@ int main(int argc, char** argv) {
         size_t start = 0;
         while (start <= list.size()) {
           size_t comma = list.find(',', start);
-          std::string item = list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-          if (item == "normal") o.layers.normal = true;
-          else if (item == "voxel") o.layers.voxel = true;
-          else return Usage("--layers: unknown layer '" + item + "' (normal, voxel)");
+          std::string item =
+              list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+          if (item == "normal")
+            o.layers.normal = true;
+          else if (item == "voxel")
+            o.layers.voxel = true;
+          else
+            return Usage("--layers: unknown layer '" + item + "' (normal, voxel)");
           if (comma == std::string::npos) break;
           start = comma + 1;
         }
       } else if (a == "--size") {
         std::string s = v;
         size_t x = s.find('x');
-        if (x == std::string::npos || !ParseInt(s.substr(0, x).c_str(), 1, vox::kMaxImageSide, &o.default_width) ||
+        if (x == std::string::npos ||
+            !ParseInt(s.substr(0, x).c_str(), 1, vox::kMaxImageSide, &o.default_width) ||
             !ParseInt(s.substr(x + 1).c_str(), 1, vox::kMaxImageSide, &o.default_height))
           return Usage("--size '" + s + "': expected WxH");
       }

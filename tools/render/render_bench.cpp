@@ -9,10 +9,9 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "core/tracer.h"
 #include "render/camera.h"
@@ -34,17 +33,26 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (a == "--cam") cam_path = next();
-    else if (a == "--scene") scene_path = next();
-    else if (a == "--split") split = next();
-    else if (a == "--exr") exr = next();
-    else if (a == "--runs") runs = std::max(2, atoi(next().c_str()));
-    else if (a == "--threads") threads = atoi(next().c_str());
-    else if (a == "--cache-mb") cache_mb = size_t(atol(next().c_str()));
-    else if (!a.empty() && a[0] != '-' && store.empty()) store = a;
+    if (a == "--cam")
+      cam_path = next();
+    else if (a == "--scene")
+      scene_path = next();
+    else if (a == "--split")
+      split = next();
+    else if (a == "--exr")
+      exr = next();
+    else if (a == "--runs")
+      runs = std::max(2, atoi(next().c_str()));
+    else if (a == "--threads")
+      threads = atoi(next().c_str());
+    else if (a == "--cache-mb")
+      cache_mb = size_t(atol(next().c_str()));
+    else if (!a.empty() && a[0] != '-' && store.empty())
+      store = a;
     else {
-      fprintf(stderr, "usage: vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N] "
-                      "[--threads N] [--split S] [--exr out.exr] [--cache-mb M]\n");
+      fprintf(stderr,
+              "usage: vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N] "
+              "[--threads N] [--split S] [--exr out.exr] [--cache-mb M]\n");
       return 2;
     }
   }
@@ -79,7 +87,8 @@ int main(int argc, char** argv) {
   auto cpu_now = [] {
     rusage ru;
     getrusage(RUSAGE_SELF, &ru);
-    return double(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) + 1e-6 * double(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
+    return double(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
+           1e-6 * double(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
   };
   std::vector<double> secs, cpu;
   vox::FrameStats last;
