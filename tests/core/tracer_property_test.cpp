@@ -201,7 +201,7 @@ Config Make(std::string name, int levels, std::vector<Voxel> voxels, std::vector
 TEST(TracerProperty, Grid64DenseRandom) {
   Rng rng(11);
   Config c = Make("2^6 dense 30%", 6, DenseVoxels(rng, 0.3, {0, 0, 0}, 64), {6, 3}, {6, 5, 3, 1},
-                  1500, 101);
+                  4000, 101);
   c.traverse_every = 10;
   RunConfig(c);
 }
@@ -209,7 +209,7 @@ TEST(TracerProperty, Grid64DenseRandom) {
 TEST(TracerProperty, Grid64SparseRandom) {
   Rng rng(12);
   Config c = Make("2^6 sparse 0.3%", 6, DenseVoxels(rng, 0.003, {0, 0, 0}, 64), {6, 2},
-                  {6, 4, 2, 1}, 1500, 102);
+                  {6, 4, 2, 1}, 4000, 102);
   c.traverse_every = 5;
   RunConfig(c);
 }
@@ -217,7 +217,7 @@ TEST(TracerProperty, Grid64SparseRandom) {
 TEST(TracerProperty, Grid64Sphere) {
   int levels = 0;
   Config c = Make("sphere:64", 6, ShapeVoxels("sphere:64", {0, 0, 0}, &levels), {6, 4},
-                  {6, 3, 2, 5}, 1500, 103);
+                  {6, 3, 2, 5}, 4000, 103);
   ASSERT_EQ(levels, 6);
   c.traverse_every = 10;
   RunConfig(c);
@@ -228,7 +228,7 @@ TEST(TracerProperty, Grid64Sphere) {
 TEST(TracerProperty, Grid256Cubes) {
   int levels = 0;
   Config c = Make("cubes:256", 8, ShapeVoxels("cubes:256", {0, 0, 0}, &levels), {8, 4},
-                  {8, 4, 2, 6}, 1000, 104);
+                  {8, 4, 2, 6}, 3000, 104);
   ASSERT_EQ(levels, 8);
   c.traverse_every = 20;
   RunConfig(c);
@@ -237,7 +237,7 @@ TEST(TracerProperty, Grid256Cubes) {
 TEST(TracerProperty, Grid256Torus) {
   int levels = 0;
   Config c = Make("torus:256", 8, ShapeVoxels("torus:256", {0, 0, 0}, &levels), {8, 3},
-                  {8, 5, 3}, 1000, 105);
+                  {8, 5, 3}, 3000, 105);
   ASSERT_EQ(levels, 8);
   RunConfig(c);
 }
@@ -245,7 +245,7 @@ TEST(TracerProperty, Grid256Torus) {
 TEST(TracerProperty, Grid1024Noise) {
   int levels = 0;
   Config c = Make("noise:1024", 10, ShapeVoxels("noise:1024", {0, 0, 0}, &levels), {10, 5},
-                  {10, 5, 3, 7}, 600, 106);
+                  {10, 5, 3, 7}, 1500, 106);
   ASSERT_EQ(levels, 10);
   RunConfig(c);
 }
@@ -280,14 +280,14 @@ std::vector<Voxel> Blobs(Rng& rng, int levels, int blobs, int64_t extent, double
 TEST(TracerProperty, Grid2p16Blobs) {
   Rng rng(16);
   Config c = Make("2^16 blobs", 16, Blobs(rng, 16, 12, 16, 0.4, 3000), {16, 9},
-                  {16, 9, 5, 12}, 300, 116);
+                  {16, 9, 5, 12}, 1000, 116);
   RunConfig(c);
 }
 
 TEST(TracerProperty, Grid2p20Blobs) {
   Rng rng(20);
   Config c = Make("2^20 blobs", 20, Blobs(rng, 20, 12, 16, 0.4, 3000), {20, 11},
-                  {20, 11, 6, 14}, 200, 120);
+                  {20, 11, 6, 14}, 600, 120);
   c.make_ray = NearRay;
   RunConfig(c);
 }
@@ -297,14 +297,14 @@ TEST(TracerProperty, Grid2p20Blobs) {
 TEST(TracerProperty, Grid2p30Blobs) {
   Rng rng(30);
   Config c = Make("2^30 blobs", 30, Blobs(rng, 30, 10, 16, 0.4, 200), {12, 25},
-                  {10, 15, 20}, 200, 130);
+                  {10, 15, 20}, 600, 130);
   c.make_ray = NearRay;
   RunConfig(c);
 }
 
 TEST(TracerProperty, Grid2p40Blobs) {
   Rng rng(40);
-  Config c = Make("2^40 blobs", 40, Blobs(rng, 40, 10, 16, 0.4, 100), {12, 30}, {20}, 200, 140);
+  Config c = Make("2^40 blobs", 40, Blobs(rng, 40, 10, 16, 0.4, 100), {12, 30}, {20}, 600, 140);
   c.make_ray = NearRay;
   RunConfig(c);
 }
@@ -336,7 +336,7 @@ TEST(TracerPrecision, Grid2p40FromFarOutside) {
 
 TEST(TracerPrecision, Grid2p30FromFarOutside) {
   Rng rng(31);
-  Config c = Make("2^30 far rays", 30, Blobs(rng, 30, 10, 16, 0.4, 100), {15}, {10, 20}, 60, 131);
+  Config c = Make("2^30 far rays", 30, Blobs(rng, 30, 10, 16, 0.4, 100), {15}, {10, 20}, 200, 131);
   c.make_ray = FarRay;
   RunConfig<DefaultTracer>(c, Budget{}, "Fixed64");
   RunConfig<Tracer128>(c, Budget{}, "Fixed128");
