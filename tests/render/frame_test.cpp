@@ -239,6 +239,51 @@ TEST_F(FrameTest, PngPreview) {
   EXPECT_FALSE(WritePngPreview(Path("part.exr"), Path("part.png")).ok());
 }
 
+// A volume whose bricks or attributes fail to load, as a corrupt store's would.
+class FailingVolume : public RenderVolume, public BrickSource {
+ public:
+  FailingVolume(MemoryVolume* base, bool fail_bricks) : base_(base), fail_bricks_(fail_bricks) {}
+  const StoreMeta& meta() const override { return base_->meta(); }
+  OctreeView view() override {
+    OctreeView v = base_->view();
+    v.bricks = this;
+    return v;
+  }
+  StatusOr<BrickView> FetchBrick(uint32_t id) override {
+    if (fail_bricks_)
+      return CorruptionError("store/bricks.vxb: brick " + std::to_string(id) +
+                             " checksum mismatch");
+    return base_->view().bricks->FetchBrick(id);
+  }
+  StatusOr<VoxelAttributes> Attributes(uint32_t, uint32_t) override {
+    return IoError("store/bricks.vxb: read failed");
+  }
+  std::string description() const override { return "failing"; }
+
+ private:
+  MemoryVolume* base_;
+  bool fail_bricks_;
+};
+
+TEST_F(FrameTest, BrickAndAttributeErrorsStopTheRenderWithAMessage) {
+  for (bool fail_bricks : {true, false}) {
+    FailingVolume bad(vol_.get(), fail_bricks);
+    auto r = Renderer::Create(&bad, cam_, scene_, {});
+    ASSERT_TRUE(r.ok());
+    FrameOptions fo;
+    fo.exr_path = Path("bad.exr");
+    fo.threads = 2;
+    fo.tile_size = 16;
+    FrameStats stats;
+    Status s = RenderFrame(**r, &bad, fo, &stats);
+    ASSERT_FALSE(s.ok());
+    EXPECT_EQ(s.code(), fail_bricks ? StatusCode::kCorruption : StatusCode::kIoError);
+    EXPECT_NE(s.message().find("store/bricks.vxb"), std::string::npos) << s.ToString();
+    EXPECT_NE(s.message().find("tile ("), std::string::npos) << s.ToString();
+    EXPECT_LT(stats.tiles, 24);
+  }
+}
+
 TEST(ProgressTest, LineShowsTilesRateCacheAndTimeLeft) {
   ProgressSnapshot s;
   s.tiles_done = 25;
