@@ -179,5 +179,29 @@ TEST(Reference, FilterFallsBackToExactArithmetic) {
   EXPECT_GT(close.exact_fallbacks + er.exact_fallbacks, 0u);
 }
 
+TEST(Reference, WithinEpsilonSeparatesPrecisionFromLogic) {
+  // The ray y = x - 1 + 1e-7 (z = 0.5) clips the corner of (2,2,0) over
+  // ~1e-7 and misses the corner (3,2) of (3,1,0) by ~1e-7.
+  std::vector<Voxel> voxels = {{2, 2, 0}, {3, 1, 0}, {9, 9, 9}};
+  Reference ref(voxels, 4);
+  ExactRay er(Ray{{1.5, 0.5 + 1e-7, 0.5}, {1, 1, 0}});
+  RefHit r = ref.FirstHit(er);
+  ASSERT_TRUE(r.hit);
+  ASSERT_FALSE(r.ambiguous);
+  ASSERT_EQ(r.voxel, (Voxel{2, 2, 0}));
+  Hit near;
+  near.voxel = {3, 1, 0};
+  near.t = 1.5;
+  EXPECT_FALSE(CheckFirstHit(ref, er, r, near).empty());
+  EXPECT_TRUE(WithinEpsilon(ref, er, r, near, 1e-6));
+  EXPECT_FALSE(WithinEpsilon(ref, er, r, near, 1e-8));
+  Hit far;
+  far.voxel = {9, 9, 9};
+  EXPECT_FALSE(WithinEpsilon(ref, er, r, far, 1e-6));
+  // A miss is explained when every voxel met is met over less than eps.
+  EXPECT_TRUE(WithinEpsilon(ref, er, r, std::nullopt, 1e-6));
+  EXPECT_FALSE(WithinEpsilon(ref, er, r, std::nullopt, 1e-9));
+}
+
 }  // namespace
 }  // namespace vox::testing
