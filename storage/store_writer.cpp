@@ -47,6 +47,41 @@ ZSTD_CCtx* ThreadCCtx() {
   return cctx.get();
 }
 
+// Spreads the low 21 bits of v to every third bit (bit i -> bit 3i).
+inline uint64_t Spread21(uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffull;
+  v = (v | v << 16) & 0x1f0000ff0000ffull;
+  v = (v | v << 8) & 0x100f00f00f00f00full;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+  v = (v | v << 2) & 0x1249249249249249ull;
+  return v;
+}
+
+// Orders `voxels` as MortonLess would: by a 63-bit key (digit x | y << 1 |
+// z << 2 per level) when coordinates fit 21 bits, else by MortonLess. The
+// points' refs are the voxels' indices.
+std::vector<LeafPoint> MortonOrder(const std::vector<BrickVoxel>& voxels, int depth) {
+  std::vector<LeafPoint> pts(voxels.size());
+  if (depth <= 21) {
+    std::vector<std::pair<uint64_t, uint32_t>> keyed(voxels.size());
+    for (size_t i = 0; i < voxels.size(); ++i) {
+      const BrickVoxel& v = voxels[i];
+      keyed[i] = {Spread21(v.x) | Spread21(v.y) << 1 | Spread21(v.z) << 2, uint32_t(i)};
+    }
+    std::sort(keyed.begin(), keyed.end());
+    for (size_t k = 0; k < keyed.size(); ++k) {
+      const BrickVoxel& v = voxels[keyed[k].second];
+      pts[k] = {v.x, v.y, v.z, NodeRef(keyed[k].second)};
+    }
+    return pts;
+  }
+  for (size_t i = 0; i < voxels.size(); ++i)
+    pts[i] = {voxels[i].x, voxels[i].y, voxels[i].z, NodeRef(i)};
+  std::sort(pts.begin(), pts.end(), MortonLess);
+  return pts;
+}
+
 Status ValidateMeta(const StoreMeta& m) {
   if (m.levels < 1 || m.levels > kMaxLevels)
     return InvalidArgumentError("store levels " + std::to_string(m.levels) + " outside 1..40");
@@ -125,10 +160,7 @@ class StoreWriterImpl : public StoreWriter {
     }
 
     // Morton order; payload k is the k-th voxel in that order.
-    std::vector<LeafPoint> pts(voxels.size());
-    for (size_t i = 0; i < voxels.size(); ++i)
-      pts[i] = {voxels[i].x, voxels[i].y, voxels[i].z, NodeRef(i)};
-    std::sort(pts.begin(), pts.end(), MortonLess);
+    std::vector<LeafPoint> pts = MortonOrder(voxels, depth_);
     std::vector<VoxelAttributes> attrs(pts.size());
     for (size_t k = 0; k < pts.size(); ++k) {
       if (k > 0 && pts[k].x == pts[k - 1].x && pts[k].y == pts[k - 1].y && pts[k].z == pts[k - 1].z)

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <cstring>
 #include <random>
 #include <set>
 
@@ -143,6 +144,18 @@ TEST_P(RoundTrip, EveryVoxelAndAttribute) {
     EXPECT_EQ(a->density, e.density);
     for (int k = 0; k < 3; ++k) EXPECT_NEAR(a->color[k], e.color[k], 2e-3);
   }
+  // The same pools, cell for cell, as MemoryOctree builds (ids in Morton order).
+  auto mem = MemoryOctree::Build(vol->voxels, m.levels, m.brick_level);
+  ASSERT_TRUE(mem.ok());
+  ASSERT_EQ(s.view().top_cells, (*mem)->view().top_cells);
+  EXPECT_EQ(0, std::memcmp(s.view().top, (*mem)->view().top, sizeof(Cell) * s.view().top_cells));
+  for (uint32_t id = 0; id < (*mem)->num_bricks(); ++id) {
+    auto a = s.FetchBrick(id);
+    auto b = (*mem)->FetchBrick(id);
+    ASSERT_TRUE(a.ok() && b.ok());
+    ASSERT_EQ(a->num_cells, b->num_cells);
+    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(Cell) * a->num_cells)) << "brick " << id;
+  }
   // No voxel more than those written: count the leaves of the whole tree.
   uint64_t leaves = 0;
   std::function<void(const Cell*, const Cell*, int)> count = [&](const Cell* pool, const Cell* cell,
@@ -197,8 +210,10 @@ TEST_P(RoundTrip, TracesLikeMemoryOctree) {
   std::set<int> splits = {1, std::max(1, meta.brick_level - 1), meta.brick_level,
                           std::min(levels, meta.brick_level + 1), levels};
   uint64_t total_hits = 0;
+  int traced = 0;
   for (int n1 : splits) {
     if (n1 > 20 || levels - n1 > 20) continue;
+    ++traced;
     auto ts = Tracer<>::Create((*store)->view(), n1);
     auto tm = Tracer<>::Create((*mem)->view(), n1);
     ASSERT_TRUE(ts.ok() && tm.ok()) << ts.status().ToString();
@@ -219,7 +234,9 @@ TEST_P(RoundTrip, TracesLikeMemoryOctree) {
       }
     }
   }
-  EXPECT_GT(total_hits, 300u);  // the comparison saw hits in every split
+  if (traced > 0) {
+    EXPECT_GT(total_hits, 300u);  // the comparison saw hits
+  }
   CacheStats cs = (*store)->cache_stats();
   EXPECT_LE(cs.bytes_resident, cs.capacity);
 }
@@ -234,7 +251,8 @@ INSTANTIATE_TEST_SUITE_P(
                       Case{"cubes:64", 4, GridClass::kLevelSet, true},
                       Case{"noise:32", 3, GridClass::kFogVolume, false},
                       Case{"corner:12", 6, GridClass::kLevelSet, false},
-                      Case{"corner:24", 10, GridClass::kLevelSet, true}),
+                      Case{"corner:24", 10, GridClass::kLevelSet, true},
+                      Case{"corner:26", 3, GridClass::kLevelSet, false}),  // 23-level bricks
     [](const auto& info) {
       std::string s = info.param.shape + "_bl" + std::to_string(info.param.brick_level) +
                       (info.param.gc == GridClass::kLevelSet ? "_ls" : "_fog") +
@@ -272,6 +290,46 @@ TEST(Writer, CoarserNormalsShrinkTheStoreAndStayAccurate) {
   WriteOptions bad;
   bad.normal_bits = 17;
   EXPECT_EQ(StoreWriter::Create(tmp / "x", meta, bad).status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(Writer, DeepBricksSortedWithoutKeys) {
+  // 23-level bricks exceed the 63-bit Morton key: the comparator path.
+  const int levels = 26, bl = 3;
+  std::mt19937_64 rng(8);
+  std::vector<LeafPoint> voxels;
+  for (int i = 0; i < 3000; ++i) {
+    uint64_t b = rng() % 3;  // three bricks along x
+    uint64_t m = (uint64_t(1) << 23) - 1;
+    voxels.push_back({(b << 23) | (rng() & m), rng() & m, rng() & m, kEmptyRef});
+    if (i % 10 == 0)  // clusters, so bricks share cells deep down
+      for (int k = 1; k < 4; ++k)
+        voxels.push_back({voxels.back().x ^ uint64_t(k), voxels.back().y, voxels.back().z, kEmptyRef});
+  }
+  std::sort(voxels.begin(), voxels.end(), MortonLess);
+  voxels.erase(std::unique(voxels.begin(), voxels.end(), [](auto& a, auto& b) {
+                 return a.x == b.x && a.y == b.y && a.z == b.z;
+               }), voxels.end());
+  StoreMeta meta = storage_test::MetaFor(levels, bl, GridClass::kFogVolume, false);
+  TempDir tmp;
+  ASSERT_TRUE(storage_test::WriteVoxels(tmp / "s", voxels, meta).ok());
+  auto s = Store::Open(tmp / "s", {});
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  auto mem = MemoryOctree::Build(voxels, levels, bl);
+  ASSERT_TRUE(mem.ok());
+  for (uint32_t id = 0; id < (*mem)->num_bricks(); ++id) {
+    auto a = (*s)->FetchBrick(id);
+    auto b = (*mem)->FetchBrick(id);
+    ASSERT_TRUE(a.ok() && b.ok());
+    ASSERT_EQ(a->num_cells, b->num_cells);
+    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(Cell) * a->num_cells));
+  }
+  for (const LeafPoint& p : voxels) {
+    auto loc = storage_test::Locate(**s, p.x, p.y, p.z);
+    ASSERT_TRUE(loc.ok() && loc->has_value());
+    auto a = (*s)->Attributes((*loc)->brick, (*loc)->payload);
+    ASSERT_TRUE(a.ok());
+    EXPECT_EQ(a->density, storage_test::AttrFor(p.x, p.y, p.z, meta).density);
+  }
 }
 
 TEST(Writer, EmptyStoreOpens) {
