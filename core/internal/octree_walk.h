@@ -1,0 +1,247 @@
+// The part of the paper's traversal (figure 1) that does not depend on how a
+// DDA does its arithmetic: descend (loop 3), the skip loop that leaves an
+// empty octant by one bit test, and the ascent by XOR (loop 2), over a packed
+// XYZ register with carry bits. Tracer (the paper's fixed-point DDA) and
+// AwTracer (Amanatides-Woo, for the accuracy study) both run on it, so the
+// two differ only in their arithmetic. Also the per-ray helpers they share:
+// clipping to the grid, start voxels, brick pinning.
+//
+// Internal to core. Stateless functions; thread-safe.
+#ifndef VOX_CORE_INTERNAL_OCTREE_WALK_H_
+#define VOX_CORE_INTERNAL_OCTREE_WALK_H_
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+
+#include "core/octree.h"
+#include "core/ray.h"
+#include "core/status.h"
+
+namespace vox::internal {
+
+enum class Flow { kLeft, kStop, kError };
+
+// A step's packed-register geometry: x, y, z in fields of n + 1 bits.
+struct StepLayout {
+  int n = 0;  // levels of the step
+  int w = 1;  // field width n + 1
+  uint64_t unit = 0;   // bit 0 of each field
+  uint64_t carry = 0;  // the three carry bits
+  uint64_t field = 0;  // mask of one field's coordinate bits
+
+  explicit StepLayout(int levels)
+      : n(levels),
+        w(levels + 1),
+        unit(1 | (uint64_t(1) << w) | (uint64_t(1) << (2 * w))),
+        carry(unit << levels),
+        field((uint64_t(1) << levels) - 1) {}
+  uint64_t Inc(int axis, int sign) const {
+    return (uint64_t(1) << (axis * w)) * uint64_t(int64_t(sign));
+  }
+  uint64_t Pack(const int64_t v[3]) const {
+    return uint64_t(v[0]) | (uint64_t(v[1]) << w) | (uint64_t(v[2]) << (2 * w));
+  }
+  int64_t Coord(uint64_t xyz, int axis) const { return int64_t((xyz >> (axis * w)) & field); }
+  // The axis whose field differs between two registers one move apart.
+  int MovedAxis(uint64_t diff) const {
+    return (diff & (field | (field + 1))) ? 0 : (diff & ((field | (field + 1)) << w)) ? 1 : 2;
+  }
+};
+
+// Pins the brick a ray is in (at most one at a time: the stack never holds
+// cells of two bricks) and resolves child references to cells.
+struct BrickPinner {
+  BrickSource* source = nullptr;
+  uint32_t id = kNoBrick;
+  BrickView brick{};
+  Status error{};
+  uint64_t fetches = 0;
+
+  // Sets cell (and pool, when the child is a brick) for `child` of a cell in
+  // `pool`. False on a fetch error (kept in `error`).
+  bool Resolve(NodeRef child, const Cell*& cell, const Cell*& pool) {
+    if (!IsBrickRef(child)) {
+      cell = pool + child;
+      return true;
+    }
+    uint32_t want = child & kBrickIdMask;
+    if (want != id) {
+      if (source == nullptr) {
+        error = CorruptionError("octree refers to brick " + std::to_string(want) +
+                                " but has no brick source");
+        return false;
+      }
+      ++fetches;
+      auto b = source->FetchBrick(want);
+      if (!b.ok()) {
+        error = b.status();
+        return false;
+      }
+      brick = std::move(b).value();
+      id = want;
+    }
+    pool = brick.cells;
+    cell = pool;
+    return true;
+  }
+};
+
+struct WalkStats {
+  uint64_t skips = 0, cells = 0;
+};
+
+// Figure 1 over one step's grid, starting in voxel `xyz` (packed per
+// `layout`) with `root` the step's root cell in `root_pool`.
+//
+// Dda must provide `void Move(uint64_t& xyz)`: one 6-connected move (adds
+// +-1 to one field of xyz). `occupied(child, pool, xyz, prev, dda) -> Flow`
+// is called for a non-empty child at the step's last level, with `prev` the
+// register before the last move (== xyz before any move); kLeft goes on
+// (the voxel is skipped), kStop and kError end the walk.
+template <class Dda, class Occupied>
+Flow WalkStep(const StepLayout& layout, uint64_t xyz, Dda& dda, const Cell* root,
+              const Cell* root_pool, BrickPinner& pinner, Occupied&& occupied, WalkStats* stats) {
+  const int w = layout.w;
+  const uint64_t unit = layout.unit, carry = layout.carry;
+  uint64_t prev = xyz;
+  uint64_t skips = 0, cells = 0;
+  Flow flow = Flow::kLeft;
+
+  const Cell* cell_stack[kMaxStepLevels + 1];
+  const Cell* pool_stack[kMaxStepLevels + 1];
+  int depth = 0;
+  cell_stack[0] = root;
+  pool_stack[0] = root_pool;
+  int bit = layout.n - 1;
+  uint64_t mask = unit << bit;
+
+  while (!(xyz & carry)) {
+    // Loop 3: descend until an empty octant or the step's last level.
+    const Cell* cell = cell_stack[depth];
+    const Cell* pool = pool_stack[depth];
+    for (;;) {
+      unsigned digit = unsigned((xyz >> bit) & 1) | unsigned(((xyz >> (w + bit)) & 1) << 1) |
+                       unsigned(((xyz >> (2 * w + bit)) & 1) << 2);
+      NodeRef child = cell->child[digit];
+      ++cells;
+      if (child == kEmptyRef) break;
+      if (bit == 0) {
+        flow = occupied(child, pool, xyz, prev, dda);
+        if (flow != Flow::kLeft) goto done;
+        break;
+      }
+      if (!pinner.Resolve(child, cell, pool)) {
+        flow = Flow::kError;
+        goto done;
+      }
+      ++depth;
+      cell_stack[depth] = cell;
+      pool_stack[depth] = pool;
+      --bit;
+      mask >>= 1;
+    }
+    // Skip: DDA moves until the octant's bit flips; no octree access.
+    // (On a local copy, so the DDA state lives in registers while moving.)
+    {
+      const uint64_t start = xyz;
+      Dda d = dda;
+      do {
+        prev = xyz;
+        d.Move(xyz);
+      } while (!((xyz ^ start) & mask));
+      dda = d;
+      ++skips;
+    }
+    if (xyz & carry) break;
+    // Loop 2: ascend once per level boundary crossed.
+    while ((prev ^ xyz) & (mask << 1)) {
+      --depth;
+      ++bit;
+      mask <<= 1;
+    }
+  }
+done:
+  stats->skips += skips;
+  stats->cells += cells;
+  return flow;
+}
+
+// Scales a direction by the power of two that puts its largest |component|
+// in [1, 2): exact, keeps every ratio, and keeps ray parameters finite.
+inline void ScaleDirection(const glm::dvec3& dir, double out[3]) {
+  double m = std::max({std::fabs(dir.x), std::fabs(dir.y), std::fabs(dir.z)});
+  int e = std::ilogb(m);
+  for (int a = 0; a < 3; ++a) out[a] = std::ldexp(dir[a], -e);
+}
+
+// Travel direction per axis: +1 when the unscaled component is >= 0
+// (including -0), else -1. (Scaling can flush a subnormal component to +-0,
+// and the ray still leaves its start plane to that side.)
+inline int TravelSign(double unscaled) { return unscaled >= 0 ? 1 : -1; }
+
+// Clips the ray o + t D (D scaled, s its travel signs) to the grid [0, G]^3:
+// sets the start point p (the origin, or the entry point set exactly onto the
+// entry face) and the entry parameter. False when the ray misses the grid.
+template <class Real>
+bool ClipToGrid(const glm::dvec3& origin, const Real D[3], const int s[3], Real G, Real p[3],
+                Real* t_start) {
+  Real o[3] = {Real(origin.x), Real(origin.y), Real(origin.z)};
+  Real t0 = Real(0), t1 = Real(0);
+  bool bounded = false;
+  int entry = -1;
+  for (int a = 0; a < 3; ++a) {
+    if (D[a] == Real(0)) {
+      // Half-open along the axis, on the side the ray leaves o towards.
+      if (s[a] > 0 ? (o[a] < Real(0) || o[a] >= G) : (o[a] <= Real(0) || o[a] > G)) return false;
+      continue;
+    }
+    Real near = s[a] > 0 ? Real(0) : G, far = s[a] > 0 ? G : Real(0);
+    Real ta = (near - o[a]) / D[a], tb = (far - o[a]) / D[a];
+    if (ta > t0) {
+      t0 = ta;
+      entry = a;
+    }
+    if (!bounded || tb < t1) t1 = tb;
+    bounded = true;
+  }
+  if (!(t1 > t0)) return false;
+  for (int a = 0; a < 3; ++a) {
+    if (entry < 0) {
+      p[a] = o[a];
+    } else if (a == entry) {
+      p[a] = s[a] > 0 ? Real(0) : G;  // exactly on the entry face
+    } else {
+      p[a] = std::clamp(o[a] + t0 * D[a], Real(0), G);
+    }
+  }
+  *t_start = t0;
+  return true;
+}
+
+// Start voxel on one axis: the voxel the ray is in just after leaving p.
+template <class Real>
+int64_t StartVoxel(Real p, int s, int64_t size) {
+  if (!(p > Real(0))) return 0;  // also clamps p < 0 and catches NaN
+  if (!(p < Real(size))) return size - 1;
+  int64_t f = int64_t(p);  // floor, as p > 0
+  int64_t v = s > 0 ? f : (Real(f) == p ? f - 1 : f);  // ceil(p) - 1 for s < 0
+  return v < 0 ? 0 : v;
+}
+
+// The voxel the ray is in just *before* reaching p on one axis: differs from
+// StartVoxel only when p lies exactly on a voxel boundary.
+template <class Real>
+int64_t BeforeVoxel(Real p, int s, int64_t size) {
+  if (!(p > Real(0))) return 0;
+  if (!(p < Real(size))) return size - 1;
+  int64_t f = int64_t(p);  // floor, as p > 0
+  int64_t v = s < 0 ? f : (Real(f) == p ? f - 1 : f);
+  return v < 0 ? 0 : v;
+}
+
+}  // namespace vox::internal
+
+#endif  // VOX_CORE_INTERNAL_OCTREE_WALK_H_
