@@ -69,7 +69,8 @@ std::vector<LeafPoint> MortonOrder(const std::vector<BrickVoxel>& voxels, int de
       const BrickVoxel& v = voxels[i];
       keyed[i] = {Spread21(v.x) | Spread21(v.y) << 1 | Spread21(v.z) << 2, uint32_t(i)};
     }
-    std::sort(keyed.begin(), keyed.end());
+    // Writers that already hand voxels over in Morton order pay no sort.
+    if (!std::is_sorted(keyed.begin(), keyed.end())) std::sort(keyed.begin(), keyed.end());
     for (size_t k = 0; k < keyed.size(); ++k) {
       const BrickVoxel& v = voxels[keyed[k].second];
       pts[k] = {v.x, v.y, v.z, NodeRef(keyed[k].second)};
