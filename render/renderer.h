@@ -10,10 +10,11 @@
 // world space by the inverse transpose of index_to_world); a voxel without a
 // normal uses the face its ray entered through.
 //
-// Secondary rays (shadow, reflection, refraction) start on the hit voxel's
-// face and skip the run of occupied voxels contiguous with their start (the
-// surface they leave), so a surface never shadows or reflects itself, while
-// anything after an empty voxel does occlude. Refracted rays cross the
+// Secondary rays (shadow, reflection, refraction) leave the hit voxel's face
+// 2.5 voxels out along the normal (clear of the surface's own staircase at
+// grazing angles) and skip any run of occupied voxels contiguous with their
+// start, so a surface never shadows or reflects itself, while anything after
+// an empty voxel occludes. Refracted rays enter at the face itself. Refracted rays cross the
 // object to the end of the first occupied run whose stored normal faces
 // along the ray (the back surface; a level set's interior is hollow).
 //
@@ -117,6 +118,8 @@ class Renderer {
       : volume_(volume), camera_(camera), scene_(scene), options_(o), tracer_(tracer), xf_(xf) {}
 
   Ray ToGrid(const glm::dvec3& origin_w, const glm::dvec3& dir_w) const;
+  // Grid point p_g moved kSurfaceOffsetVoxels voxels along world normal n.
+  glm::dvec3 OffsetAlong(const glm::dvec3& p_g, const glm::dvec3& n_world) const;
   glm::dvec3 Background(const glm::dvec3& dir) const;
   void ShadePixel(double x, double y, Ctx& cx, Sample* s) const;
   glm::dvec3 Radiance(const glm::dvec3& origin_g, const glm::dvec3& origin_w, const glm::dvec3& dir,

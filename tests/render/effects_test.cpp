@@ -181,6 +181,42 @@ TEST(EffectsTest, ShadowFallsWhereGeometrySays) {
   EXPECT_GT(checked, 500);
 }
 
+TEST(EffectsTest, NoShadowAcneOnATiltedVoxelPlaneAtGrazingLight) {
+  // A 3-voxel-thick slab under a tilted plane (a staircase of voxels), lit at
+  // 4 degrees above the plane: nothing occludes it, so every hit pixel
+  // must get the same, fully lit, shade.
+  const glm::dvec3 n = glm::normalize(glm::dvec3(0.3, 1.0, 0.2));
+  const glm::dvec3 p0(16, 14, 16);
+  Part plane;
+  plane.inside = [=](const glm::dvec3& c) {
+    double d = glm::dot(c - p0, n);
+    return d <= 0 && d > -3;
+  };
+  plane.normal = [=](const glm::dvec3&) { return n; };
+  auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet), {plane});
+  ASSERT_TRUE(vol);
+  // Travel direction with n . (-dir) = sin(4 degrees).
+  glm::dvec3 t = glm::normalize(glm::cross(n, glm::dvec3(0, 0, 1)));
+  glm::dvec3 to_light = std::sin(4 * M_PI / 180) * n + std::cos(4 * M_PI / 180) * t;
+  char json[512];
+  snprintf(json, sizeof json,
+           R"({"lights":[{"type":"directional","direction":[%.17g,%.17g,%.17g]}],
+               "ambient":[0.1,0.1,0.1], "material":{"color":[1,1,1],"diffuse":1,"specular":0}})",
+           -to_light.x, -to_light.y, -to_light.z);
+  Camera cam = Ortho({16, 30, 16}, {16, 0, 16}, {0, 0, -1}, 20, 40, 40);
+  Rendered r = Render(vol.get(), cam, ParseOrDie(json));
+  const float lit = float(0.1 + glm::dot(n, to_light));
+  int hits = 0;
+  for (int j = 0; j < 40; ++j)
+    for (int i = 0; i < 40; ++i) {
+      if (r.img.at("A", i, j) != 1.0f) continue;
+      ++hits;
+      ASSERT_NEAR(r.img.at("R", i, j), lit, 1e-6) << i << "," << j;
+    }
+  EXPECT_EQ(hits, 1600);
+  EXPECT_EQ(r.counters.rays[kRayShadow], 1600u);
+}
+
 TEST(EffectsTest, MirrorShowsTheReflectedObject) {
   // A mirror floor y in [0,4) and a red sphere above it; everything else diffuse.
   Part floor = Box({0, 0, 0}, {32, 4, 32}, glm::vec3(1.0f));
