@@ -45,7 +45,8 @@ struct FixedPoint {
       // x - floor(x) is not exact for small negative x.
       const bool neg = x < 0;
       const Real ax = neg ? -x : x;
-      Real ip = std::floor(ax);
+      using std::floor;  // and ExactReal's, found by ADL
+      Real ip = floor(ax);
       Real f = (ax - ip) * Real(uint64_t(1) << 62);  // exact, in [0, 2^62)
       int64_t hi = int64_t(f);                        // floor, as f >= 0
       Real lo = (f - Real(hi)) * Real(uint64_t(1) << (kFrac - 62));  // exact
@@ -62,11 +63,12 @@ struct FixedPoint {
     // Two halves, so a 128-bit word converts without losing its high bits.
     int64_t ip = Floor(w);
     Word frac = w - FromInt(ip);
+    using std::ldexp;  // and ExactReal's, found by ADL
     Real f = 0;
     if constexpr (kFrac > 62) {
-      f = std::ldexp(Real(int64_t(frac >> (kFrac - 62))), -62);
+      f = ldexp(Real(int64_t(frac >> (kFrac - 62))), -62);
     } else {
-      f = std::ldexp(Real(int64_t(frac)), -kFrac);
+      f = ldexp(Real(int64_t(frac)), -kFrac);
     }
     return Real(ip) + f;
   }
