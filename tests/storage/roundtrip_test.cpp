@@ -292,6 +292,35 @@ TEST(Writer, CoarserNormalsShrinkTheStoreAndStayAccurate) {
   EXPECT_EQ(StoreWriter::Create(tmp / "x", meta, bad).status().code(), StatusCode::kInvalidArgument);
 }
 
+TEST(Writer, VoxelsAlreadyInMortonOrder) {
+  auto vol = GenerateShape("torus:64");
+  ASSERT_TRUE(vol.ok());
+  std::vector<LeafPoint> v = vol->voxels;
+  std::sort(v.begin(), v.end(), MortonLess);
+  StoreMeta meta = storage_test::MetaFor(vol->levels, 3, GridClass::kLevelSet, false);
+  TempDir tmp;
+  ASSERT_TRUE(storage_test::WriteVoxels(tmp / "s", v, meta, {}, 1, /*shuffle_voxels=*/false).ok());
+  auto s = Store::Open(tmp / "s", {});
+  ASSERT_TRUE(s.ok());
+  auto mem = MemoryOctree::Build(v, vol->levels, 3);
+  ASSERT_TRUE(mem.ok());
+  for (uint32_t id = 0; id < (*mem)->num_bricks(); ++id) {
+    auto a = (*s)->FetchBrick(id);
+    auto b = (*mem)->FetchBrick(id);
+    ASSERT_TRUE(a.ok() && b.ok());
+    ASSERT_EQ(a->num_cells, b->num_cells);
+    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(Cell) * a->num_cells));
+  }
+  for (size_t i = 0; i < v.size(); i += 13) {
+    auto loc = storage_test::Locate(**s, v[i].x, v[i].y, v[i].z);
+    ASSERT_TRUE(loc.ok() && loc->has_value());
+    auto a = (*s)->Attributes((*loc)->brick, (*loc)->payload);
+    ASSERT_TRUE(a.ok());
+    glm::vec3 e = storage_test::AttrFor(v[i].x, v[i].y, v[i].z, meta).normal;
+    EXPECT_GT(glm::dot(a->normal, e), 0.99999f);
+  }
+}
+
 TEST(Writer, DeepBricksSortedWithoutKeys) {
   // 23-level bricks exceed the 63-bit Morton key: the comparator path.
   const int levels = 26, bl = 3;

@@ -76,9 +76,10 @@ inline StoreMeta MetaFor(int levels, int brick_level, GridClass gc, bool color) 
 }
 
 // Writes `voxels` (global grid coordinates) as a store: bricks in a shuffled
-// order, voxels shuffled within each brick.
+// order, voxels shuffled within each brick (or kept in the given order).
 inline Status WriteVoxels(const std::string& dir, const std::vector<LeafPoint>& voxels,
-                          const StoreMeta& meta, WriteOptions opts = {}, uint64_t seed = 1) {
+                          const StoreMeta& meta, WriteOptions opts = {}, uint64_t seed = 1,
+                          bool shuffle_voxels = true) {
   const int sub = meta.levels - meta.brick_level;
   std::map<std::tuple<uint64_t, uint64_t, uint64_t>, std::vector<BrickVoxel>> bricks;
   const uint64_t lm = (uint64_t(1) << sub) - 1;
@@ -98,7 +99,7 @@ inline Status WriteVoxels(const std::string& dir, const std::vector<LeafPoint>& 
   auto w = StoreWriter::Create(dir, meta, opts);
   if (!w.ok()) return w.status();
   for (auto& [c, v] : list) {
-    std::shuffle(v.begin(), v.end(), rng);
+    if (shuffle_voxels) std::shuffle(v.begin(), v.end(), rng);
     Status s = (*w)->AddBrick(c, std::move(v));
     if (!s.ok()) return s;
   }
