@@ -11,6 +11,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "render/camera.h"
 #include "render/exr.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
@@ -191,6 +192,60 @@ TEST_F(CliTest, BadCameraFilesNameTheFieldAndFail) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("lights[0].direction"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find(scene), std::string::npos) << r.output;
+}
+
+TEST_F(CliTest, FogStoreTransmittanceIsExponential) {
+  // A fog cube of density 0.6, index [8,24)^3 with voxel size 0.5: world [4,12)^3
+  // (index_to_world = scale(0.5) * translate(0.5), as in the test volumes).
+  StoreMeta meta = testing::TestMeta(5, GridClass::kFogVolume, 0.5);
+  meta.brick_level = 2;
+  std::vector<MemoryVoxel> voxels;
+  for (int z = 8; z < 24; ++z)
+    for (int y = 8; y < 24; ++y)
+      for (int x = 8; x < 24; ++x) {
+        MemoryVoxel v;
+        v.x = uint64_t(x), v.y = uint64_t(y), v.z = uint64_t(z);
+        v.attr.density = 0.6f;
+        voxels.push_back(v);
+      }
+  ASSERT_TRUE(testing::WriteStore(Path("fog"), meta, voxels).ok());
+  std::string cam = Write(
+      "fogcam.json",
+      R"({"position":[9,10.5,25], "look_at":[8,8,8], "fov_deg":40, "width":40, "height":40})");
+  std::string scene =
+      Write("fogscene.json",
+            R"({"lights":[], "background":[1,1,1], "volume":{"absorption":0.4,"scattering":0}})");
+  RunResult r =
+      Exec(std::string(VOX_RENDER_BIN) + " " + Path("fog") + " --cam " + cam + " --scene " + scene +
+           " -o " + Path("fog.exr") + " --quiet --stats " + Path("fog.json"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  auto img = ReadExr(Path("fog.exr"));
+  ASSERT_TRUE(img.ok());
+  auto c = ParseCamera(
+      R"({"position":[9,10.5,25], "look_at":[8,8,8], "fov_deg":40, "width":40, "height":40})",
+      "cam");
+  ASSERT_TRUE(c.ok());
+  int inside = 0;
+  for (int j = 0; j < 40; ++j)
+    for (int i = 0; i < 40; ++i) {
+      WorldRay ray = c->PixelRay(i + 0.5, j + 0.5);
+      double t0 = 0, t1 = 1e300;
+      for (int a = 0; a < 3; ++a) {
+        double ta = (4 - ray.origin[a]) / ray.dir[a], tb = (12 - ray.origin[a]) / ray.dir[a];
+        t0 = std::max(t0, std::min(ta, tb));
+        t1 = std::min(t1, std::max(ta, tb));
+      }
+      double len = t1 > t0 ? t1 - t0 : 0;
+      inside += len > 0;
+      ASSERT_NEAR(img->pixels["R"][size_t(j) * 40 + i], std::exp(-0.4 * 0.6 * len), 1e-3)
+          << i << "," << j;
+    }
+  EXPECT_GT(inside, 200);
+  std::ifstream in(Path("fog.json"));
+  auto stats = nlohmann::json::parse(in);
+  EXPECT_TRUE(stats["passes"]["volume"].get<bool>());
+  EXPECT_EQ(stats["rays"]["shadow"], 0);
+  EXPECT_EQ(stats["rays"]["volume"], 0);
 }
 
 TEST_F(CliTest, BadFlagsAndMissingStore) {
