@@ -59,7 +59,8 @@ print(f"image {v['width']}x{v['height']}, {v['threads']} threads, split {v['spli
 print(f"vox-render  cold {v['cold_seconds']:.3f} s wall ({v['cold_cpu_seconds']:.3f} s CPU); "
       f"warm median {v['warm_median_seconds']:.3f} s wall ({v['warm_cpu_median_seconds']:.3f} s CPU) "
       f"over {len(v['warm_seconds'])} frames")
-print(f"            {v['warm_rays_per_second']/1e6:.2f} M rays/s, {v['warm_dda_moves_per_second']/1e6:.1f} M DDA moves/s (warm)")
+print(f"            {v['warm_rays_per_second']/1e6:.2f} M rays/s, {v['warm_dda_moves_per_second']/1e6:.1f} M DDA moves/s (warm, wall); "
+      f"per CPU second {v['rays']/v['warm_cpu_median_seconds']/1e6:.2f} M rays, {v['dda_moves']/v['warm_cpu_median_seconds']/1e6:.1f} M moves")
 print(f"vdb_render  median {vdb_wall:.3f} s wall ray-tracing, {vdb_cpu:.3f} s CPU over {len(rows)} runs")
 print(f"speed-up    warm {vdb_wall / v['warm_median_seconds']:.2f}x wall, {vdb_cpu / v['warm_cpu_median_seconds']:.2f}x CPU; "
       f"cold {vdb_wall / v['cold_seconds']:.2f}x wall, {vdb_cpu / v['cold_cpu_seconds']:.2f}x CPU")
