@@ -109,7 +109,7 @@ Status PatchTimings(const std::string& path, double render_seconds,
     return InternalError("timings JSON longer than its header slot");
   std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
   if (!f) return IoError(path + ": cannot reopen to record timings");
-  std::string head(size_t(1) << 16, '\0');
+  std::string head(size_t(1) << 20, '\0');
   f.read(head.data(), std::streamsize(head.size()));
   head.resize(size_t(f.gcount()));
   f.clear();
