@@ -306,7 +306,11 @@ TEST(TracerProperty, Grid2p40Blobs) {
   Rng rng(40);
   Config c = Make("2^40 blobs", 40, Blobs(rng, 40, 10, 16, 0.4, 100), {12, 30}, {20}, 600, 140);
   c.make_ray = NearRay;
-  RunConfig(c);
+  // 2% of NearRay's rays come from far outside: over a 20-level first step
+  // Fixed64 drifts by up to half a voxel (TracerPrecision below). Measured
+  // with 10^5 rays: 49 wrong first hits (0.05%), all within 0.5 voxel.
+  RunConfig<DefaultTracer>(c, Budget{1, 0.005}, "Fixed64");
+  RunConfig<Tracer<Fixed128, long double>>(c, Budget{}, "Fixed128");
 }
 
 // ---------------------------------------------------------------- precision
