@@ -329,10 +329,15 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir, const OpenO
     return InvalidArgumentError("'" + dir + "' is not a store directory");
   std::string base = dir;
   while (base.size() > 1 && base.back() == '/') base.pop_back();
-  VOX_ASSIGN_OR_RETURN(auto index,
-                       OpenMmapFile(base + "/" + storage_internal::kIndexFileName));
-  VOX_ASSIGN_OR_RETURN(auto bricks,
-                       OpenMmapFile(base + "/" + storage_internal::kBrickFileName));
+  auto open = [&](const char* name) {
+    auto f = OpenMmapFile(base + "/" + name);
+    if (!f.ok() && f.status().code() == StatusCode::kNotFound)
+      return StatusOr<std::unique_ptr<RandomAccessFile>>(
+          f.status().WithContext("'" + base + "' is not a complete vox store"));
+    return f;
+  };
+  VOX_ASSIGN_OR_RETURN(auto index, open(storage_internal::kIndexFileName));
+  VOX_ASSIGN_OR_RETURN(auto bricks, open(storage_internal::kBrickFileName));
   return storage_internal::OpenStoreFromFiles(base, std::move(index), std::move(bricks), options);
 }
 
