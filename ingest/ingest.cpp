@@ -2,24 +2,23 @@
 //
 // How it streams. The file is opened with OpenVDB's delayed loading: reading
 // the grid loads its tree topology (nodes and active masks) but leaves every
-// leaf buffer on disk (memory-mapped) until a value is read. Then:
+// leaf buffer on disk (memory-mapped) until a value is read. Values are only
+// ever read through private copies of leaf buffers (LeafValues below), so
+// the tree itself stays topology-only for the whole ingest. Then:
 //  1. Topology pass: list the leaves (with their mask-only active bbox) and
 //     the active tiles; no voxel values are read.
 //  2. Exact occupied bbox: scan the leaves from each of the 6 sides in order
 //     of their active bbox until no further leaf can move the bound; each
-//     scanned leaf is decoded into a private copy of its buffer and dropped,
-//     so the tree's leaves stay on disk. Usually a few hundred leaves.
+//     scanned leaf is decoded and dropped. Usually a few hundred leaves; all
+//     of them when nothing is occupied.
 //  3. Placement (origin, levels), the StoreWriter, and the brick map: brick
 //     coordinate -> the leaves and tiles that overlap it.
-//  4. Bricks, ordered in slabs along the axis with most bricks, go through a
-//     TBB pipeline: a parallel stage decodes the brick's leaves (inside the
-//     tree, so neighbours serve the gradient), builds its voxels and hands
-//     them to the writer (which compresses in parallel); a serial in-order
-//     stage keeps the books. When every brick of a slab has been built,
-//     the leaves no later brick can read (their last slab, one voxel of
-//     gradient reach included, is done) have their buffers freed. Peak
-//     memory: the topology + about two slabs of leaf buffers + the bricks in
-//     flight.
+//  4. Bricks go through a TBB pipeline: a parallel stage decodes the brick's
+//     leaves (and, for the gradient, the face neighbours it touches), builds
+//     its voxels in Morton order and hands them to the writer (which
+//     compresses in the calling thread); a serial in-order stage keeps the
+//     books. Peak memory: the topology + the bricks in flight (2 per thread).
+//     Leaves on a brick's faces are decoded by both bricks (a few % of CPU).
 #include "ingest/ingest.h"
 
 #include <sys/stat.h>
@@ -70,6 +69,90 @@ int CeilLog2(uint64_t extent) {
 int64_t AlignDown(int64_t v, int b) { return (v >> b) << b; }  // arithmetic shift: floor
 
 // ---------------------------------------------------------------------------
+// Leaf values without touching the tree.
+//
+// With delayed loading, reading a value through the tree loads the leaf's
+// buffer into the tree for good. Instead, every leaf is decoded into a
+// private copy of its (out-of-core) buffer, used, and dropped, so the tree
+// stays topology-only and memory stays bounded. It also sidesteps an
+// OpenVDB 10 defect: when LeafBuffer::doLoad throws (corrupt leaf data) it
+// leaves the buffer claiming to be out of core while holding an array, and
+// destroying or reading that buffer again crashes. A private copy that fails
+// to decode is deliberately leaked (a few kB, corrupt files only) and the
+// tree's own buffers are never loaded.
+
+template <class LeafT>
+class LeafValues {
+ public:
+  using Buffer = typename LeafT::Buffer;
+  using ValueT = typename LeafT::ValueType;
+
+  // The leaf's values (offset x << 6 | y << 3 | z), decoded once per
+  // LeafValues; may throw an OpenVDB exception for corrupt data.
+  const ValueT* Get(const LeafT* leaf) {
+    if (leaf == last_leaf_) return last_data_;
+    auto it = index_.find(leaf);
+    const ValueT* data;
+    if (it != index_.end()) {
+      data = it->second;
+    } else {
+      const Buffer& in_tree = leaf->buffer();
+      if (!in_tree.isOutOfCore() && !in_tree.empty()) {
+        data = in_tree.data();  // already in memory (delayed loading off)
+      } else {
+        auto* copy = new Buffer(in_tree);  // shares the file mapping, reads nothing yet
+        data = copy->data();  // decodes; if this throws, `copy` is leaked on purpose
+        owned_.emplace_back(copy);
+      }
+      index_.emplace(leaf, data);
+    }
+    last_leaf_ = leaf;
+    last_data_ = data;
+    return data;
+  }
+  void Clear() {
+    index_.clear();
+    owned_.clear();
+    last_leaf_ = nullptr;
+  }
+
+ private:
+  std::unordered_map<const LeafT*, const ValueT*> index_;
+  std::vector<std::unique_ptr<Buffer>> owned_;
+  const LeafT* last_leaf_ = nullptr;
+  const ValueT* last_data_ = nullptr;
+};
+
+// A tree accessor that caches the internal nodes but never a leaf: OpenVDB's
+// default accessor keeps a pointer to the cached leaf's values, which loads
+// the leaf's buffer into the tree.
+template <class TreeT>
+using NoLeafAccessor = openvdb::tree::ValueAccessor2<const TreeT, false, 1, 2>;
+
+// Values of a whole tree read through LeafValues: leaves decoded privately,
+// tiles and background from the topology.
+template <class GridT>
+class PrivateReader {
+ public:
+  using TreeT = typename GridT::TreeType;
+  using LeafT = typename TreeT::LeafNodeType;
+  using ValueT = typename GridT::ValueType;
+
+  explicit PrivateReader(const GridT& grid) : acc_(grid.constTree()) {}
+
+  ValueT Value(const Coord& c) {
+    if (const LeafT* leaf = acc_.probeConstLeaf(c)) return leaves_.Get(leaf)[LeafT::coordToOffset(c)];
+    return acc_.getValue(c);  // a tile or the background: no leaf buffer involved
+  }
+  const ValueT* Leaf(const LeafT* leaf) { return leaves_.Get(leaf); }
+  void Clear() { leaves_.Clear(); }
+
+ private:
+  NoLeafAccessor<TreeT> acc_;
+  LeafValues<LeafT> leaves_;
+};
+
+// ---------------------------------------------------------------------------
 // Colour sampling from a vec3 grid of the same file.
 
 class ColorReader {
@@ -79,37 +162,10 @@ class ColorReader {
   virtual glm::vec3 At(const Coord& ijk) = 0;
 };
 
-// A leaf buffer that may be freed once the slab `last_slab` has been written.
-struct ReleaseEntry {
-  int64_t last_slab = 0;
-  void* leaf = nullptr;
-  void (*release)(void*) = nullptr;
-};
-
-template <class LeafT>
-void ReleaseLeafBuffer(void* p) {
-  auto& buf = static_cast<LeafT*>(p)->buffer();
-  if (buf.isOutOfCore() || buf.empty()) return;  // never loaded: nothing to free
-  typename LeafT::Buffer none{openvdb::PartialCreate{}, typename LeafT::ValueType{}};
-  buf.swap(none);  // `none` now owns the values and frees them
-}
-
-// Geometry shared by the release schedule: slab axis and brick size.
-struct SlabGeometry {
-  int axis = 0;
-  int64_t origin = 0;  // origin along the axis
-  int brick_depth = 0; // B: a brick is 2^B voxels
-  int64_t LastSlab(int64_t max_index_coord) const {
-    // The last slab whose bricks read this coordinate (gradient reach 1).
-    return (max_index_coord + 1 - origin) >> brick_depth;
-  }
-};
-
 class ColorSource {
  public:
   virtual ~ColorSource() = default;
   virtual std::unique_ptr<ColorReader> NewReader() = 0;
-  virtual void AddReleases(const SlabGeometry& g, std::vector<ReleaseEntry>* out) = 0;
 };
 
 template <class CGridT>
@@ -122,43 +178,35 @@ class TypedColorSource : public ColorSource {
     return std::make_unique<Reader>(*grid_, main_, same_);
   }
 
-  void AddReleases(const SlabGeometry& g, std::vector<ReleaseEntry>* out) override {
-    using LeafT = typename CGridT::TreeType::LeafNodeType;
-    for (auto it = grid_->tree().beginLeaf(); it; ++it) {
-      LeafT* leaf = it.getLeaf();
-      CoordBBox nb = leaf->getNodeBoundingBox();
-      int64_t hi;
-      if (same_) {
-        hi = nb.max()[g.axis];
-      } else {
-        // The leaf's extent in main-grid index space (+1: the trilinear footprint).
-        double m = -std::numeric_limits<double>::infinity();
-        for (int c = 0; c < 8; ++c) {
-          openvdb::Vec3d p(c & 1 ? nb.max().x() + 1 : nb.min().x() - 1,
-                           c & 2 ? nb.max().y() + 1 : nb.min().y() - 1,
-                           c & 4 ? nb.max().z() + 1 : nb.min().z() - 1);
-          openvdb::Vec3d q = main_.worldToIndex(grid_->transform().indexToWorld(p));
-          m = std::max(m, q[g.axis]);
-        }
-        hi = m > 4e18 ? std::numeric_limits<int64_t>::max() / 2 : int64_t(std::ceil(m)) + 1;
-      }
-      out->push_back({g.LastSlab(hi), leaf, &ReleaseLeafBuffer<LeafT>});
-    }
-  }
-
  private:
   class Reader : public ColorReader {
    public:
     Reader(const CGridT& grid, const openvdb::math::Transform& main, bool same)
-        : grid_(grid), main_(main), same_(same), acc_(grid.getConstUnsafeAccessor()) {}
+        : grid_(grid), main_(main), same_(same), values_(grid) {}
     glm::vec3 At(const Coord& ijk) override {
-      typename CGridT::ValueType v;
+      openvdb::Vec3d v;
       if (same_) {
-        v = acc_.getValue(ijk);
+        v = openvdb::Vec3d(values_.Value(ijk));
       } else {
+        // Trilinear, as openvdb::tools::BoxSampler.
         openvdb::Vec3d p = grid_.transform().worldToIndex(main_.indexToWorld(ijk));
-        openvdb::tools::BoxSampler::sample(acc_, p, v);
+        Coord i0 = Coord::floor(p);
+        openvdb::Vec3d u = p - i0.asVec3d();
+        openvdb::Vec3d c[2][2][2];
+        for (int dx = 0; dx < 2; ++dx)
+          for (int dy = 0; dy < 2; ++dy)
+            for (int dz = 0; dz < 2; ++dz)
+              c[dx][dy][dz] = openvdb::Vec3d(values_.Value(i0.offsetBy(dx, dy, dz)));
+        auto lerp = [](const openvdb::Vec3d& a, const openvdb::Vec3d& b, double t) {
+          return a + (b - a) * t;
+        };
+        openvdb::Vec3d x00 = lerp(c[0][0][0], c[0][0][1], u[2]);
+        openvdb::Vec3d x01 = lerp(c[0][1][0], c[0][1][1], u[2]);
+        openvdb::Vec3d x10 = lerp(c[1][0][0], c[1][0][1], u[2]);
+        openvdb::Vec3d x11 = lerp(c[1][1][0], c[1][1][1], u[2]);
+        v = lerp(lerp(x00, x01, u[1]), lerp(x10, x11, u[1]), u[0]);
       }
+      if (++reads_ % 4096 == 0) values_.Clear();  // bound the private leaf cache
       return glm::vec3(float(v[0]), float(v[1]), float(v[2]));
     }
 
@@ -166,7 +214,8 @@ class TypedColorSource : public ColorSource {
     const CGridT& grid_;
     const openvdb::math::Transform& main_;
     bool same_;
-    typename CGridT::ConstUnsafeAccessor acc_;
+    PrivateReader<CGridT> values_;
+    uint64_t reads_ = 0;
   };
 
   typename CGridT::Ptr grid_;
@@ -204,9 +253,10 @@ class GridIngest {
 
     // 1. Topology.
     double t0 = Now();
+    uint64_t leaf_count = 0;
     for (auto it = tree_.beginLeaf(); it; ++it) {
       LeafT* leaf = it.getLeaf();
-      all_leaves_.push_back(leaf);
+      ++leaf_count;
       if (leaf->isEmpty()) continue;  // no active voxel
       LeafInfo li;
       li.leaf = leaf;
@@ -226,10 +276,10 @@ class GridIngest {
         cx_.stats->occupied_tile_voxels += b.volume();
       }
     }
-    cx_.stats->leaf_nodes = all_leaves_.size();
+    cx_.stats->leaf_nodes = leaf_count;
     cx_.stats->active_voxels = tree_.activeVoxelCount();
     cx_.stats->seconds_open += Now() - t0;
-    Message("grid " + Quote(cx_.meta.grid_name) + ": " + std::to_string(all_leaves_.size()) +
+    Message("grid " + Quote(cx_.meta.grid_name) + ": " + std::to_string(leaf_count) +
             " leaf nodes, " + std::to_string(cx_.stats->active_tiles) + " active tiles, " +
             std::to_string(cx_.stats->active_voxels) + " active voxels");
 
@@ -278,6 +328,9 @@ class GridIngest {
       VOX_RETURN_IF_ERROR(WriteBricks(writer.get()));
     }
     cx_.stats->seconds_bricks = Now() - t0;
+    // Streaming check: no leaf buffer was loaded into the tree itself.
+    for (auto it = tree_.cbeginLeaf(); it; ++it)
+      if (!it->buffer().isOutOfCore()) ++cx_.stats->leaves_resident_in_tree;
     t0 = Now();
     VOX_RETURN_IF_ERROR(writer->Finish());
     cx_.stats->seconds_finish = Now() - t0;
@@ -310,8 +363,8 @@ class GridIngest {
   // Decodes a leaf into a private buffer copy (the tree's leaf stays on disk).
   void DecodeOccupied(LeafInfo& li) {
     if (li.state) return;
-    typename LeafT::Buffer copy(li.leaf->buffer());
-    const ValueT* d = copy.data();
+    LeafValues<LeafT> values;
+    const ValueT* d = values.Get(li.leaf);
     const Coord o = li.leaf->origin();
     for (auto m = li.leaf->getValueMask().beginOn(); m; ++m) {
       openvdb::Index n = m.pos();
@@ -410,33 +463,19 @@ class GridIngest {
         for (int64_t y = lo[1]; y <= hi[1]; ++y)
           for (int64_t x = lo[0]; x <= hi[0]; ++x) brick(x, y, z).tiles.push_back(i);
     }
-    // Slabs along the axis with the most bricks.
-    int64_t span[3];
-    for (int a = 0; a < 3; ++a)
-      span[a] = ((int64_t(occ.max()[a]) - origin_[a]) >> B_) -
-                ((int64_t(occ.min()[a]) - origin_[a]) >> B_);
-    slab_.axis = int(std::max_element(span, span + 3) - span);
-    slab_.origin = origin_[slab_.axis];
-    slab_.brick_depth = B_;
-    const int ax = slab_.axis, a1 = (ax + 1) % 3, a2 = (ax + 2) % 3;
+    // Bricks in z, y, x order of their coordinates: neighbours stay close.
     std::sort(bricks_.begin(), bricks_.end(), [&](const BrickWork& p, const BrickWork& q) {
-      for (int a : {ax, a2, a1}) {
+      for (int a : {2, 1, 0}) {
         int64_t u = KeyCoord(p.key, a), v = KeyCoord(q.key, a);
         if (u != v) return u < v;
       }
       return false;
     });
-    // Release schedule: every leaf of the grid (and of the colour grid).
-    for (LeafT* leaf : all_leaves_)
-      releases_.push_back({slab_.LastSlab(leaf->getNodeBoundingBox().max()[ax]), leaf,
-                           &ReleaseLeafBuffer<LeafT>});
-    if (cx_.color) cx_.color->AddReleases(slab_, &releases_);
-    std::sort(releases_.begin(), releases_.end(),
-              [](const ReleaseEntry& p, const ReleaseEntry& q) { return p.last_slab < q.last_slab; });
     return OkStatus();
   }
 
-  // One brick's voxels. Runs concurrently on many bricks.
+  // One brick's voxels. Runs concurrently on many bricks; reads leaf values
+  // only through private decoded copies (see LeafValues).
   std::vector<BrickVoxel> ExtractBrick(const BrickWork& bw) {
     const int64_t size = int64_t(1) << B_;
     int64_t rmin[3], rmax[3];
@@ -445,48 +484,72 @@ class GridIngest {
       rmax[a] = rmin[a] + size - 1;
     }
     std::vector<BrickVoxel> out;
-    auto acc = grid_.getConstUnsafeAccessor();
+    PrivateReader<GridT> reader(grid_);
+    NoLeafAccessor<TreeT> acc(grid_.constTree());  // topology only: probes and tiles
     std::unique_ptr<ColorReader> color = cx_.color ? cx_.color->NewReader() : nullptr;
-    auto finish = [&](BrickVoxel& bv, const Coord& ijk) {
-      if (color) bv.attr.color = color->At(ijk);
-    };
     auto normal_from = [](double gx, double gy, double gz) {
       double len = std::sqrt(gx * gx + gy * gy + gz * gz);
       if (!(len > 0) || !std::isfinite(len)) return glm::vec3(0.0f);
       return glm::vec3(float(gx / len), float(gy / len), float(gz / len));
     };
-    // One active voxel at leaf offset n (leaf-local lx, ly, lz).
-    auto visit = [&](const ValueT* d, const Coord& o, openvdb::Index n, int lx, int ly, int lz,
-                     bool check_region) {
-      const int64_t x = int64_t(o.x()) + lx, y = int64_t(o.y()) + ly, z = int64_t(o.z()) + lz;
+
+    // The leaf being visited and its six face neighbours, resolved lazily.
+    struct Current {
+      const LeafT* leaf = nullptr;
+      const ValueT* d = nullptr;
+      Coord o;
+      const ValueT* nb[6];   // +x, -x, +y, -y, +z, -z: a neighbour leaf's values
+      bool resolved[6];
+    } cur;
+    auto begin_leaf = [&](const LeafT* leaf) {
+      cur.leaf = leaf;
+      cur.d = reader.Leaf(leaf);
+      cur.o = leaf->origin();
+      for (int i = 0; i < 6; ++i) cur.resolved[i] = false;
+    };
+    // Value at leaf offset n moved one voxel along `axis` in direction `dir`
+    // (+1/-1), from leaf-local coordinate l on that axis.
+    static constexpr openvdb::Index kStride[3] = {64, 8, 1};
+    auto step = [&](openvdb::Index n, int axis, int dir, int l) -> double {
+      const int64_t stride = kStride[axis];
+      if ((dir > 0 && l < 7) || (dir < 0 && l > 0)) return double(cur.d[int64_t(n) + dir * stride]);
+      const int slot = 2 * axis + (dir > 0 ? 0 : 1);
+      Coord c = cur.o + Coord(int(n >> 6), int((n >> 3) & 7), int(n & 7));
+      c[axis] += dir;
+      if (!cur.resolved[slot]) {
+        const LeafT* nb = acc.probeConstLeaf(c);
+        cur.nb[slot] = nb ? reader.Leaf(nb) : nullptr;
+        cur.resolved[slot] = true;
+      }
+      if (cur.nb[slot]) return double(cur.nb[slot][LeafT::coordToOffset(c)]);
+      return double(acc.getValue(c));  // a tile or the background
+    };
+    // One active voxel at leaf offset n of the current leaf.
+    auto visit = [&](openvdb::Index n, bool check_region) {
+      const int lx = int(n >> 6), ly = int((n >> 3) & 7), lz = int(n & 7);
+      const int64_t x = int64_t(cur.o.x()) + lx, y = int64_t(cur.o.y()) + ly,
+                    z = int64_t(cur.o.z()) + lz;
       if (check_region && (x < rmin[0] || x > rmax[0] || y < rmin[1] || y > rmax[1] ||
                            z < rmin[2] || z > rmax[2]))
         return;
-      const ValueT v = d[n];
+      const ValueT v = cur.d[n];
       if (!Occupied(v)) return;
       BrickVoxel bv;
       bv.x = uint32_t(x - rmin[0]);
       bv.y = uint32_t(y - rmin[1]);
       bv.z = uint32_t(z - rmin[2]);
-      const Coord ijk{int(x), int(y), int(z)};
       if (level_set_) {
-        // Central differences; inside the leaf without the accessor.
-        double gx = (lx > 0 && lx < 7) ? double(d[n + 64]) - double(d[n - 64])
-                                        : double(acc.getValue(ijk.offsetBy(1, 0, 0))) -
-                                              double(acc.getValue(ijk.offsetBy(-1, 0, 0)));
-        double gy = (ly > 0 && ly < 7) ? double(d[n + 8]) - double(d[n - 8])
-                                        : double(acc.getValue(ijk.offsetBy(0, 1, 0))) -
-                                              double(acc.getValue(ijk.offsetBy(0, -1, 0)));
-        double gz = (lz > 0 && lz < 7) ? double(d[n + 1]) - double(d[n - 1])
-                                        : double(acc.getValue(ijk.offsetBy(0, 0, 1))) -
-                                              double(acc.getValue(ijk.offsetBy(0, 0, -1)));
-        bv.attr.normal = normal_from(gx, gy, gz);
+        // Central differences in index space.
+        bv.attr.normal = normal_from(step(n, 0, 1, lx) - step(n, 0, -1, lx),
+                                     step(n, 1, 1, ly) - step(n, 1, -1, ly),
+                                     step(n, 2, 1, lz) - step(n, 2, -1, lz));
       } else {
         bv.attr.density = float(v);
       }
-      finish(bv, ijk);
+      if (color) bv.attr.color = color->At(Coord{int(x), int(y), int(z)});
       out.push_back(bv);
     };
+
     // Fast path: bricks of at least 8^3 without tiles hold whole leaves
     // (the origin is aligned to the brick size); visiting the leaves in
     // Morton order and each leaf's voxels in Morton order gives the voxels
@@ -509,22 +572,16 @@ class GridIngest {
       out.reserve(size_t(expected));
       const auto& table = MortonLeafOrder();
       for (const auto& [key, leaf] : order) {
-        const ValueT* d = leaf->buffer().data();  // loads the leaf in the tree
-        const Coord o = leaf->origin();
+        begin_leaf(leaf);
         const auto& mask = leaf->getValueMask();
         for (uint16_t n : table)
-          if (mask.isOn(n)) visit(d, o, n, n >> 6, (n >> 3) & 7, n & 7, false);
+          if (mask.isOn(n)) visit(n, false);
       }
       return out;
     }
     for (uint32_t li_index : bw.leaves) {
-      const LeafT* leaf = leaves_[li_index].leaf;
-      const ValueT* d = leaf->buffer().data();  // loads the leaf in the tree
-      const Coord o = leaf->origin();
-      for (auto m = leaf->getValueMask().beginOn(); m; ++m) {
-        const openvdb::Index n = m.pos();
-        visit(d, o, n, int(n >> 6), int((n >> 3) & 7), int(n & 7), true);
-      }
+      begin_leaf(leaves_[li_index].leaf);
+      for (auto m = cur.leaf->getValueMask().beginOn(); m; ++m) visit(m.pos(), true);
     }
     for (uint32_t ti : bw.tiles) {
       const Tile& t = tiles_[ti];
@@ -543,14 +600,14 @@ class GridIngest {
             const Coord ijk{int(x), int(y), int(z)};
             if (level_set_) {
               auto g = [&](int dx, int dy, int dz) {
-                return double(acc.getValue(ijk.offsetBy(dx, dy, dz))) -
-                       double(acc.getValue(ijk.offsetBy(-dx, -dy, -dz)));
+                return double(reader.Value(ijk.offsetBy(dx, dy, dz))) -
+                       double(reader.Value(ijk.offsetBy(-dx, -dy, -dz)));
               };
               bv.attr.normal = normal_from(g(1, 0, 0), g(0, 1, 0), g(0, 0, 1));
             } else {
               bv.attr.density = float(t.value);
             }
-            finish(bv, ijk);
+            if (color) bv.attr.color = color->At(ijk);
             out.push_back(bv);
           }
     }
@@ -604,8 +661,8 @@ class GridIngest {
 
   // Bricks go through a pipeline: the parallel stage builds a brick's voxels
   // and hands them to the writer (AddBrick is thread-safe: it encodes and
-  // compresses in the calling thread); the serial in-order stage frees the
-  // leaves of finished slabs and reports progress.
+  // compresses in the calling thread); the serial in-order stage reports
+  // progress.
   Status WriteBricks(StoreWriter* writer) {
     struct Item {
       size_t index = 0;
@@ -613,7 +670,7 @@ class GridIngest {
     };
     const size_t total = bricks_.size();
     Message("writing " + std::to_string(total) + " bricks of " + std::to_string(1 << B_) +
-            "^3 voxels, slabs along " + "xyz"[slab_.axis]);
+            "^3 voxels");
     std::atomic<bool> failed{false};
     std::mutex error_mu;
     Status first_error;
@@ -622,9 +679,8 @@ class GridIngest {
       if (first_error.ok()) first_error = std::move(s);
       failed.store(true);
     };
-    size_t next = 0, written = 0, released = 0;
+    size_t next = 0, written = 0;
     uint64_t voxels_done = 0;
-    const int ax = slab_.axis;
     const size_t tokens = size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
     tbb::parallel_pipeline(
         tokens,
@@ -670,17 +726,6 @@ class GridIngest {
                   if (failed.load()) return;
                   voxels_done += it.voxels;
                   if (it.voxels) ++written;
-                  // Slab complete (every earlier brick is built, in order):
-                  // free the leaves no later brick reads.
-                  const int64_t slab = KeyCoord(bricks_[it.index].key, ax);
-                  const bool slab_done =
-                      it.index + 1 == total || KeyCoord(bricks_[it.index + 1].key, ax) != slab;
-                  if (slab_done) {
-                    while (released < releases_.size() && releases_[released].last_slab <= slab) {
-                      releases_[released].release(releases_[released].leaf);
-                      ++released;
-                    }
-                  }
                   if (cx_.progress) cx_.progress->Progress(it.index + 1, total, voxels_done);
                 }));
     if (!first_error.ok()) return first_error;
@@ -694,14 +739,11 @@ class GridIngest {
   Context& cx_;
   bool level_set_ = true;
   ValueT iso_{}, threshold_{};
-  std::vector<LeafT*> all_leaves_;
   std::vector<LeafInfo> leaves_;  // leaves with active voxels
   std::vector<Tile> tiles_;       // occupied active tiles
   int B_ = 0;
   int64_t origin_[3] = {0, 0, 0};
   std::vector<BrickWork> bricks_;
-  SlabGeometry slab_;
-  std::vector<ReleaseEntry> releases_;
 };
 
 // ---------------------------------------------------------------------------
@@ -1089,7 +1131,8 @@ StatusOr<IngestStats> IngestWithWriter(const IngestOptions& options, const Write
   } catch (const openvdb::Exception& e) {
     return CorruptionError(options.input + ": OpenVDB cannot read it: " + e.what());
   } catch (const std::bad_alloc&) {
-    return ResourceExhaustedError("out of memory ingesting " + options.input);
+    return ResourceExhaustedError("out of memory ingesting " + options.input +
+                                  " (a corrupt file can make OpenVDB ask for huge allocations)");
   } catch (const std::exception& e) {
     return InternalError("ingesting " + options.input + ": " + e.what());
   }

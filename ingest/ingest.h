@@ -79,6 +79,9 @@ struct IngestStats {
   uint64_t occupied_voxels = 0;
   uint64_t bricks = 0;
   uint64_t bbox_leaves_read = 0;    // leaves decoded to find the exact occupied bbox
+  // Leaves whose values ended up held by the tree (0 when the file was read
+  // with delayed loading: values are decoded into private copies and dropped).
+  uint64_t leaves_resident_in_tree = 0;
   int threads = 0;
   double seconds_open = 0, seconds_bbox = 0, seconds_bricks = 0, seconds_finish = 0;
   double seconds_total = 0;

@@ -175,6 +175,8 @@ TEST_F(IngestTest, SphereWithNegativeCoordinates) {
   EXPECT_EQ(r.stats->occupied_voxels, r.store.Voxels().size());
   EXPECT_EQ(r.stats->active_voxels, grid->activeVoxelCount());
   EXPECT_EQ(r.stats->bricks, r.store.bricks.size());
+  EXPECT_EQ(r.stats->leaves_resident_in_tree, 0u) << "leaf values stayed in memory";
+  EXPECT_GT(r.stats->leaf_nodes, 0u);
 }
 
 TEST_F(IngestTest, PlatonicSolids) {
@@ -393,6 +395,7 @@ TEST_F(IngestTest, ExplicitLevelsAndThreads) {
       o.threads = threads;
       auto r = RunFake(o);
       ASSERT_TRUE(r.stats.ok()) << r.stats.status().ToString();
+      EXPECT_EQ(r.stats->leaves_resident_in_tree, 0u);
       auto lv = ParseLevels(levels);
       ASSERT_TRUE(lv.ok());
       EXPECT_EQ(r.store.meta.brick_level, lv->brick_level);
@@ -506,6 +509,43 @@ TEST_F(IngestTest, TruncatedVdbFiles) {
         << r.stats.status().ToString();
     EXPECT_FALSE(r.store.finished);
   }
+}
+
+TEST_F(IngestTest, CorruptLeafDataIsAnErrorNotACrash) {
+  // Bytes flipped inside the compressed leaf data: OpenVDB throws while
+  // decoding (and its LeafBuffer is left inconsistent); the ingest must turn
+  // that into a Status naming the file, from the bbox scan or from the
+  // parallel brick stage, and never crash.
+  auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+      12.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
+  grid->setName("s");
+  std::string full = dir_.File("full.vdb");
+  testutil::WriteVdb(full, {grid});
+  std::ifstream in(full, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  int errors = 0;
+  for (double frac : {0.1, 0.3, 0.5, 0.7, 0.9, 0.98}) {
+    std::string b = bytes;
+    size_t at = size_t(double(b.size()) * frac);
+    for (size_t i = 0; i < 64 && at + i < b.size(); ++i) b[at + i] ^= 0x5a;
+    std::string path = dir_.File("corrupt" + std::to_string(at) + ".vdb");
+    std::ofstream(path, std::ios::binary).write(b.data(), std::streamsize(b.size()));
+    for (int threads : {1, 2}) {
+      IngestOptions o = Opts(path);
+      o.threads = threads;
+      auto r = RunFake(o);
+      if (r.stats.ok()) continue;  // the flip hit bytes that do not matter
+      ++errors;
+      // Corruption, or ResourceExhausted when a garbage length made OpenVDB
+      // attempt a huge allocation.
+      EXPECT_TRUE(r.stats.status().code() == StatusCode::kCorruption ||
+                  r.stats.status().code() == StatusCode::kResourceExhausted)
+          << r.stats.status().ToString();
+      EXPECT_NE(r.stats.status().message().find(path), std::string::npos);
+      EXPECT_FALSE(r.store.finished);
+    }
+  }
+  EXPECT_GE(errors, 4) << "flipped leaf data went unnoticed";
 }
 
 TEST_F(IngestTest, MissingGridName) {
