@@ -169,6 +169,8 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(RenderVolume* volume, const
   p.reflection = !r->fog_ && s.max_depth > 0 && max_reflect > 0;
   p.refraction = !r->fog_ && s.max_depth > 0 && max_transmit > 0;
   p.scattering = r->fog_ && any_light && s.volume.scattering > 0;
+  r->needs_attributes_ =
+      meta.has_color || any_light || p.reflection || p.refraction || options.layers.normal;
   r->eps_t_ = 1e-7 * std::max(meta.voxel_size, 1e-300);
   return r;
 }
@@ -253,11 +255,16 @@ glm::dvec3 Renderer::WorldNormal(const Ray& gr, const Hit& h, const VoxelAttribu
 
 glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h, int depth,
                                   Ctx& cx, glm::dvec3* normal_out) const {
-  ++cx.c->attribute_lookups;
-  auto attrs = volume_->Attributes(h.brick, h.payload);
-  if (!attrs.ok()) {
-    cx.Fail(attrs.status());
-    return glm::dvec3(0.0);
+  // Unlit matte surfaces without stored colour or a normal layer need no
+  // attributes: skip the lookup.
+  StatusOr<VoxelAttributes> attrs = VoxelAttributes{};
+  if (needs_attributes_) {
+    ++cx.c->attribute_lookups;
+    attrs = volume_->Attributes(h.brick, h.payload);
+    if (!attrs.ok()) {
+      cx.Fail(attrs.status());
+      return glm::dvec3(0.0);
+    }
   }
   const glm::dvec3 origin_w = xf_.GridToWorld(gr.origin);
   const glm::dvec3 p_w = origin_w + h.t * dir_w;

@@ -144,7 +144,8 @@ class Renderer {
   GridTransform xf_;
   RenderPasses passes_;
   bool fog_ = false;
-  double eps_t_ = 1e-9;  // t tolerance for "touching" voxels, in world units
+  bool needs_attributes_ = true;  // surfaces: shading reads normals or colours
+  double eps_t_ = 1e-9;           // t tolerance for "touching" voxels, in world units
 };
 
 }  // namespace vox

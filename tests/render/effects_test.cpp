@@ -107,6 +107,8 @@ TEST(EffectsTest, PrimaryVisibilityMatchesTheBoxExactly) {
     }
   EXPECT_EQ(r.counters.hit_pixels, 256u);
   EXPECT_EQ(r.counters.rays[kRayPrimary], 32u * 32u);
+  // Unlit and uncoloured: no attribute is read.
+  EXPECT_EQ(r.counters.attribute_lookups, 0u);
 }
 
 TEST(EffectsTest, NoShadowRaysWithoutShadowCastingLights) {
@@ -141,6 +143,7 @@ TEST(EffectsTest, ExactlyOneShadowRayPerLitHitPixel) {
   EXPECT_EQ(CountAlpha(r.img, 1.0f), 256);
   EXPECT_EQ(r.counters.hit_pixels, 256u);
   EXPECT_EQ(r.counters.rays[kRayShadow], 256u);
+  EXPECT_EQ(r.counters.attribute_lookups, 256u);  // one normal per hit
   // A light behind the slab lights nothing: no shadow rays at all.
   Rendered back = Render(vol.get(), cam,
                          ParseOrDie(R"({"lights":[{"type":"directional","direction":[0,0,1]}]})"));
