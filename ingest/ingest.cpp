@@ -5,10 +5,10 @@
 // leaf buffer on disk (memory-mapped) until a value is read. Values are only
 // ever read through private copies of leaf buffers (LeafValues below), so
 // the tree itself stays topology-only for the whole ingest. Then:
-//  1. Topology pass: list the leaves (with their mask-only active bbox) and
+//  1. Topology pass: list the leaves with active voxels (and their node box) and
 //     the active tiles; no voxel values are read.
 //  2. Exact occupied bbox: scan the leaves from each of the 6 sides in order
-//     of their active bbox until no further leaf can move the bound; each
+//     of their node box until no further leaf can move the bound; each
 //     scanned leaf is decoded and dropped. Usually a few hundred leaves; all
 //     of them when nothing is occupied.
 //  3. Placement (origin, levels), the StoreWriter, and the brick map: brick
@@ -260,7 +260,7 @@ class GridIngest {
       if (leaf->isEmpty()) continue;  // no active voxel
       LeafInfo li;
       li.leaf = leaf;
-      leaf->evalActiveBoundingBox(li.active, /*visitVoxels=*/true);
+      li.active = leaf->getNodeBoundingBox();  // bounds the active voxels; no per-voxel scan
       leaves_.push_back(li);
     }
     {
@@ -340,7 +340,7 @@ class GridIngest {
  private:
   struct LeafInfo {
     LeafT* leaf = nullptr;
-    CoordBBox active;    // bbox of the active mask (no values read)
+    CoordBBox active;    // bounds of its active voxels: the leaf's node box
     int state = 0;       // 0: not decoded, 1: decoded
     CoordBBox occupied;  // once decoded
   };

@@ -4,7 +4,8 @@
 #   tools/ingest/bench_ingest.sh [VOX_INGEST] [VDB] [THREADS]
 # Defaults: build/tools/ingest/vox-ingest, /tmp/sphere2048.vdb (made with
 # `vdb_tool -sphere d=2048 r=1 c=0,0,0 v=0.001 w=3 -write /tmp/sphere2048.vdb`
-# when missing), 2 threads. Peak memory is sampled from /proc every 50 ms:
+# when missing), 2 threads. CPU time and max RSS from /usr/bin/time; peak
+# memory also sampled from /proc every 50 ms:
 # RssAnon (the process's own memory) apart from RssFile (the memory-mapped
 # .vdb, reclaimable page cache).
 set -euo pipefail
@@ -18,32 +19,33 @@ fi
 out=$(mktemp -d)/store
 log=$(mktemp)
 start=$(date +%s.%N)
-"$bin" "$vdb" "$out" --threads "$threads" 2>"$log" &
-pid=$!
-peak_anon=0; peak_file=0; cpu=0
-while kill -0 $pid 2>/dev/null; do
-  if read -r a f < <(awk '/RssAnon/{a=$2} /RssFile/{f=$2} END{print a+0, f+0}' /proc/$pid/status 2>/dev/null); then
+times=$(mktemp)
+/usr/bin/time -o "$times" -f "%U %S %M" "$bin" "$vdb" "$out" --threads "$threads" 2>"$log" &
+tpid=$!
+peak_anon=0; peak_file=0
+while kill -0 $tpid 2>/dev/null; do
+  pid=$(pgrep -P $tpid | head -1 || true)
+  if [ -n "$pid" ] && read -r a f < <(awk '/RssAnon/{a=$2} /RssFile/{f=$2} END{print a+0, f+0}' /proc/$pid/status 2>/dev/null); then
     [ "$a" -gt "$peak_anon" ] && peak_anon=$a
     [ "$f" -gt "$peak_file" ] && peak_file=$f
-    t=$(awk '{print $14 + $15}' /proc/$pid/stat 2>/dev/null || echo 0)
-    [ -n "$t" ] && cpu=$t
   fi
   sleep 0.05
 done
-wait $pid
+wait $tpid
 end=$(date +%s.%N)
 grep -v '% .*bricks,' "$log"
-tick=$(getconf CLK_TCK)
+read -r user sys maxrss < "$times"
+cpu=$(awk -v u="$user" -v s="$sys" 'BEGIN{print u + s}')
 active=$(grep -o '[0-9]* active voxels read' "$log" | grep -o '^[0-9]*')
 occupied=$(grep -o '[0-9]* occupied voxels' "$log" | grep -o '^[0-9]*')
 vdb_bytes=$(stat -c %s "$vdb")
 store_bytes=$(du -sb "$out" | cut -f1)
 awk -v s="$start" -v e="$end" -v a="$active" -v o="$occupied" -v vb="$vdb_bytes" -v sb="$store_bytes" \
-    -v pa="$peak_anon" -v pf="$peak_file" -v cpu="$cpu" -v tick="$tick" -v th="$threads" 'BEGIN {
-  w = e - s; c = cpu / tick;
+    -v pa="$peak_anon" -v pf="$peak_file" -v cpu="$cpu" -v mr="$maxrss" -v th="$threads" 'BEGIN {
+  w = e - s; c = cpu;
   printf "wall %.2f s, cpu %.2f s (%d threads, load %s)\n", w, c, th, "'"$(cut -d' ' -f1-3 /proc/loadavg)"'";
   printf "throughput %.2f M active voxels/s wall; %.2f M/s per cpu-second (x%d cores if idle: %.2f M/s)\n", a / w / 1e6, a / c / 1e6, th, th * a / c / 1e6;
   printf "store %d bytes = %.1f%% of the .vdb (%d bytes); %.2f bytes per occupied voxel (%d occupied)\n", sb, 100 * sb / vb, vb, sb / o, o;
-  printf "peak RssAnon %.1f MiB, peak RssFile (mapped .vdb) %.1f MiB\n", pa / 1024, pf / 1024;
+  printf "peak RssAnon %.1f MiB, peak RssFile (mapped .vdb) %.1f MiB (sampled every 50 ms); max RSS %.1f MiB (time -v, anon + file)\n", pa / 1024, pf / 1024, mr / 1024;
 }'
-rm -rf "$(dirname "$out")" "$log"
+rm -rf "$(dirname "$out")" "$log" "$times"
