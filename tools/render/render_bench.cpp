@@ -1,6 +1,6 @@
 // vox-render-bench: times vox's renderer on a store in one process: the first
 // frame with an empty brick cache (cold), then warm frames; prints JSON with
-// the times, their median, rays/s and DDA moves/s. scripts/render_bench.sh
+// the times, their median, rays/s and DDA moves/s. tools/render/render_bench.sh
 // runs it side by side with vdb_render.
 //   vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N]
 //                    [--threads N] [--split N1+N2|N1] [--exr out.exr] [--cache-mb M]

@@ -2,7 +2,7 @@
 # vox-render vs OpenVDB's vdb_render, side by side on the same level set,
 # camera, image size and thread count (issue 4's benchmark).
 #
-#   scripts/render_bench.sh [BUILD_DIR] [WORK_DIR]
+#   tools/render/render_bench.sh [BUILD_DIR] [WORK_DIR]
 #
 # Makes `vdb_tool -sphere d=2048 r=1 c=0,0,0 v=0.001 w=3` (if WORK_DIR lacks
 # it), ingests it with vox-ingest, then times RUNS (default 5) frames of each
