@@ -63,7 +63,9 @@ TEST(Variants, AgreeWithTheExactReference) {
       // study measures.
       bool must_be_exact = var.real == "exact" || var.name == "fixed64/39 long-double" ||
                            var.name == "fixed128/103 long-double";
-      if (must_be_exact) EXPECT_EQ(wrong, 0) << first_failure;
+      if (must_be_exact) {
+        EXPECT_EQ(wrong, 0) << first_failure;
+      }
     }
   }
 }
