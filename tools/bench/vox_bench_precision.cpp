@@ -206,7 +206,7 @@ bool Fits(const TraversalVariant& v, int levels, int n1) {
 Status RunPrecisionPart(const RunContext& ctx, std::string* report) {
   const std::vector<TraversalVariant> variants = TraversalVariants();
   if (variants.empty()) return InternalError("TraversalVariants() is empty");
-  const int per_family = ctx.quick ? 2000 : 20000;
+  const int per_family = ctx.quick ? 2000 : 10000;
   std::vector<std::unique_ptr<Scenario>> scenes;
   // A: an ordinary grid and split. B: the same shell deep in a 2^24 grid,
   // 12+12 (long DDA runs in both steps). C: at the far corner of OpenVDB's

@@ -201,7 +201,27 @@ std::string SvgPlot(const PlotSpec& spec, const std::vector<Series>& series) {
   o << "<text transform=\"translate(18," << top + ph / 2
     << ") rotate(-90)\" text-anchor=\"middle\">" << Esc(spec.y_label)
     << (spec.log_y ? " (log scale)" : "") << "</text>\n";
-  // Data.
+  // Data. Point labels are moved up or down until they overlap no other.
+  struct Box {
+    double x0, y0, x1, y1;
+  };
+  std::vector<Box> placed;
+  auto place = [&](double x, double y, const std::string& text) {
+    const double w = 5.6 * double(text.size()), h = 11;
+    for (int k = 0; k < 40; ++k) {
+      double dy = (k % 2 ? 1 : -1) * 12.0 * double((k + 1) / 2);
+      double ty = y - 5 + dy;
+      Box b{x + 5, ty - h + 2, x + 5 + w, ty + 2};
+      bool clash = false;
+      for (const Box& p : placed)
+        if (b.x0 < p.x1 && p.x0 < b.x1 && b.y0 < p.y1 && p.y0 < b.y1) clash = true;
+      if (!clash || k == 39) {
+        placed.push_back(b);
+        return ty;
+      }
+    }
+    return y - 5;
+  };
   for (size_t si = 0; si < series.size(); ++si) {
     const Series& s = series[si];
     const char* col = kColors[si % 10];
@@ -220,9 +240,14 @@ std::string SvgPlot(const PlotSpec& spec, const std::vector<Series>& series) {
       auto [x, y] = pts[i];
       if (!std::isfinite(x)) continue;
       o << "<circle cx=\"" << x << "\" cy=\"" << y << "\" r=\"3.5\" fill=\"" << col << "\"/>\n";
-      if (i < s.labels.size() && !s.labels[i].empty())
-        o << "<text x=\"" << x + 5 << "\" y=\"" << y - 5 << "\" font-size=\"10\" fill=\"" << col
-          << "\">" << Esc(s.labels[i]) << "</text>\n";
+      if (i < s.labels.size() && !s.labels[i].empty()) {
+        double ty = place(x, y, s.labels[i]);
+        if (std::fabs(ty - (y - 5)) > 1)  // a leader line to a moved label
+          o << "<line x1=\"" << x << "\" y1=\"" << y << "\" x2=\"" << x + 5 << "\" y2=\"" << ty - 3
+            << "\" stroke=\"" << col << "\" stroke-width=\"0.6\"/>\n";
+        o << "<text x=\"" << x + 5 << "\" y=\"" << ty << "\" font-size=\"10\" fill=\"" << col << "\">"
+          << Esc(s.labels[i]) << "</text>\n";
+      }
     }
     double ly = top + 14 + 18 * double(si);
     o << "<line x1=\"" << left + pw + 12 << "\" y1=\"" << ly - 4 << "\" x2=\"" << left + pw + 32

@@ -26,6 +26,7 @@ struct RunContext {
   bool quick = true;
   int threads = 2;
   int rounds = 5;  // repetitions of each timed measurement
+  std::vector<int> grids, images;  // part 1's sizes (empty: the defaults)
 };
 
 // "Produced by `cmd` on MACHINE, DATE." (Markdown).
