@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 
@@ -173,7 +174,19 @@ done:
 // in [1, 2): exact, keeps every ratio, and keeps ray parameters finite.
 inline void ScaleDirection(const glm::dvec3& dir, double out[3]) {
   double m = std::max({std::fabs(dir.x), std::fabs(dir.y), std::fabs(dir.z)});
-  int e = std::ilogb(m);
+  uint64_t bits;
+  std::memcpy(&bits, &m, sizeof bits);
+  const int biased = int(bits >> 52) & 0x7ff;
+  if (biased > 1 && biased < 0x7fe) {
+    // m normal with exponent e = biased - 1023: multiply by the normal double
+    // 2^-e (as exact as ldexp, without the libm call on every ray).
+    const uint64_t scale_bits = uint64_t(2046 - biased) << 52;
+    double scale;
+    std::memcpy(&scale, &scale_bits, sizeof scale);
+    for (int a = 0; a < 3; ++a) out[a] = dir[a] * scale;
+    return;
+  }
+  int e = std::ilogb(m);  // subnormal or extreme magnitudes
   for (int a = 0; a < 3; ++a) out[a] = std::ldexp(dir[a], -e);
 }
 
