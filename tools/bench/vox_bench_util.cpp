@@ -295,7 +295,7 @@ std::string Quote(const std::string& s) {
 }
 
 StatusOr<std::string> RunCommand(const std::string& command) {
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
+  FILE* p = popen(("(" + command + "\n) 2>&1").c_str(), "r");
   if (p == nullptr) return IoError("cannot run: " + command);
   std::string out;
   char buf[4096];
