@@ -72,10 +72,11 @@ struct RenderOptions {
   ImageLayers layers;
 };
 
-// The tracer the renderer uses: 64-bit fixed point for the DDA, double for
-// the per-ray set-up and transitions (camera rays are doubles already; long
-// double set-up costs x87 arithmetic on every ray and transition).
-using RenderTracer = Tracer<Fixed64, double>;
+// The tracer the renderer uses: fixed point for the DDA (64-bit words up to
+// 2^26 grids, 128-bit above: see AutoTracer), double for the per-ray set-up
+// and transitions (camera rays are doubles already; long double set-up costs
+// x87 arithmetic on every ray and transition).
+using RenderTracer = AutoTracer<double>;
 
 // The first-step levels vox uses for a `levels`-level octree (core's
 // DefaultFirstStepLevels: the paper's 6, single step up to 2^6).

@@ -4,7 +4,8 @@
 //
 //   vox-probe --generate sphere:1024 [--brick-level L] [options] < rays.txt
 //   vox-probe store/ [options] < rays.txt
-// Options: --split N1+N2|N1, --single-step, --cache-mb M, --fixed 64|128, --stats
+// Options: --split N1+N2|N1, --single-step, --cache-mb M, --stats,
+//   --fixed auto|64|128 (fixed-point word; auto: 64 up to 2^26 grids, else 128)
 #include <cstdio>
 #include <cstring>
 #include <iostream>
@@ -21,7 +22,7 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: vox-probe (--generate SHAPE | STORE_DIR) [--split N1+N2|N1] [--single-step]\n"
-    "                 [--brick-level L] [--cache-mb M] [--fixed 64|128] [--stats] < rays.txt\n"
+    "                 [--brick-level L] [--cache-mb M] [--fixed auto|64|128] [--stats] < rays.txt\n"
     "  SHAPE: sphere:N, torus:N, cubes:N, noise:N (N voxels per axis), corner:L (2^L grid)\n";
 
 struct Options {
@@ -29,7 +30,7 @@ struct Options {
   bool single_step = false, stats = false;
   int brick_level = -1;
   size_t cache_mb = 256;
-  int fixed = 64;
+  int fixed = 0;  // 0: auto
 };
 
 int Fail(const std::string& msg) {
@@ -100,6 +101,9 @@ int main(int argc, char** argv) {
       opt.single_step = true;
     } else if (a == "--stats") {
       opt.stats = true;
+    } else if (a == "--fixed" && i + 1 < argc && std::string(argv[i + 1]) == "auto") {
+      ++i;
+      opt.fixed = 0;
     } else if (a == "--brick-level" || a == "--cache-mb" || a == "--fixed") {
       if (!(v = value(a.c_str()))) return Fail(a + " needs a number");
       char* end = nullptr;
@@ -118,7 +122,8 @@ int main(int argc, char** argv) {
   }
   if (opt.generate.empty() == opt.store.empty())
     return Fail("give either --generate SHAPE or a store directory\n" + std::string(kUsage));
-  if (opt.fixed != 64 && opt.fixed != 128) return Fail("--fixed takes 64 or 128");
+  if (opt.fixed != 0 && opt.fixed != 64 && opt.fixed != 128)
+    return Fail("--fixed takes auto, 64 or 128");
 
   std::unique_ptr<vox::MemoryOctree> memory;
   std::unique_ptr<vox::Store> store;
@@ -155,7 +160,12 @@ int main(int argc, char** argv) {
     if (!tr.ok()) return Fail(tr.status().message());
     return Run(*tr, origin, opt.stats);
   }
-  auto tr = vox::DefaultTracer::Create(view, n1);
+  if (opt.fixed == 64) {
+    auto tr = vox::DefaultTracer::Create(view, n1);
+    if (!tr.ok()) return Fail(tr.status().message());
+    return Run(*tr, origin, opt.stats);
+  }
+  auto tr = vox::AutoTracer<long double>::Create(view, n1);
   if (!tr.ok()) return Fail(tr.status().message());
   return Run(*tr, origin, opt.stats);
 }
