@@ -9,7 +9,7 @@ scripts/build.sh
 mkdir -p out
 bin=build/tools
 if [ ! -s out/demo.vdb ]; then
-  # A dodecahedron and a sphere resting on a ground slab: shading, shadows, reflections.
+  # A dodecahedron and a sphere: shading, shadows, a reflective sphere.
   vdb_tool -platonic f=12 s=0.45 c=-0.45,0.0,0.0 v=0.002 w=3 \
            -sphere r=0.3 c=0.45,-0.1,0.1 v=0.002 w=3 \
            -union -write out/demo.vdb >/dev/null
