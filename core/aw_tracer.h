@@ -76,12 +76,8 @@ class AwTracer {
     const internal::StepLayout l2(n2_);
     auto leaf = [&](const int64_t base[3], const internal::StepLayout& lay, NodeRef child,
                     const Cell* pool, uint64_t xyz) {
-      Hit h;
-      h.voxel = {base[0] + lay.Coord(xyz, 0), base[1] + lay.Coord(xyz, 1),
-                 base[2] + lay.Coord(xyz, 2)};
-      h.t = VoxelEntryT(ray, h.voxel);
-      h.brick = pool == tree_.top ? kNoBrick : pinner.id;
-      h.payload = LeafPayload(child);
+      Hit h = internal::LeafHit(ray, lay, base, xyz, child,
+                                pool == tree_.top ? kNoBrick : pinner.id);
       return visit(h) ? internal::Flow::kLeft : internal::Flow::kStop;
     };
     auto occupied1 = [&](NodeRef child, const Cell* pool, uint64_t xyz, uint64_t prev,
@@ -126,25 +122,11 @@ class AwTracer {
     internal::Flow f =
         internal::WalkStep(l1, l1.Pack(v), dda, tree_.top, tree_.top, pinner, occupied1, &stats);
     AddMoves(dda, &c);
-    c.skips += stats.skips;
-    c.cells_visited += stats.cells;
-    c.brick_fetches += pinner.fetches;
-    if (f == internal::Flow::kError) return pinner.error;
-    return OkStatus();
+    return internal::FinishWalk(f, stats, pinner, &c);
   }
 
   StatusOr<std::optional<Hit>> FirstHit(const Ray& ray, TraceCounters* counters = nullptr) const {
-    std::optional<Hit> result;
-    Status s = Traverse(
-        ray,
-        [&](const Hit& h) {
-          result = h;
-          return false;
-        },
-        counters);
-    if (!s.ok()) return s;
-    if (result && counters) ++counters->hits;
-    return result;
+    return internal::FirstHitOf(*this, ray, counters);
   }
 
  private:

@@ -96,12 +96,8 @@ class Tracer {
     // An occupied voxel of the last level: a hit.
     auto leaf = [&](const internal::StepLayout& lay, const int64_t base[3], NodeRef child,
                     const Cell* pool, uint64_t xyz) {
-      Hit h;
-      h.voxel = {base[0] + lay.Coord(xyz, 0), base[1] + lay.Coord(xyz, 1),
-                 base[2] + lay.Coord(xyz, 2)};
-      h.t = VoxelEntryT(ray, h.voxel);
-      h.brick = pool == tree_.top ? kNoBrick : pinner.id;
-      h.payload = LeafPayload(child);
+      Hit h = internal::LeafHit(ray, lay, base, xyz, child,
+                                pool == tree_.top ? kNoBrick : pinner.id);
       return visit(h) ? internal::Flow::kLeft : internal::Flow::kStop;
     };
     auto occupied1 = [&](NodeRef child, const Cell* pool, uint64_t xyz, uint64_t prev,
@@ -126,26 +122,12 @@ class Tracer {
     internal::Flow f =
         internal::WalkStep(l1, dda.xyz, dda, tree_.top, tree_.top, pinner, occupied1, &stats);
     dda.AddTo(cx, &c);
-    c.skips += stats.skips;
-    c.cells_visited += stats.cells;
-    c.brick_fetches += pinner.fetches;
-    if (f == internal::Flow::kError) return pinner.error;
-    return OkStatus();
+    return internal::FinishWalk(f, stats, pinner, &c);
   }
 
   // The first occupied voxel along the ray, or nullopt on a miss.
   StatusOr<std::optional<Hit>> FirstHit(const Ray& ray, TraceCounters* counters = nullptr) const {
-    std::optional<Hit> result;
-    Status s = Traverse(
-        ray,
-        [&](const Hit& h) {
-          result = h;
-          return false;
-        },
-        counters);
-    if (!s.ok()) return s;
-    if (result && counters) ++counters->hits;
-    return result;
+    return internal::FirstHitOf(*this, ray, counters);
   }
 
  private:

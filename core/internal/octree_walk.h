@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <string>
 
 #include "core/octree.h"
@@ -168,6 +169,45 @@ done:
   stats->skips += skips;
   stats->cells += cells;
   return flow;
+}
+
+// The hit for occupied voxel `xyz` of a step's last level (step grid corner
+// `base`, in finest voxels): coordinates, entry parameter, payload.
+inline Hit LeafHit(const Ray& ray, const StepLayout& lay, const int64_t base[3], uint64_t xyz,
+                   NodeRef child, uint32_t brick_id) {
+  Hit h;
+  h.voxel = {base[0] + lay.Coord(xyz, 0), base[1] + lay.Coord(xyz, 1),
+             base[2] + lay.Coord(xyz, 2)};
+  h.t = VoxelEntryT(ray, h.voxel);
+  h.brick = brick_id;
+  h.payload = LeafPayload(child);
+  return h;
+}
+
+// Adds a finished walk's counters and turns its flow into a Status.
+inline Status FinishWalk(Flow flow, const WalkStats& stats, const BrickPinner& pinner,
+                         TraceCounters* c) {
+  c->skips += stats.skips;
+  c->cells_visited += stats.cells;
+  c->brick_fetches += pinner.fetches;
+  return flow == Flow::kError ? pinner.error : OkStatus();
+}
+
+// FirstHit in terms of Traverse, for any tracer.
+template <class TracerT>
+StatusOr<std::optional<Hit>> FirstHitOf(const TracerT& tracer, const Ray& ray,
+                                        TraceCounters* counters) {
+  std::optional<Hit> result;
+  Status s = tracer.Traverse(
+      ray,
+      [&](const Hit& h) {
+        result = h;
+        return false;
+      },
+      counters);
+  if (!s.ok()) return s;
+  if (result && counters) ++counters->hits;
+  return result;
 }
 
 // Scales a direction by the power of two that puts its largest |component|
