@@ -8,6 +8,21 @@
 namespace vox {
 namespace {
 
+// The unit direction from world point p to light l and its distance (inf for
+// a directional light). False when p is at a point light's position.
+bool DirectionToLight(const Light& l, const glm::dvec3& p, glm::dvec3* to_light, double* dist) {
+  if (l.type == Light::Type::kDirectional) {
+    *to_light = -l.direction;
+    *dist = std::numeric_limits<double>::infinity();
+    return true;
+  }
+  *to_light = l.position - p;
+  *dist = glm::length(*to_light);
+  if (!(*dist > 0)) return false;
+  *to_light /= *dist;
+  return true;
+}
+
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kMinTransmittance = 1e-6;
 constexpr double kScatterStepVoxels = 3.0;
@@ -283,14 +298,7 @@ glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const 
       if (l.intensity <= 0) continue;
       glm::dvec3 to_light;
       double dist = kInf;
-      if (l.type == Light::Type::kDirectional) {
-        to_light = -l.direction;
-      } else {
-        to_light = l.position - p_w;
-        dist = glm::length(to_light);
-        if (!(dist > 0)) continue;
-        to_light /= dist;
-      }
+      if (!DirectionToLight(l, p_w, &to_light, &dist)) continue;
       double ndl = glm::dot(n, to_light);
       if (ndl <= 0) continue;
       if (passes_.shadows && l.shadows && Occluded(p_off, to_light, dist, cx)) continue;
@@ -469,14 +477,7 @@ glm::dvec3 Renderer::Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double
               if (l.intensity <= 0) continue;
               glm::dvec3 to_light;
               double dist = kInf;
-              if (l.type == Light::Type::kDirectional) {
-                to_light = -l.direction;
-              } else {
-                to_light = l.position - p_w;
-                dist = glm::length(to_light);
-                if (!(dist > 0)) continue;
-                to_light /= dist;
-              }
+              if (!DirectionToLight(l, p_w, &to_light, &dist)) continue;
               double tl = l.shadows ? Transmittance(p_g, to_light, dist, cx) : 1.0;
               in += l.color * l.intensity * tl;
             }
