@@ -257,6 +257,10 @@ Status RunPrecisionPart(const RunContext& ctx, std::string* report) {
     std::string error;
   };
   std::vector<Result> res(variants.size());
+  // The first refused rays of each variant and scenario, to reproduce them.
+  std::string refused_log =
+      "# First refused rays per variant and scenario (at most 5 each), C99 hex floats\n"
+      "# variant | scenario | family | reason\n";
   std::vector<std::vector<std::unique_ptr<AnyTracer>>> tracers(variants.size());
   for (size_t v = 0; v < variants.size(); ++v) {
     Result& R = res[v];
@@ -280,7 +284,12 @@ Status RunPrecisionPart(const RunContext& ctx, std::string* report) {
         RayFamily& fam = sc.families[fi];
         for (size_t i = 0; i < fam.rays.size(); ++i) {
           auto got = tracers[v][s]->FirstHit(fam.rays[i], nullptr);
-          bool ok = got.ok() && CheckFirstHit(*sc.ref, fam.exact[i], fam.expected[i], *got).empty();
+          std::string why = got.ok() ? CheckFirstHit(*sc.ref, fam.exact[i], fam.expected[i], *got)
+                                     : "tracer error " + got.status().ToString();
+          bool ok = why.empty();
+          if (!ok && R.scene_refused[s] < 5)
+            refused_log += variants[v].name + " | " + sc.name + " | " + fam.name + " | " + why + " [" +
+                           testing::RayString(fam.rays[i]) + "]\n";
           R.refused[s][fi] += !ok;
           R.scene_refused[s] += !ok;
           ++R.scene_rays[s];
@@ -413,8 +422,10 @@ Status RunPrecisionPart(const RunContext& ctx, std::string* report) {
       "differs from the reference's, accepted or not. `ns / ray`: single thread, median of passes "
       "over the scenario's random rays (all variants one after another in each round); `time / "
       "default`: median of per-round ratios to the first variant. `n/a (step too deep)`: the variant "
-      "cannot hold a step of that many levels. Per family: [precision_families.md](precision_families.md).\n" +
+      "cannot hold a step of that many levels. Per family: [precision_families.md](precision_families.md); the first refused rays: "
+      "[precision_refused.txt](precision_refused.txt).\n" +
       (errors.empty() ? "" : "\nRefused at creation: " + errors + "\n");
+  VOX_RETURN_IF_ERROR(WriteFile(ctx.out_dir + "/precision_refused.txt", refused_log));
   VOX_RETURN_IF_ERROR(WriteTable(ctx, "precision", "Precision against time", table, notes));
   VOX_RETURN_IF_ERROR(WriteTable(ctx, "precision_families", "Refused first hits per scenario and ray family",
                                  detail, "Counts of refused first hits; scenarios as in [precision.md](precision.md).\n"));
