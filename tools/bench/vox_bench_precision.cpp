@@ -288,8 +288,11 @@ Status RunPrecisionPart(const RunContext& ctx, std::string* report) {
                                      : "tracer error " + got.status().ToString();
           bool ok = why.empty();
           if (!ok && R.scene_refused[s] < 5)
-            refused_log += variants[v].name + " | " + sc.name + " | " + fam.name + " | " + why + " [" +
-                           testing::RayString(fam.rays[i]) + "]\n";
+            refused_log += variants[v].name + " | " + sc.name + " | " + fam.name + " | " + why +
+                           (why.find("[origin") == std::string::npos
+                                ? " [" + testing::RayString(fam.rays[i]) + "]"
+                                : std::string()) +
+                           "\n";
           R.refused[s][fi] += !ok;
           R.scene_refused[s] += !ok;
           ++R.scene_rays[s];
