@@ -569,14 +569,6 @@ Status RunPeerPart(const RunContext& ctx, std::string* report) {
   return OkStatus();
 }
 
-#ifndef VOX_BENCH_HAVE_VARIANTS
-Status RunPrecisionPart(const RunContext&, std::string* report) {
-  *report += "## 2. Precision against time\n\nNot measured: this build has no core/variants.cpp "
-             "(TraversalVariants).\n\n";
-  return UnsupportedError("precision: core/variants.cpp is not in this build");
-}
-#endif
-
 }  // namespace vox::bench
 
 namespace {
