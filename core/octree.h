@@ -81,6 +81,21 @@ struct LeafPoint {
   NodeRef ref = kEmptyRef;
 };
 
+// The Morton key of a point whose coordinates fit 21 bits: digit
+// x | y << 1 | z << 2 per level, so keys order points as MortonLess does.
+inline uint64_t MortonKey21(uint64_t x, uint64_t y, uint64_t z) {
+  auto spread = [](uint64_t v) {  // bit i -> bit 3i
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffull;
+    v = (v | v << 16) & 0x1f0000ff0000ffull;
+    v = (v | v << 8) & 0x100f00f00f00f00full;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+    v = (v | v << 2) & 0x1249249249249249ull;
+    return v;
+  };
+  return spread(x) | spread(y) << 1 | spread(z) << 2;
+}
+
 // Orders points by Morton code (z most significant within a level's digit);
 // `levels` need not be known: coordinates of up to 64 bits compare correctly.
 bool MortonLess(const LeafPoint& a, const LeafPoint& b);

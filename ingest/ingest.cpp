@@ -562,9 +562,9 @@ class GridIngest {
       for (uint32_t li_index : bw.leaves) {
         const LeafT* leaf = leaves_[li_index].leaf;
         const Coord o = leaf->origin();
-        order.push_back({Spread3(uint64_t(o.x() - rmin[0]) >> 3) |
-                             Spread3(uint64_t(o.y() - rmin[1]) >> 3) << 1 |
-                             Spread3(uint64_t(o.z() - rmin[2]) >> 3) << 2,
+        order.push_back({MortonKey21(uint64_t(o.x() - rmin[0]) >> 3,
+                                     uint64_t(o.y() - rmin[1]) >> 3,
+                                     uint64_t(o.z() - rmin[2]) >> 3),
                          leaf});
         expected += leaf->onVoxelCount();
       }
@@ -615,17 +615,6 @@ class GridIngest {
     return out;
   }
 
-  // Spreads the low 21 bits of v to every third bit.
-  static uint64_t Spread3(uint64_t v) {
-    v &= 0x1fffff;
-    v = (v | v << 32) & 0x1f00000000ffffULL;
-    v = (v | v << 16) & 0x1f0000ff0000ffULL;
-    v = (v | v << 8) & 0x100f00f00f00f00fULL;
-    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-    v = (v | v << 2) & 0x1249249249249249ULL;
-    return v;
-  }
-
   // Leaf offsets (x << 6 | y << 3 | z) of an 8^3 leaf in Morton order.
   static const std::array<uint16_t, 512>& MortonLeafOrder() {
     static const std::array<uint16_t, 512> table = [] {
@@ -651,7 +640,7 @@ class GridIngest {
     std::vector<std::pair<uint64_t, uint32_t>> keys(v->size());
     for (size_t i = 0; i < v->size(); ++i) {
       const BrickVoxel& b = (*v)[i];
-      keys[i] = {Spread3(b.x) | Spread3(b.y) << 1 | Spread3(b.z) << 2, uint32_t(i)};
+      keys[i] = {MortonKey21(b.x, b.y, b.z), uint32_t(i)};
     }
     std::sort(keys.begin(), keys.end());
     std::vector<BrickVoxel> sorted(v->size());

@@ -414,21 +414,25 @@ double Renderer::Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir
         if (h.t >= t_max) return false;
         double t1 = std::min(VoxelExitT(gr, h.voxel), t_max);
         double rho = 1.0;
-        if (has_density) {
-          ++cx.c->attribute_lookups;
-          auto a = volume_->Attributes(h.brick, h.payload);
-          if (!a.ok()) {
-            cx.Fail(a.status());
-            return false;
-          }
-          rho = a->density;
-        }
+        if (has_density && !Density(h, cx, &rho)) return false;
         tau += sigma_t * rho * std::max(0.0, t1 - h.t);
         return std::exp(-tau) >= kMinTransmittance;
       },
       &cx.c->trace);
   if (!s.ok()) cx.Fail(s);
   return std::exp(-tau);
+}
+
+// The density of fog voxel `h` (stops the frame with the error on failure).
+bool Renderer::Density(const Hit& h, Ctx& cx, double* rho) const {
+  ++cx.c->attribute_lookups;
+  auto a = volume_->Attributes(h.brick, h.payload);
+  if (!a.ok()) {
+    cx.Fail(a.status());
+    return false;
+  }
+  *rho = a->density;
+  return true;
 }
 
 glm::dvec3 Renderer::Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double* transmittance,
@@ -449,15 +453,7 @@ glm::dvec3 Renderer::Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double
         const double t1 = VoxelExitT(gr, h.voxel);
         const double len = std::max(0.0, t1 - h.t);
         double rho = 1.0;
-        if (has_density) {
-          ++cx.c->attribute_lookups;
-          auto a = volume_->Attributes(h.brick, h.payload);
-          if (!a.ok()) {
-            cx.Fail(a.status());
-            return false;
-          }
-          rho = a->density;
-        }
+        if (has_density && !Density(h, cx, &rho)) return false;
         const double st = sigma_t * rho;
         if (st <= 0) return true;
         const double seg_tau = st * len;

@@ -131,6 +131,7 @@ class Renderer {
                      int depth, Ctx& cx) const;
   glm::dvec3 Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double* transmittance,
                  double* first_t) const;
+  bool Density(const Hit& h, Ctx& cx, double* rho) const;
   double Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max,
                        Ctx& cx) const;
   bool Occluded(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max, Ctx& cx) const;

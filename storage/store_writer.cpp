@@ -47,17 +47,6 @@ ZSTD_CCtx* ThreadCCtx() {
   return cctx.get();
 }
 
-// Spreads the low 21 bits of v to every third bit (bit i -> bit 3i).
-inline uint64_t Spread21(uint64_t v) {
-  v &= 0x1fffff;
-  v = (v | v << 32) & 0x1f00000000ffffull;
-  v = (v | v << 16) & 0x1f0000ff0000ffull;
-  v = (v | v << 8) & 0x100f00f00f00f00full;
-  v = (v | v << 4) & 0x10c30c30c30c30c3ull;
-  v = (v | v << 2) & 0x1249249249249249ull;
-  return v;
-}
-
 // Orders `voxels` as MortonLess would: by a 63-bit key (digit x | y << 1 |
 // z << 2 per level) when coordinates fit 21 bits, else by MortonLess. The
 // points' refs are the voxels' indices.
@@ -67,7 +56,7 @@ std::vector<LeafPoint> MortonOrder(const std::vector<BrickVoxel>& voxels, int de
     std::vector<std::pair<uint64_t, uint32_t>> keyed(voxels.size());
     for (size_t i = 0; i < voxels.size(); ++i) {
       const BrickVoxel& v = voxels[i];
-      keyed[i] = {Spread21(v.x) | Spread21(v.y) << 1 | Spread21(v.z) << 2, uint32_t(i)};
+      keyed[i] = {MortonKey21(v.x, v.y, v.z), uint32_t(i)};
     }
     // Writers that already hand voxels over in Morton order pay no sort.
     if (!std::is_sorted(keyed.begin(), keyed.end())) std::sort(keyed.begin(), keyed.end());
