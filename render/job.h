@@ -24,7 +24,7 @@ struct RenderJobOptions {
   std::string exr_path = "render.exr";
   std::string preview_path;  // empty: none
   std::string stats_path;    // empty: none
-  std::string split;         // --split N1+N2 or N1; empty: DefaultSplit
+  std::string split;         // --split N1+N2 or N1; empty: DefaultFirstStepLevels
   bool single_step = false;
   size_t cache_mb = 1024;
   int threads = 0;

@@ -69,8 +69,6 @@ std::string RenderPasses::ToString() const {
   return s;
 }
 
-int DefaultSplit(int levels) { return DefaultFirstStepLevels(levels); }
-
 // A thread's own view of the bricks: the last bricks it fetched, pinned, in a
 // small direct-mapped table, so a ray entering a brick a neighbouring ray
 // just used does not go through the shared cache (its lock, hash and LRU).
@@ -145,7 +143,7 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(RenderVolume* volume, const
                                                      const RenderOptions& options) {
   const StoreMeta& meta = volume->meta();
   OctreeView view = volume->view();
-  int n1 = options.n1 > 0 ? options.n1 : DefaultSplit(view.levels);
+  int n1 = options.n1 > 0 ? options.n1 : DefaultFirstStepLevels(view.levels);
   VOX_ASSIGN_OR_RETURN(RenderTracer tracer, RenderTracer::Create(view, n1));
   VOX_ASSIGN_OR_RETURN(GridTransform xf, GridTransform::FromMeta(meta));
   Camera cam = camera;

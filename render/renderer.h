@@ -68,7 +68,7 @@ struct RenderPasses {
 };
 
 struct RenderOptions {
-  int n1 = 0;  // first-step levels of the two-step traversal; 0: DefaultSplit
+  int n1 = 0;  // first-step levels of the two-step traversal; 0: DefaultFirstStepLevels
   ImageLayers layers;
 };
 
@@ -77,10 +77,6 @@ struct RenderOptions {
 // and transitions (camera rays are doubles already; long double set-up costs
 // x87 arithmetic on every ray and transition).
 using RenderTracer = AutoTracer<double>;
-
-// The first-step levels vox uses for a `levels`-level octree (core's
-// DefaultFirstStepLevels: the paper's 6, single step up to 2^6).
-int DefaultSplit(int levels);
 
 class Renderer {
  public:
