@@ -71,13 +71,13 @@ class AwTracer {
     const int64_t base0[3] = {0, 0, 0};
     Dda dda = MakeDda(cx, l1, v, base0, s1);
 
-    internal::BrickPinner pinner{tree_.bricks};
+    internal::BrickPinner pinner(tree_.bricks);
     internal::WalkStats stats;
     const internal::StepLayout l2(n2_);
     auto leaf = [&](const int64_t base[3], const internal::StepLayout& lay, NodeRef child,
                     const Cell* pool, uint64_t xyz) {
       Hit h = internal::LeafHit(ray, lay, base, xyz, child,
-                                pool == tree_.top ? kNoBrick : pinner.id);
+                                pool != tree_.top, pinner);
       return visit(h) ? internal::Flow::kLeft : internal::Flow::kStop;
     };
     auto occupied1 = [&](NodeRef child, const Cell* pool, uint64_t xyz, uint64_t prev,

@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <type_traits>
 
 namespace vox {
@@ -63,12 +64,14 @@ struct FixedPoint {
     // Two halves, so a 128-bit word converts without losing its high bits.
     int64_t ip = Floor(w);
     Word frac = w - FromInt(ip);
-    using std::ldexp;  // and ExactReal's, found by ADL
+    constexpr int kShift = kFrac > 62 ? 62 : kFrac;
+    const int64_t m = int64_t(kFrac > 62 ? frac >> (kFrac - 62) : frac);
     Real f = 0;
-    if constexpr (kFrac > 62) {
-      f = ldexp(Real(int64_t(frac >> (kFrac - 62))), -62);
+    if constexpr (std::is_floating_point_v<Real>) {
+      f = Real(m) * Real(1.0 / double(uint64_t(1) << kShift));  // exact power of two, no libm call
     } else {
-      f = ldexp(Real(int64_t(frac)), -kFrac);
+      using std::ldexp;  // ExactReal's, found by ADL
+      f = ldexp(Real(m), -kShift);
     }
     return Real(ip) + f;
   }
@@ -79,16 +82,15 @@ struct FixedPoint {
   static Word Ratio(double num, double den, Word sat) {
     num = std::fabs(num);
     den = std::fabs(den);
-    if (den == 0.0 || !(num / den < std::ldexp(1.0, kIntBits - 2))) {
-      if (den == 0.0) return sat;
-      // num/den may overflow to inf for subnormal den: saturate.
-      if (!(num / den < std::ldexp(1.0, kIntBits - 2))) return sat;
-    }
+    static_assert(kIntBits - 2 < 64);
+    constexpr double kLimit = double(uint64_t(1) << (kIntBits - 2));
+    // num/den may overflow to inf for subnormal den: saturate.
+    if (den == 0.0 || !(num / den < kLimit)) return sat;
     if (num == 0.0) return 0;
     int en = 0, ed = 0;
     // num = mn * 2^(en - 53), den = md * 2^(ed - 53), mn, md 53-bit integers.
-    uint64_t mn = uint64_t(std::ldexp(std::frexp(num, &en), 53));
-    uint64_t md = uint64_t(std::ldexp(std::frexp(den, &ed), 53));
+    uint64_t mn = Mantissa53(num, &en);
+    uint64_t md = Mantissa53(den, &ed);
     // Quotient = (mn / md) * 2^(en - ed); we want it * 2^Frac, plus one more
     // bit for rounding: long division, one quotient bit per step.
     int shift = kFrac + 1 + (en - ed);  // total power of two applied to mn / md
@@ -117,6 +119,18 @@ struct FixedPoint {
     q = (q + 1) >> 1;  // round half up on the extra bit
     Word w = Word(q);
     return w >= sat ? sat : w;
+  }
+
+ private:
+  // x = m * 2^(e - 53) with m in [2^52, 2^53), for finite x > 0 (as
+  // frexp(x, &e) * 2^53, by the bits for normal x, without libm calls).
+  static uint64_t Mantissa53(double x, int* e) {
+    uint64_t bits;
+    std::memcpy(&bits, &x, sizeof bits);
+    const int biased = int(bits >> 52) & 0x7ff;
+    if (biased == 0) return uint64_t(std::ldexp(std::frexp(x, e), 53));  // subnormal
+    *e = biased - 1022;
+    return (bits & ((uint64_t(1) << 52) - 1)) | (uint64_t(1) << 52);
   }
 };
 

@@ -23,6 +23,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "core/status.h"
@@ -51,10 +52,13 @@ inline constexpr NodeRef MakeLeafRef(uint32_t payload) { return payload + 1; }
 inline constexpr uint32_t LeafPayload(NodeRef r) { return r - 1; }
 
 // A fetched brick: its cell pool, kept alive (pinned) as long as `pin` is held.
+// `data` is the source's own record of the brick (storage: the decoded brick
+// with its attribute planes), opaque to core, alive as long as the cells.
 struct BrickView {
   const Cell* cells = nullptr;
   uint32_t num_cells = 0;
   std::shared_ptr<const void> pin;
+  const void* data = nullptr;
 };
 
 // Where bricks come from: storage's paging cache, or an in-memory octree.
@@ -64,6 +68,18 @@ class BrickSource {
   // Returns brick `id`'s cells. Thread-safe. Errors (I/O, checksum) name the
   // brick and the file.
   virtual StatusOr<BrickView> FetchBrick(uint32_t id) = 0;
+
+  // Lending: a source used by one thread that keeps the bricks it hands out
+  // pinned itself (a per-thread table in front of a shared cache) returns
+  // true from lends() and implements LendBrick: brick `id`'s view, valid
+  // until the next FetchBrick or LendBrick call on this source, or nullptr
+  // with *error set. A traversal then takes no pin (no reference count) per
+  // brick it enters.
+  virtual bool lends() const { return false; }
+  virtual const BrickView* LendBrick(uint32_t id, Status* error) {
+    *error = InternalError("this brick source does not lend (brick " + std::to_string(id) + ")");
+    return nullptr;
+  }
 };
 
 // What a traversal needs to walk a tree: non-owning.

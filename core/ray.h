@@ -27,6 +27,9 @@ struct Hit {
   double t = 0.0;             // ray parameter where the ray enters it (0 if it starts inside)
   uint32_t brick = kNoBrick;  // the brick holding its payload, kNoBrick for the top pool
   uint32_t payload = 0;       // payload index in that pool
+  // The brick's BrickView::data (nullptr for the top pool): valid while the
+  // visitor that receives the hit runs (the traversal pins the brick).
+  const void* brick_data = nullptr;
 };
 
 struct TraceCounters {

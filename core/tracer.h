@@ -90,14 +90,14 @@ class Tracer {
     for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * down2_;
     const internal::StepLayout l1(n1_), l2(n2_);
     Dda dda = InitStep(cx, l1, p1);
-    internal::BrickPinner pinner{tree_.bricks};
+    internal::BrickPinner pinner(tree_.bricks);
     internal::WalkStats stats;
     const int64_t base0[3] = {0, 0, 0};
     // An occupied voxel of the last level: a hit.
     auto leaf = [&](const internal::StepLayout& lay, const int64_t base[3], NodeRef child,
                     const Cell* pool, uint64_t xyz) {
       Hit h = internal::LeafHit(ray, lay, base, xyz, child,
-                                pool == tree_.top ? kNoBrick : pinner.id);
+                                pool != tree_.top, pinner);
       return visit(h) ? internal::Flow::kLeft : internal::Flow::kStop;
     };
     auto occupied1 = [&](NodeRef child, const Cell* pool, uint64_t xyz, uint64_t prev,

@@ -70,32 +70,42 @@ std::string RenderPasses::ToString() const {
 }
 
 // A thread's own view of the bricks: the last bricks it fetched, pinned, in a
-// small direct-mapped table, so a ray entering a brick a neighbouring ray
-// just used does not go through the shared cache (its lock, hash and LRU).
+// direct-mapped table, so a ray entering a brick a neighbouring ray just used
+// takes neither the shared cache's lock, hash and LRU nor a reference count:
+// the table lends its views to the thread's tracer (BrickSource::lends).
 class Renderer::LocalBricks : public BrickSource {
  public:
-  explicit LocalBricks(BrickSource* base) : base_(base) {}
+  explicit LocalBricks(BrickSource* base) : base_(base), slots_(kSlots) {}
   StatusOr<BrickView> FetchBrick(uint32_t id) override {
+    Status error;
+    const BrickView* v = LendBrick(id, &error);
+    if (v == nullptr) return error;
+    return *v;
+  }
+  bool lends() const override { return true; }
+  const BrickView* LendBrick(uint32_t id, Status* error) override {
     Slot& s = slots_[(id * 2654435761u) >> (32 - kSlotBits)];
-    if (s.valid && s.id == id) return s.view;
+    if (s.id == id && s.view.cells != nullptr) return &s.view;
     auto v = base_->FetchBrick(id);
-    if (v.ok()) {
-      s.valid = true;
-      s.id = id;
-      s.view = *v;
+    if (!v.ok()) {
+      *error = v.status();
+      return nullptr;
     }
-    return v;
+    s.id = id;
+    s.view = std::move(v).value();
+    return &s.view;
   }
 
  private:
-  static constexpr int kSlotBits = 6;
+  // 256 pins per thread: a 64 x 64 tile's rays enter a few dozen bricks.
+  static constexpr int kSlotBits = 8;
+  static constexpr size_t kSlots = size_t(1) << kSlotBits;
   struct Slot {
-    bool valid = false;
     uint32_t id = 0;
-    BrickView view;
+    BrickView view;  // cells == nullptr: empty
   };
   BrickSource* base_;
-  Slot slots_[1 << kSlotBits];
+  std::vector<Slot> slots_;
 };
 
 struct Renderer::ThreadState {
@@ -207,7 +217,8 @@ glm::dvec3 Renderer::Background(const glm::dvec3& dir) const {
   return glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
 }
 
-bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit) const {
+bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit,
+                       VoxelAttributes* attrs) const {
   bool in_run = skip_start_run, found = false;
   double run_end = 0.0;
   const double eps = eps_t_;
@@ -223,6 +234,17 @@ bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit) co
         }
         *hit = h;
         found = true;
+        if (attrs != nullptr) {
+          // While the traversal still pins the hit's brick: read from it.
+          ++cx.c->attribute_lookups;
+          StatusOr<VoxelAttributes> a = volume_->HitAttributes(h);
+          if (!a.ok()) {
+            cx.Fail(a.status());
+            found = false;
+          } else {
+            *attrs = *a;
+          }
+        }
         return false;
       },
       &cx.c->trace);
@@ -266,28 +288,18 @@ glm::dvec3 Renderer::WorldNormal(const Ray& gr, const Hit& h, const VoxelAttribu
   return len > 0 ? w / len : glm::dvec3(0.0, 1.0, 0.0);
 }
 
-glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h, int depth,
-                                  Ctx& cx, glm::dvec3* normal_out) const {
-  // Unlit matte surfaces without stored colour or a normal layer need no
-  // attributes: skip the lookup.
-  StatusOr<VoxelAttributes> attrs = VoxelAttributes{};
-  if (needs_attributes_) {
-    ++cx.c->attribute_lookups;
-    attrs = volume_->Attributes(h.brick, h.payload);
-    if (!attrs.ok()) {
-      cx.Fail(attrs.status());
-      return glm::dvec3(0.0);
-    }
-  }
+glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
+                                  const VoxelAttributes& attrs, int depth, Ctx& cx,
+                                  glm::dvec3* normal_out) const {
   const glm::dvec3 origin_w = xf_.GridToWorld(gr.origin);
   const glm::dvec3 p_w = origin_w + h.t * dir_w;
   const glm::dvec3 p_g = gr.origin + h.t * gr.dir;
-  const glm::dvec3 n_out = WorldNormal(gr, h, *attrs);
+  const glm::dvec3 n_out = WorldNormal(gr, h, attrs);
   const glm::dvec3 n = glm::dot(n_out, dir_w) > 0 ? -n_out : n_out;  // facing the viewer
   if (normal_out) *normal_out = n;
   const glm::dvec3 p_off = OffsetAlong(p_g, n);
   const Material& m = scene_.MaterialAt(p_w);
-  const glm::dvec3 base = volume_->meta().has_color ? glm::dvec3(attrs->color) : m.color;
+  const glm::dvec3 base = volume_->meta().has_color ? glm::dvec3(attrs.color) : m.color;
   const double k_local = 1.0 - m.reflect - m.transmit;
   glm::dvec3 color(0.0);
   if (k_local > 0) {
@@ -334,8 +346,10 @@ glm::dvec3 Renderer::Radiance(const glm::dvec3& origin_g, const glm::dvec3& orig
   Ray gr{origin_g, xf_.world_to_grid_linear * dir};
   (void)origin_w;
   Hit h;
-  if (!FindHit(gr, /*skip_start_run=*/true, cx, &h)) return Background(dir);
-  return ShadeSurface(gr, dir, h, depth, cx, nullptr);
+  VoxelAttributes a;
+  if (!FindHit(gr, /*skip_start_run=*/true, cx, &h, SurfaceAttrs(&a)))
+    return cx.failed() ? glm::dvec3(0.0) : Background(dir);
+  return ShadeSurface(gr, dir, h, a, depth, cx, nullptr);
 }
 
 glm::dvec3 Renderer::Refract(const glm::dvec3& origin_g, const glm::dvec3& origin_w,
@@ -391,8 +405,10 @@ glm::dvec3 Renderer::Refract(const glm::dvec3& origin_g, const glm::dvec3& origi
     Ray og{OffsetAlong(q_g, exit_n), xf_.world_to_grid_linear * glm::normalize(out)};
     glm::dvec3 od = glm::normalize(out);
     Hit h;
-    if (!FindHit(og, /*skip_start_run=*/true, cx, &h)) return Background(od);
-    return ShadeSurface(og, od, h, depth, cx, nullptr);
+    VoxelAttributes a;
+    if (!FindHit(og, /*skip_start_run=*/true, cx, &h, SurfaceAttrs(&a)))
+      return cx.failed() ? glm::dvec3(0.0) : Background(od);
+    return ShadeSurface(og, od, h, a, depth, cx, nullptr);
   }
   // Total internal reflection: another pass inside, if the depth allows.
   if (depth >= scene_.max_depth) return glm::dvec3(0.0);
@@ -424,7 +440,7 @@ double Renderer::Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir
 // The density of fog voxel `h` (stops the frame with the error on failure).
 bool Renderer::Density(const Hit& h, Ctx& cx, double* rho) const {
   ++cx.c->attribute_lookups;
-  auto a = volume_->Attributes(h.brick, h.payload);
+  auto a = volume_->HitAttributes(h);  // called by visitors: h's brick is pinned
   if (!a.ok()) {
     cx.Fail(a.status());
     return false;
@@ -503,15 +519,16 @@ void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out) const {
     return;
   }
   Hit h;
-  if (!FindHit(gr, /*skip_start_run=*/false, cx, &h)) {
-    out->color = Background(wr.dir);
+  VoxelAttributes a;
+  if (!FindHit(gr, /*skip_start_run=*/false, cx, &h, SurfaceAttrs(&a))) {
+    if (!cx.failed()) out->color = Background(wr.dir);
     return;
   }
   out->hit = true;
   out->alpha = 1.0;
   out->z = h.t;
   out->voxel = h.voxel + volume_->meta().origin;
-  out->color = ShadeSurface(gr, wr.dir, h, 0, cx, &out->normal);
+  out->color = ShadeSurface(gr, wr.dir, h, a, 0, cx, &out->normal);
 }
 
 Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,

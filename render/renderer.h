@@ -121,7 +121,10 @@ class Renderer {
   void ShadePixel(double x, double y, Ctx& cx, Sample* s) const;
   glm::dvec3 Radiance(const glm::dvec3& origin_g, const glm::dvec3& origin_w, const glm::dvec3& dir,
                       int depth, int kind, Ctx& cx) const;
-  glm::dvec3 ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h, int depth, Ctx& cx,
+  // `attrs`: the hit voxel's attributes (default ones when the scene needs
+  // none: unlit, no stored colour, no normal layer).
+  glm::dvec3 ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
+                          const VoxelAttributes& attrs, int depth, Ctx& cx,
                           glm::dvec3* normal_out) const;
   glm::dvec3 Refract(const glm::dvec3& origin_g, const glm::dvec3& origin_w, const glm::dvec3& dir,
                      int depth, Ctx& cx) const;
@@ -131,7 +134,14 @@ class Renderer {
   double Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max,
                        Ctx& cx) const;
   bool Occluded(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max, Ctx& cx) const;
-  bool FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit) const;
+  // The first hit along gr (after the run of voxels the ray starts in, if
+  // skip_start_run); with `attrs`, also its attributes, read while the
+  // traversal pins the brick. False on a miss or an error (cx.failed()).
+  bool FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit,
+               VoxelAttributes* attrs = nullptr) const;
+  // Where surface shading wants the hit's attributes: `a`, or nullptr when
+  // the scene needs none.
+  VoxelAttributes* SurfaceAttrs(VoxelAttributes* a) const { return needs_attributes_ ? a : nullptr; }
   glm::dvec3 WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a) const;
 
   RenderVolume* volume_;

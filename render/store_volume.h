@@ -24,6 +24,9 @@ class StoreVolume : public RenderVolume {
   StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) override {
     return store_->Attributes(brick, payload);
   }
+  StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) override {
+    return store_->HitAttributes(hit);
+  }
   CacheStats cache_stats() const override { return store_->cache_stats(); }
   std::string description() const override { return dir_; }
   Store* store() { return store_.get(); }

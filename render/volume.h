@@ -29,6 +29,11 @@ class RenderVolume {
   virtual OctreeView view() = 0;
   // Attributes of the voxel hit in brick `brick` (kNoBrick: the top) at `payload`.
   virtual StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) = 0;
+  // The same for a hit of a traversal of view(), called from the traversal's
+  // visitor (the hit's brick is pinned): volumes may read it from the brick.
+  virtual StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) {
+    return Attributes(hit.brick, hit.payload);
+  }
   // Brick cache counters (zero for volumes without a cache).
   virtual CacheStats cache_stats() const { return {}; }
   // Where the volume comes from, for EXR headers ("memory", a store path).

@@ -42,7 +42,8 @@ class StoreImpl : public Store {
 
   StatusOr<BrickView> FetchBrick(uint32_t id) override {
     VOX_ASSIGN_OR_RETURN(auto b, Get(id));
-    return BrickView{b->cells.data(), uint32_t(b->cells.size()), b};
+    const DecodedBrick* data = b.get();
+    return BrickView{b->cells.data(), uint32_t(b->cells.size()), std::move(b), data};
   }
 
   StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) override {
@@ -53,11 +54,13 @@ class StoreImpl : public Store {
       return ReadAttributes(top_attr_.data(), uint32_t(meta_.voxel_count), flags_, payload);
     }
     VOX_ASSIGN_OR_RETURN(auto b, Get(brick));
-    if (payload >= b->voxel_count)
-      return InvalidArgumentError("payload " + std::to_string(payload) + " outside brick " +
-                                  std::to_string(brick) + " (" + std::to_string(b->voxel_count) +
-                                  " voxels) of store '" + dir_ + "'");
-    return ReadAttributes(b->attr_planes.data(), b->voxel_count, b->flags, payload);
+    return BrickAttributes(*b, brick, payload);
+  }
+
+  StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) override {
+    if (hit.brick_data == nullptr || hit.brick == kNoBrick) return Attributes(hit.brick, hit.payload);
+    return BrickAttributes(*static_cast<const DecodedBrick*>(hit.brick_data), hit.brick,
+                           hit.payload);
   }
 
   CacheStats cache_stats() const override {
@@ -103,6 +106,15 @@ class StoreImpl : public Store {
   }
 
   StatusOr<std::shared_ptr<DecodedBrick>> LoadBrick(uint32_t id);
+
+  StatusOr<VoxelAttributes> BrickAttributes(const DecodedBrick& b, uint32_t brick,
+                                            uint32_t payload) const {
+    if (payload >= b.voxel_count)
+      return InvalidArgumentError("payload " + std::to_string(payload) + " outside brick " +
+                                  std::to_string(brick) + " (" + std::to_string(b.voxel_count) +
+                                  " voxels) of store '" + dir_ + "'");
+    return ReadAttributes(b.attr_planes.data(), b.voxel_count, b.flags, payload);
+  }
 
   const std::string dir_;
   const OpenOptions options_;

@@ -27,6 +27,7 @@
 #include <glm/vec3.hpp>
 
 #include "core/octree.h"
+#include "core/ray.h"
 #include "core/status.h"
 
 namespace vox {
@@ -120,6 +121,10 @@ class Store : public BrickSource {
   virtual OctreeView view() = 0;
   // Attributes of a voxel hit in brick `brick` (kNoBrick: the top) at `payload`.
   virtual StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) = 0;
+  // The same for a hit a traversal of this store's view() reports, read from
+  // the brick it pins (Hit::brick_data: no cache look-up). Call it while the
+  // hit's brick is pinned: from the traversal's visitor.
+  virtual StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) = 0;
   virtual CacheStats cache_stats() const = 0;
   // Bytes held in memory for the life of the Store: top cells, top payloads
   // and the brick table (not the cache).

@@ -54,39 +54,57 @@ struct StepLayout {
 };
 
 // Pins the brick a ray is in (at most one at a time: the stack never holds
-// cells of two bricks) and resolves child references to cells.
+// cells of two bricks) and resolves child references to cells. A lending
+// source (BrickSource::lends) keeps the brick pinned for it.
 struct BrickPinner {
+  explicit BrickPinner(BrickSource* s) : source(s), lending(s != nullptr && s->lends()) {}
+
   BrickSource* source = nullptr;
+  bool lending = false;
   uint32_t id = kNoBrick;
-  BrickView brick{};
+  const Cell* cells = nullptr;     // the pinned brick's pool
+  const void* data = nullptr;      // and its BrickView::data
+  std::shared_ptr<const void> pin;  // when the source does not lend
   Status error{};
   uint64_t fetches = 0;
 
   // Sets cell (and pool, when the child is a brick) for `child` of a cell in
   // `pool`. False on a fetch error (kept in `error`).
   bool Resolve(NodeRef child, const Cell*& cell, const Cell*& pool) {
-    if (!IsBrickRef(child)) {
+    if (!IsBrickRef(child)) [[likely]] {
       cell = pool + child;
       return true;
     }
-    uint32_t want = child & kBrickIdMask;
-    if (want != id) {
-      if (source == nullptr) {
-        error = CorruptionError("octree refers to brick " + std::to_string(want) +
-                                " but has no brick source");
-        return false;
-      }
-      ++fetches;
+    if ((child & kBrickIdMask) != id && !Fetch(child & kBrickIdMask)) return false;
+    pool = cells;
+    cell = pool;
+    return true;
+  }
+
+ private:
+  bool Fetch(uint32_t want) {
+    if (source == nullptr) {
+      error = CorruptionError("octree refers to brick " + std::to_string(want) +
+                              " but has no brick source");
+      return false;
+    }
+    ++fetches;
+    if (lending) {
+      const BrickView* v = source->LendBrick(want, &error);
+      if (v == nullptr) return false;
+      cells = v->cells;
+      data = v->data;
+    } else {
       auto b = source->FetchBrick(want);
       if (!b.ok()) {
         error = b.status();
         return false;
       }
-      brick = std::move(b).value();
-      id = want;
+      cells = b->cells;
+      data = b->data;
+      pin = std::move(b->pin);
     }
-    pool = brick.cells;
-    cell = pool;
+    id = want;
     return true;
   }
 };
@@ -173,14 +191,16 @@ done:
 
 // The hit for occupied voxel `xyz` of a step's last level (step grid corner
 // `base`, in finest voxels): coordinates, entry parameter, payload.
+// `in_brick`: the voxel's pool is the pinner's brick (else the top pool).
 inline Hit LeafHit(const Ray& ray, const StepLayout& lay, const int64_t base[3], uint64_t xyz,
-                   NodeRef child, uint32_t brick_id) {
+                   NodeRef child, bool in_brick, const BrickPinner& pinner) {
   Hit h;
   h.voxel = {base[0] + lay.Coord(xyz, 0), base[1] + lay.Coord(xyz, 1),
              base[2] + lay.Coord(xyz, 2)};
   h.t = VoxelEntryT(ray, h.voxel);
-  h.brick = brick_id;
+  h.brick = in_brick ? pinner.id : kNoBrick;
   h.payload = LeafPayload(child);
+  h.brick_data = in_brick ? pinner.data : nullptr;
   return h;
 }
 

@@ -4,6 +4,7 @@
 // runs it side by side with vdb_render.
 //   vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N]
 //                    [--threads N] [--split N1+N2|N1] [--exr out.exr] [--cache-mb M]
+//                    [--tile-size T]
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -22,7 +23,7 @@
 
 int main(int argc, char** argv) {
   std::string store, cam_path, scene_path, split, exr;
-  int runs = 5, threads = 2;
+  int runs = 5, threads = 2, tile_size = 64;
   size_t cache_mb = 2048;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
@@ -45,6 +46,8 @@ int main(int argc, char** argv) {
       runs = std::max(2, atoi(next().c_str()));
     else if (a == "--threads")
       threads = atoi(next().c_str());
+    else if (a == "--tile-size")
+      tile_size = std::max(1, atoi(next().c_str()));
     else if (a == "--cache-mb")
       cache_mb = size_t(atol(next().c_str()));
     else if (!a.empty() && a[0] != '-' && store.empty())
@@ -52,7 +55,7 @@ int main(int argc, char** argv) {
     else {
       fprintf(stderr,
               "usage: vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N] "
-              "[--threads N] [--split S] [--exr out.exr] [--cache-mb M]\n");
+              "[--threads N] [--split S] [--exr out.exr] [--cache-mb M] [--tile-size T]\n");
       return 2;
     }
   }
@@ -96,6 +99,7 @@ int main(int argc, char** argv) {
     vox::FrameOptions fo;
     fo.exr_path = exr;
     fo.threads = threads;
+    fo.tile_size = tile_size;
     vox::FrameStats st;
     const double c0 = cpu_now();
     vox::Status s = vox::RenderFrame(**renderer, vol->get(), fo, &st);
@@ -120,6 +124,7 @@ int main(int argc, char** argv) {
   j["width"] = cam->width;
   j["height"] = cam->height;
   j["threads"] = threads;
+  j["tile_size"] = tile_size;
   j["split"] = (*renderer)->SplitString();
   j["passes"] = (*renderer)->passes().ToString();
   j["write_exr"] = !exr.empty();
