@@ -316,6 +316,7 @@ class GridIngest {
     }
     WriteOptions wo;
     wo.zstd_level = cx_.options.zstd_level;
+    wo.normal_bits = cx_.options.normal_bits;
     wo.force = cx_.options.force;
     auto writer_or = cx_.factory(cx_.options.output, meta, wo);
     if (!writer_or.ok()) return writer_or.status();
@@ -880,6 +881,9 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
   if (o.output.empty()) return InvalidArgumentError("no output store directory given");
   if (o.zstd_level < 1 || o.zstd_level > 22)
     return InvalidArgumentError("zstd level " + std::to_string(o.zstd_level) + " outside 1..22");
+  if (o.normal_bits < 8 || o.normal_bits > 16)
+    return InvalidArgumentError("normal precision " + std::to_string(o.normal_bits) +
+                                " bits outside 8..16");
   if (o.threads < 0) return InvalidArgumentError("thread count must be >= 0 (0: all cores)");
   if (o.isovalue && o.threshold)
     return InvalidArgumentError(
@@ -986,6 +990,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
     if (o.isovalue) meta.build_options += " isovalue=" + FormatDouble(*o.isovalue);
     if (o.threshold) meta.build_options += " threshold=" + FormatDouble(*o.threshold);
     if (!o.color_grid.empty()) meta.build_options += " color=" + o.color_grid;
+    if (o.normal_bits != 16) meta.build_options += " normal_bits=" + std::to_string(o.normal_bits);
   }
 
   // The colour grid.

@@ -46,6 +46,7 @@ struct IngestOptions {
   std::optional<double> threshold;  // fog volumes; default 0
   std::string color_grid;   // optional Vec3f/Vec3d grid of the same file
   int zstd_level = 3;
+  int normal_bits = 16;     // per octahedral normal component, 8..16 (WriteOptions::normal_bits)
   int threads = 0;          // 0: all cores
   bool force = false;       // replace an existing store
   std::string command_line; // recorded in the store's build_options

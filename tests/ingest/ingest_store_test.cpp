@@ -31,43 +31,8 @@ namespace {
 
 using openvdb::Coord;
 using testutil::Ijk;
+using testutil::ReadAll;
 using testutil::TempDir;
-
-struct StoredVoxel {
-  uint32_t brick = kNoBrick, payload = 0;
-};
-
-// Every occupied voxel of a store, found by walking its octree (grid coordinates).
-Status WalkCells(Store& store, const Cell* pool, uint32_t cell, int size_log2, Ijk base,
-                 uint32_t brick, std::map<Ijk, StoredVoxel>* out) {
-  const int child_log2 = size_log2 - 1;
-  for (unsigned digit = 0; digit < 8; ++digit) {
-    NodeRef ref = pool[cell].child[digit];
-    if (ref == kEmptyRef) continue;
-    Ijk c{base[0] + (int64_t(digit & 1) << child_log2),
-          base[1] + (int64_t((digit >> 1) & 1) << child_log2),
-          base[2] + (int64_t((digit >> 2) & 1) << child_log2)};
-    if (child_log2 == 0) {
-      if (!out->emplace(c, StoredVoxel{brick, LeafPayload(ref)}).second)
-        return InternalError("voxel listed twice");
-    } else if (IsBrickRef(ref)) {
-      if (brick != kNoBrick) return CorruptionError("a brick refers to a brick");
-      uint32_t id = ref & kBrickIdMask;
-      VOX_ASSIGN_OR_RETURN(BrickView b, store.FetchBrick(id));
-      VOX_RETURN_IF_ERROR(WalkCells(store, b.cells, 0, child_log2, c, id, out));
-    } else {
-      VOX_RETURN_IF_ERROR(WalkCells(store, pool, ref, child_log2, c, brick, out));
-    }
-  }
-  return OkStatus();
-}
-
-StatusOr<std::map<Ijk, StoredVoxel>> ReadAll(Store& store) {
-  std::map<Ijk, StoredVoxel> grid_voxels;
-  OctreeView v = store.view();
-  VOX_RETURN_IF_ERROR(WalkCells(store, v.top, 0, v.levels, Ijk{0, 0, 0}, kNoBrick, &grid_voxels));
-  return grid_voxels;
-}
 
 template <class GridT>
 std::map<Ijk, double> SourceOccupied(const GridT& grid, bool level_set, double cut) {

@@ -1,6 +1,7 @@
-// Helpers for the ingest tests: a temporary directory, writing VDB files, and
-// FakeStore, a StoreWriter that records what the ingest hands it (checking
-// the StoreWriter contract as it goes) and can fail on demand.
+// Helpers for the ingest tests: a temporary directory, writing VDB files,
+// reading every voxel of a store back, and FakeStore, a StoreWriter that
+// records what the ingest hands it (checking the StoreWriter contract as it
+// goes) and can fail on demand.
 // The fake writer's AddBrick is thread-safe, like StoreWriter's; the rest is
 // used by one test thread.
 #ifndef VOX_TESTS_INGEST_INGEST_TEST_UTIL_H_
@@ -21,6 +22,8 @@
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
+#include "core/octree.h"
+#include "core/status.h"
 #include "ingest/ingest.h"
 #include "storage/store.h"
 
@@ -50,6 +53,46 @@ class TempDir {
 
 inline void WriteVdb(const std::string& path, const openvdb::GridPtrVec& grids) {
   openvdb::io::File(path).write(grids);
+}
+
+// Where a store keeps a voxel's attributes.
+struct StoredVoxel {
+  uint32_t brick = kNoBrick, payload = 0;
+};
+
+// Walks the octree under `cell` of `pool` (grid coordinates `base`, 2^size_log2 voxels
+// per axis), adding its occupied voxels to `out`.
+inline Status WalkCells(Store& store, const Cell* pool, uint32_t cell, int size_log2, Ijk base,
+                        uint32_t brick, std::map<Ijk, StoredVoxel>* out) {
+  const int child_log2 = size_log2 - 1;
+  for (unsigned digit = 0; digit < 8; ++digit) {
+    NodeRef ref = pool[cell].child[digit];
+    if (ref == kEmptyRef) continue;
+    Ijk c{base[0] + (int64_t(digit & 1) << child_log2),
+          base[1] + (int64_t((digit >> 1) & 1) << child_log2),
+          base[2] + (int64_t((digit >> 2) & 1) << child_log2)};
+    if (child_log2 == 0) {
+      if (!out->emplace(c, StoredVoxel{brick, LeafPayload(ref)}).second)
+        return InternalError("voxel listed twice");
+    } else if (IsBrickRef(ref)) {
+      if (brick != kNoBrick) return CorruptionError("a brick refers to a brick");
+      uint32_t id = ref & kBrickIdMask;
+      VOX_ASSIGN_OR_RETURN(BrickView b, store.FetchBrick(id));
+      VOX_RETURN_IF_ERROR(WalkCells(store, b.cells, 0, child_log2, c, id, out));
+    } else {
+      VOX_RETURN_IF_ERROR(WalkCells(store, pool, ref, child_log2, c, brick, out));
+    }
+  }
+  return OkStatus();
+}
+
+// Every occupied voxel of a store (grid coordinates), found by walking its octree
+// (every brick fetched).
+inline StatusOr<std::map<Ijk, StoredVoxel>> ReadAll(Store& store) {
+  std::map<Ijk, StoredVoxel> grid_voxels;
+  OctreeView v = store.view();
+  VOX_RETURN_IF_ERROR(WalkCells(store, v.top, 0, v.levels, Ijk{0, 0, 0}, kNoBrick, &grid_voxels));
+  return grid_voxels;
 }
 
 struct FakeStore {

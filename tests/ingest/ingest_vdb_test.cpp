@@ -630,6 +630,19 @@ TEST_F(IngestTest, ClassAndOptionConflicts) {
   o = Opts(path, "ls");
   o.levels = "9";
   ExpectError(RunFake(o).stats, StatusCode::kInvalidArgument, {"--levels"});
+  for (int bits : {7, 17}) {
+    o = Opts(path, "ls");
+    o.normal_bits = bits;
+    ExpectError(RunFake(o).stats, StatusCode::kInvalidArgument, {"normal", "8..16"});
+  }
+  // The normal precision reaches the writer and the options recorded in the store.
+  o = Opts(path, "ls");
+  o.normal_bits = 12;
+  r = RunFake(o);
+  ASSERT_TRUE(r.stats.ok()) << r.stats.status().ToString();
+  EXPECT_EQ(r.store.options.normal_bits, 12);
+  EXPECT_NE(r.store.meta.build_options.find("normal_bits=12"), std::string::npos)
+      << r.store.meta.build_options;
 }
 
 TEST_F(IngestTest, ExistingTargetNeedsForce) {
