@@ -218,6 +218,92 @@ TEST(Octree, BrickErrorsReachTheCaller) {
   EXPECT_EQ(h.status().code(), StatusCode::kCorruption);
 }
 
+// A one-thread source that keeps what it lends in a small table (as the
+// renderer's per-thread table does); id 1000 or above fails.
+class LendingSource : public BrickSource {
+ public:
+  explicit LendingSource(BrickSource* base) : base_(base) {}
+  StatusOr<BrickView> FetchBrick(uint32_t id) override {
+    ++fetches;
+    return base_->FetchBrick(id);
+  }
+  bool lends() const override { return true; }
+  const BrickView* LendBrick(uint32_t id, Status* error) override {
+    ++lends_count;
+    if (fail) {
+      *error = IoError("brick " + std::to_string(id) + " of lent.vox: read failed");
+      return nullptr;
+    }
+    Slot& s = slots_[id % 4];
+    if (s.id != id || s.view.cells == nullptr) {
+      auto v = base_->FetchBrick(id);
+      if (!v.ok()) {
+        *error = v.status();
+        return nullptr;
+      }
+      s.id = id;
+      s.view = *v;
+    }
+    return &s.view;
+  }
+  int fetches = 0, lends_count = 0;
+  bool fail = false;
+
+ private:
+  struct Slot {
+    uint32_t id = 0;
+    BrickView view;
+  };
+  BrickSource* base_;
+  Slot slots_[4];
+};
+
+TEST(Octree, LendingSourceTracesLikeFetching) {
+  Rng rng(6);
+  auto built = MemoryOctree::Build(ToLeafPoints(DenseVoxels(rng, 0.05, {0, 0, 0}, 64)), 6, 3);
+  ASSERT_TRUE(built.ok());
+  LendingSource lending((*built).get());
+  OctreeView view = (*built)->view();
+  view.bricks = &lending;
+  for (int n1 : {6, 3, 2}) {
+    auto tf = DefaultTracer::Create((*built)->view(), n1);
+    auto tl = DefaultTracer::Create(view, n1);
+    ASSERT_TRUE(tf.ok() && tl.ok());
+    TraceCounters cf, cl;
+    for (int i = 0; i < 300; ++i) {
+      Ray r = RayFrom(rng, glm::dvec3(rng.Uniform(0, 64), rng.Uniform(0, 64), rng.Uniform(0, 64)));
+      std::vector<Hit> hf, hl;
+      ASSERT_TRUE(tf->Traverse(r, [&](const Hit& h) { hf.push_back(h); return hf.size() < 6; }, &cf).ok());
+      ASSERT_TRUE(tl->Traverse(r, [&](const Hit& h) { hl.push_back(h); return hl.size() < 6; }, &cl).ok());
+      ASSERT_EQ(hf.size(), hl.size());
+      for (size_t k = 0; k < hf.size(); ++k) {
+        EXPECT_EQ(ToVoxel(hf[k]), ToVoxel(hl[k]));
+        EXPECT_EQ(hf[k].t, hl[k].t);
+        EXPECT_EQ(hf[k].brick, hl[k].brick);
+        EXPECT_EQ(hf[k].payload, hl[k].payload);
+      }
+    }
+    EXPECT_EQ(cf.brick_fetches, cl.brick_fetches);
+    if (n1 < 6) EXPECT_GT(cl.brick_fetches, 0u);
+  }
+  EXPECT_EQ(lending.fetches, 0);  // every brick was lent, none fetched
+  EXPECT_GT(lending.lends_count, 0);
+  lending.fail = true;
+  auto tl = DefaultTracer::Create(view, 3);
+  ASSERT_TRUE(tl.ok());
+  bool failed = false;
+  for (int i = 0; i < 50 && !failed; ++i) {
+    Ray r = RayFrom(rng, glm::dvec3(rng.Uniform(0, 64), rng.Uniform(0, 64), rng.Uniform(0, 64)));
+    auto h = tl->FirstHit(r);
+    if (!h.ok()) {
+      failed = true;
+      EXPECT_EQ(h.status().code(), StatusCode::kIoError);
+      EXPECT_NE(h.status().message().find("lent.vox"), std::string::npos);
+    }
+  }
+  EXPECT_TRUE(failed);
+}
+
 TEST(Octree, TracerCreateRefusesBadSplits) {
   auto built = MemoryOctree::Build({{1, 2, 3, kEmptyRef}}, 30, 10);
   ASSERT_TRUE(built.ok());

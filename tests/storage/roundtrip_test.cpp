@@ -219,7 +219,20 @@ TEST_P(RoundTrip, TracesLikeMemoryOctree) {
     ASSERT_TRUE(ts.ok() && tm.ok()) << ts.status().ToString();
     for (const Ray& r : rays) {
       std::vector<Hit> hs, hm;
-      ASSERT_TRUE(ts->Traverse(r, [&](const Hit& h) { hs.push_back(h); return hs.size() < 8; }).ok());
+      ASSERT_TRUE(ts->Traverse(r, [&](const Hit& h) {
+                      // Read from the brick the traversal pins: as by id.
+                      auto ah = (*store)->HitAttributes(h);
+                      auto ai = (*store)->Attributes(h.brick, h.payload);
+                      EXPECT_TRUE(ah.ok() && ai.ok());
+                      EXPECT_EQ(h.brick_data == nullptr, h.brick == kNoBrick);
+                      if (ah.ok() && ai.ok()) {
+                        EXPECT_EQ(ah->normal, ai->normal);
+                        EXPECT_EQ(ah->density, ai->density);
+                        EXPECT_EQ(ah->color, ai->color);
+                      }
+                      hs.push_back(h);
+                      return hs.size() < 8;
+                    }).ok());
       ASSERT_TRUE(tm->Traverse(r, [&](const Hit& h) { hm.push_back(h); return hm.size() < 8; }).ok());
       ASSERT_EQ(hs.size(), hm.size()) << "split " << n1;
       total_hits += hs.size();

@@ -38,7 +38,7 @@ read -r user sys maxrss < "$times"
 cpu=$(awk -v u="$user" -v s="$sys" 'BEGIN{print u + s}')
 active=$(grep -o '[0-9]* active voxels read' "$log" | grep -o '^[0-9]*')
 occupied=$(grep -o '[0-9]* occupied voxels' "$log" | grep -o '^[0-9]*')
-vdb_bytes=$(stat -c %s "$vdb")
+vdb_bytes=$(stat -L -c %s "$vdb")  # -L: the file a symlink names
 store_bytes=$(du -sb "$out" | cut -f1)
 awk -v s="$start" -v e="$end" -v a="$active" -v o="$occupied" -v vb="$vdb_bytes" -v sb="$store_bytes" \
     -v pa="$peak_anon" -v pf="$peak_file" -v cpu="$cpu" -v mr="$maxrss" -v th="$threads" 'BEGIN {
