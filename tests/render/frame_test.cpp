@@ -14,7 +14,9 @@
 #include "render/exr.h"
 #include "render/merge.h"
 #include "render/progress.h"
+#include "render/store_volume.h"
 #include "tests/render/render_util.h"
+#include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
 
 namespace vox {
@@ -282,6 +284,72 @@ TEST_F(FrameTest, BrickAndAttributeErrorsStopTheRenderWithAMessage) {
     EXPECT_NE(s.message().find("tile ("), std::string::npos) << s.ToString();
     EXPECT_LT(stats.tiles, 24);
   }
+}
+
+// Two render threads on a store whose cache holds a few bricks: bricks are
+// evicted while the threads' brick tables still lend them to the tracers,
+// and the image is bit for bit the one rendered with a cache that holds all.
+TEST_F(FrameTest, TinyCacheRendersTheSameImage) {
+  StoreMeta meta = TestMeta(6, GridClass::kLevelSet);  // 8^3 bricks of 8^3 voxels
+  std::vector<MemoryVoxel> voxels;
+  for (int z = 0; z < 64; ++z)
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x) {
+        glm::dvec3 d(x - 31.5, y - 30.5, z - 32.5);
+        double r = glm::length(d);
+        if (r > 25 || r < 22) continue;
+        MemoryVoxel v;
+        v.x = uint64_t(x);
+        v.y = uint64_t(y);
+        v.z = uint64_t(z);
+        v.attr.normal = glm::vec3(d / r);
+        voxels.push_back(v);
+      }
+  ASSERT_TRUE(testing::WriteStore(Path("store"), meta, voxels).ok());
+  Camera cam;
+  cam.position = {90, 70, 100};
+  cam.look_at = {32, 32, 32};
+  cam.fov_deg = 50;
+  cam.width = 96;
+  cam.height = 80;
+  ASSERT_TRUE(cam.Finalize().ok());
+  std::map<std::string, std::vector<float>> images[2];
+  for (int tiny : {0, 1}) {
+    OpenOptions oo;
+    oo.cache_bytes = tiny ? (16u << 10) : (64u << 20);
+    auto vol = StoreVolume::Open(Path("store"), oo);
+    ASSERT_TRUE(vol.ok()) << vol.status().ToString();
+    RenderOptions ro;
+    ro.layers.normal = true;
+    auto r = Renderer::Create(vol->get(), cam, scene_, ro);  // shadows: secondary rays too
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    FrameOptions fo;
+    fo.exr_path = Path(tiny ? "tiny.exr" : "big.exr");
+    fo.threads = 2;
+    fo.tile_size = 8;
+    FrameStats stats;
+    Status s = RenderFrame(**r, vol->get(), fo, &stats);
+    ASSERT_TRUE(s.ok()) << s.ToString();
+    EXPECT_GT(stats.counters.rays[kRayShadow], 0u);
+    const CacheStats& c = stats.cache_end;
+    if (tiny) {
+      EXPECT_GT(c.evictions, 0u);
+      EXPECT_LE(c.bytes_resident, c.capacity);
+    } else {
+      EXPECT_EQ(c.evictions, 0u);
+    }
+    auto img = ReadExr(fo.exr_path);
+    ASSERT_TRUE(img.ok()) << img.status().ToString();
+    images[tiny] = img->pixels;
+  }
+  ASSERT_FALSE(images[0].empty());
+  for (const auto& [name, px] : images[0]) {
+    ASSERT_TRUE(images[1].count(name)) << name;
+    EXPECT_EQ(px, images[1][name]) << "channel " << name;
+  }
+  size_t hits = 0;
+  for (float a : images[0]["A"]) hits += a > 0;
+  EXPECT_GT(hits, 1000u);  // the sphere fills much of the frame
 }
 
 TEST(ProgressTest, LineShowsTilesRateCacheAndTimeLeft) {
