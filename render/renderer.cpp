@@ -81,8 +81,9 @@ class Renderer::LocalBricks : public BrickSource {
 
   // Table size for a cache of `capacity` bytes: 256 slots (a 64 x 64 tile's
   // rays enter a few dozen bricks; 256 measured 3-5% faster than 64) at 1 GiB,
-  // fewer for smaller caches, so the pins of a thread stay near 1/64 of the
-  // budget for bricks of 64 KiB (the sphere of the benchmark decodes to 24 KiB).
+  // fewer (down to 16) for smaller caches, so the pins of a thread stay near
+  // 1/64 of the budget for bricks of 64 KiB (the benchmark's sphere decodes to
+  // 24 KiB per brick).
   static int SlotBits(uint64_t capacity) {
     int bits = 4;
     while (bits < 8 && (uint64_t(1) << (bits + 1)) * (64u << 10) * 64 <= capacity) ++bits;
