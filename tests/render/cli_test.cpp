@@ -49,21 +49,8 @@ class CliTest : public ::testing::Test {
     meta.index_to_world = glm::scale(glm::dmat4(1.0), glm::dvec3(0.25));
     meta.source_file = "generated";
     meta.grid_name = "sphere";
-    std::vector<MemoryVoxel> voxels;
     // A sphere of radius 20 voxels centred on index (0,0,0): world radius 5.
-    for (int z = 0; z < 64; ++z)
-      for (int y = 0; y < 64; ++y)
-        for (int x = 0; x < 64; ++x) {
-          glm::dvec3 ijk(x - 32, y - 32, z - 32);
-          double r = glm::length(ijk);
-          if (r > 20 || r < 17) continue;
-          MemoryVoxel v;
-          v.x = uint64_t(x);
-          v.y = uint64_t(y);
-          v.z = uint64_t(z);
-          v.attr.normal = glm::vec3(ijk / std::max(r, 1e-9));
-          voxels.push_back(v);
-        }
+    std::vector<MemoryVoxel> voxels = testing::ShellVoxels(64, glm::dvec3(32), 17, 20);
     Status s = testing::WriteStore(Path("store"), meta, voxels);
     ASSERT_TRUE(s.ok()) << s.ToString();
   }

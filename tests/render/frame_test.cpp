@@ -291,20 +291,7 @@ TEST_F(FrameTest, BrickAndAttributeErrorsStopTheRenderWithAMessage) {
 // and the image is bit for bit the one rendered with a cache that holds all.
 TEST_F(FrameTest, TinyCacheRendersTheSameImage) {
   StoreMeta meta = TestMeta(6, GridClass::kLevelSet);  // 8^3 bricks of 8^3 voxels
-  std::vector<MemoryVoxel> voxels;
-  for (int z = 0; z < 64; ++z)
-    for (int y = 0; y < 64; ++y)
-      for (int x = 0; x < 64; ++x) {
-        glm::dvec3 d(x - 31.5, y - 30.5, z - 32.5);
-        double r = glm::length(d);
-        if (r > 25 || r < 22) continue;
-        MemoryVoxel v;
-        v.x = uint64_t(x);
-        v.y = uint64_t(y);
-        v.z = uint64_t(z);
-        v.attr.normal = glm::vec3(d / r);
-        voxels.push_back(v);
-      }
+  std::vector<MemoryVoxel> voxels = testing::ShellVoxels(64, {31.5, 30.5, 32.5}, 22, 25);
   ASSERT_TRUE(testing::WriteStore(Path("store"), meta, voxels).ok());
   Camera cam;
   cam.position = {90, 70, 100};

@@ -47,18 +47,7 @@ TEST(SlurmTest, JobArrayRendersAndMergesOneFrame) {
   fs::create_directories(dir);
   StoreMeta meta = testing::TestMeta(6, GridClass::kLevelSet, 0.1);
   meta.brick_level = 3;
-  std::vector<MemoryVoxel> voxels;
-  for (int z = 0; z < 64; ++z)
-    for (int y = 0; y < 64; ++y)
-      for (int x = 0; x < 64; ++x) {
-        glm::dvec3 p(x - 31.5, y - 31.5, z - 31.5);
-        double r = glm::length(p);
-        if (r > 25 || r < 22) continue;
-        MemoryVoxel v;
-        v.x = uint64_t(x), v.y = uint64_t(y), v.z = uint64_t(z);
-        v.attr.normal = glm::vec3(p / r);
-        voxels.push_back(v);
-      }
+  std::vector<MemoryVoxel> voxels = testing::ShellVoxels(64, glm::dvec3(31.5), 22, 25);
   const std::string store = (dir / "store").string();
   ASSERT_TRUE(testing::WriteStore(store, meta, voxels).ok());
   const std::string cam = (dir / "cam.json").string();

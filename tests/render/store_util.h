@@ -3,6 +3,8 @@
 #ifndef VOX_TESTS_RENDER_STORE_UTIL_H_
 #define VOX_TESTS_RENDER_STORE_UTIL_H_
 
+#include <algorithm>
+#include <glm/geometric.hpp>
 #include <map>
 #include <string>
 #include <tuple>
@@ -12,6 +14,27 @@
 #include "storage/store.h"
 
 namespace vox::testing {
+
+// The voxels of an n^3 grid whose distance from `centre` (in grid
+// coordinates, from the voxel's corner) lies in [r_in, r_out], with normals
+// pointing away from the centre: a sphere shell for end-to-end tests.
+inline std::vector<MemoryVoxel> ShellVoxels(int n, glm::dvec3 centre, double r_in, double r_out) {
+  std::vector<MemoryVoxel> voxels;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        glm::dvec3 d = glm::dvec3(x, y, z) - centre;
+        double r = glm::length(d);
+        if (r > r_out || r < r_in) continue;
+        MemoryVoxel v;
+        v.x = uint64_t(x);
+        v.y = uint64_t(y);
+        v.z = uint64_t(z);
+        v.attr.normal = glm::vec3(d / std::max(r, 1e-9));
+        voxels.push_back(v);
+      }
+  return voxels;
+}
 
 // `meta` as for MemoryVolume; the voxels are grid coordinates.
 inline Status WriteStore(const std::string& dir, StoreMeta meta,
