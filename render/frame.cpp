@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <mutex>
@@ -63,6 +64,7 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
   std::atomic<int64_t> cursor{begin};
   std::atomic<int64_t> done{0};
   std::atomic<uint64_t> rays{0};
+  std::atomic<uint64_t> brick_entries{0};  // bricks rays entered (traversal brick fetches)
   std::atomic<bool> abort{false};
   std::mutex err_mu;
   Status first_error;
@@ -78,9 +80,14 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
     s.tiles_done = done.load();
     s.tiles_total = end - begin;
     s.rays = rays.load();
+    // Hit rate over the bricks rays entered: those served by the threads'
+    // tables or the shared cache, against those paged in (the shared cache's
+    // own hits are few when the threads' tables serve most entries).
     CacheStats c = volume->cache_stats();
-    s.cache_hits = c.hits - stats->cache_start.hits;
-    s.cache_misses = c.misses - stats->cache_start.misses;
+    const uint64_t misses = c.misses - stats->cache_start.misses;
+    const uint64_t entries = std::max(brick_entries.load(), misses);
+    s.cache_hits = entries - misses;
+    s.cache_misses = misses;
     return s;
   };
 
@@ -96,6 +103,7 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
         const TileRect& rect = layout.order()[size_t(i)];
         uint64_t rays_before = 0;
         for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
+        const uint64_t entries_before = w.counters.trace.brick_fetches;
         Status s = renderer.RenderTile(rect, &w.buf, &w.counters, w.state.get());
         const auto tw = Clock::now();
         if (s.ok() && writer) s = writer->WriteTile(rect, w.buf);
@@ -111,6 +119,8 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
         uint64_t rays_after = 0;
         for (int k = 0; k < kNumRayKinds; ++k) rays_after += w.counters.rays[k];
         rays.fetch_add(rays_after - rays_before, std::memory_order_relaxed);
+        brick_entries.fetch_add(w.counters.trace.brick_fetches - entries_before,
+                                std::memory_order_relaxed);
         done.fetch_add(1, std::memory_order_relaxed);
         progress.Update(snapshot());
       }

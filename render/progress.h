@@ -23,7 +23,7 @@ ProgressMode ChooseProgressMode(FILE* stream, bool quiet);
 struct ProgressSnapshot {
   int64_t tiles_done = 0, tiles_total = 0;
   uint64_t rays = 0;
-  uint64_t cache_hits = 0, cache_misses = 0;
+  uint64_t cache_hits = 0, cache_misses = 0;  // bricks entered without / with paging in
 };
 
 class Progress {
