@@ -8,6 +8,9 @@
 namespace vox {
 
 StatusOr<Ray> ParseRayLine(std::string_view line) {
+  // Read as a C string below: a NUL would hide the rest of the line.
+  if (line.find('\0') != std::string_view::npos)
+    return InvalidArgumentError("the line contains a NUL byte");
   std::string s(line);
   const char* p = s.c_str();
   double v[6];

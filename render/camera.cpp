@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -30,14 +31,13 @@ Status Camera::Finalize(std::string_view source) {
   if (height < 1 || height > kMaxImageSide)
     return err("height", "is " + std::to_string(height) + "; it must be in 1.." +
                              std::to_string(kMaxImageSide));
-  glm::dvec3 f = look_at - position;
-  double flen = glm::length(f);
-  if (!(flen > 0) || !std::isfinite(flen))
+  const glm::dvec3 d = look_at - position;
+  if (!Finite(d)) return err("look_at", "is too far from position (their difference overflows)");
+  glm::dvec3 f, u;
+  if (!json_fields::UnitVector(d, &f))
     return err("look_at", "equals position: the view direction is undefined");
-  f /= flen;
-  double ulen = glm::length(up);
-  if (!(ulen > 0)) return err("up", "is the zero vector");
-  glm::dvec3 r = glm::cross(f, up / ulen);
+  if (!json_fields::UnitVector(up, &u)) return err("up", "is the zero vector");
+  glm::dvec3 r = glm::cross(f, u);
   double rlen = glm::length(r);
   if (!(rlen > 1e-9)) return err("up", "is parallel to the view direction (look_at - position)");
   r /= rlen;
@@ -53,7 +53,17 @@ Status Camera::Finalize(std::string_view source) {
       return err("ortho_width", "must be positive");
     scale_x_ = 0.5 * ortho_width;
   }
-  scale_y_ = scale_x_ * double(height) / double(width);
+  scale_y_ = scale_x_ * (double(height) / double(width));  // no overflow before the division
+  const char* field = projection == Projection::kPerspective ? "fov_deg" : "ortho_width";
+  const double tiny = std::numeric_limits<double>::min();
+  if (!(scale_x_ / double(width) >= tiny) || !(scale_y_ / double(height) >= tiny))
+    return err(field, "is too small: neighbouring pixels would see the same ray");
+  for (double x : {0.0, double(width)})
+    for (double y : {0.0, double(height)}) {
+      const WorldRay ray = PixelRay(x, y);
+      if (!Finite(ray.origin) || !Finite(ray.dir))
+        return err(field, "is too large: the image's corner rays are not finite");
+    }
   return OkStatus();
 }
 

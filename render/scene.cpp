@@ -68,10 +68,8 @@ Status ParseLight(const json& l, std::string_view file, const std::string& prefi
   if (type == "directional") {
     out->type = Light::Type::kDirectional;
     VOX_RETURN_IF_ERROR(jf::GetVec3(l, "direction", file, prefix, true, &out->direction));
-    double len = glm::length(out->direction);
-    if (!(len > 0))
+    if (!jf::UnitVector(out->direction, &out->direction))
       return jf::FieldError(file, jf::Join(prefix, "direction"), "is the zero vector");
-    out->direction /= len;
     if (l.contains("position"))
       return jf::FieldError(file, jf::Join(prefix, "position"),
                             "does not apply to a directional light");
@@ -113,6 +111,9 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
       return jf::FieldError(file, "background",
                             "must be [r,g,b] or {\"top\":[r,g,b], \"bottom\":[r,g,b]}");
     }
+    for (int a = 0; a < 3; ++a)
+      if (s.background_top[a] < 0 || s.background_bottom[a] < 0)
+        return jf::FieldError(file, "background", "must not have negative components");
   }
   VOX_RETURN_IF_ERROR(ReadColor(j, "ambient", file, "", &s.ambient));
   if (auto it = j.find("lights"); it != j.end()) {
@@ -139,6 +140,10 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
       VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(*box, {"min", "max"}, file, prefix + ".box"));
       VOX_RETURN_IF_ERROR(jf::GetVec3(*box, "min", file, prefix + ".box", true, &r.min));
       VOX_RETURN_IF_ERROR(jf::GetVec3(*box, "max", file, prefix + ".box", true, &r.max));
+      for (int a = 0; a < 3; ++a)
+        if (r.min[a] > r.max[a])
+          return jf::FieldError(file, prefix + ".box",
+                                "has min above max on axis " + std::string(1, "xyz"[a]));
       s.regions.push_back(r);
     }
   }

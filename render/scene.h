@@ -14,14 +14,16 @@
 //     "material": {"color":[r,g,b], "diffuse":kd, "specular":ks,
 //                  "shininess":n, "reflect":kr, "transmit":kt, "ior":eta},
 //     "materials": [ {"box":{"min":[x,y,z],"max":[x,y,z]}, ...material...} ],
-//         region overrides in world space: the first box holding the hit
-//         point gives the material; elsewhere "material" applies,
+//         region overrides in world space (min <= max on each axis): the
+//         first box holding the hit point gives the material; elsewhere
+//         "material" applies,
 //     "volume": {"absorption":sa, "scattering":ss, "color":[r,g,b]},
 //         per world unit, times the voxel density (fog volumes only),
 //     "max_depth": D,          reflection/refraction generations (0..16)
 //     "samples_per_pixel": S   (1..1024)
 //   }
-// A colour stored per voxel replaces the material colour. Surface colour =
+// Colours have no negative components. A colour stored per voxel replaces
+// the material colour. Surface colour =
 // (1 - reflect - transmit) * local + reflect * reflected + transmit *
 // refracted, where local = colour * (ambient + sum diffuse) + specular.
 //

@@ -4,6 +4,7 @@
 #ifndef VOX_RENDER_INTERNAL_JSON_FIELDS_H_
 #define VOX_RENDER_INTERNAL_JSON_FIELDS_H_
 
+#include <algorithm>
 #include <cmath>
 #include <glm/vec3.hpp>
 #include <initializer_list>
@@ -16,6 +17,17 @@
 namespace vox::json_fields {
 
 using nlohmann::json;
+
+// `v` scaled to unit length, through its largest component first so that
+// neither huge (1e200) nor tiny (1e-200) components overflow or vanish in
+// the length. False for the zero vector or a non-finite one.
+inline bool UnitVector(glm::dvec3 v, glm::dvec3* out) {
+  const double m = std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)});
+  if (!(m > 0) || !std::isfinite(m)) return false;
+  v /= m;
+  *out = v / std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
+  return true;
+}
 
 inline Status FieldError(std::string_view file, const std::string& field, const std::string& what) {
   return InvalidArgumentError(std::string(file) + ": field '" + field + "' " + what);

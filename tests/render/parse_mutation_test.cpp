@@ -8,10 +8,9 @@
 // must give a usable value: finite, within the documented ranges, and
 // accepted again after ToJson().
 //
-// Known bugs, found by this file and not fixed yet, are tagged kKnownBug: the
-// mutation campaigns count them without failing, and a DISABLED_KnownBug_*
-// test below holds the exact input. Enable that test (and drop the tag) when
-// the bug is fixed.
+// The three bugs this file found (a huge ortho_width giving non-finite rays,
+// a huge light direction becoming the zero vector, text after a NUL byte in
+// a ray line ignored) are fixed; their exact inputs are tests at the end.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -225,10 +224,6 @@ using namespace std::string_view_literals;
 constexpr std::string_view kJsonAlphabet = "{}[]\",:-.eE0123456789 \t\n\r\0"sv;
 constexpr std::string_view kRayAlphabet = "0123456789.eEpPxX+-nNaAiIfF \t\r\n#,\0"sv;
 
-// Prefix of a problem that is a known, reported bug (see the DISABLED_KnownBug_
-// tests at the end).
-const std::string kKnownBug = "[known bug] ";
-bool IsKnownBug(const std::string& problem) { return problem.rfind(kKnownBug, 0) == 0; }
 
 // ---------------------------------------------------------------------------
 // Value spans of a valid JSON seed, so that values can be swapped.
@@ -490,7 +485,6 @@ std::string CameraValueProblem(const Camera& parsed, const std::string& file) {
     return "camera basis is not orthogonal";
   if (!(glm::dot(f, c.look_at - c.position) > 0)) return "forward does not point at look_at";
   // Rays through the corners and the centre are finite and unit.
-  std::string known;
   const double w = c.width, h = c.height;
   for (const glm::dvec2& p : {glm::dvec2(0, 0), glm::dvec2(w, 0), glm::dvec2(0, h),
                               glm::dvec2(w, h), glm::dvec2(w / 2, h / 2)}) {
@@ -498,12 +492,6 @@ std::string CameraValueProblem(const Camera& parsed, const std::string& file) {
     const std::string what = "PixelRay(" + std::to_string(p.x) + ", " + std::to_string(p.y) +
                              ") is not a finite unit ray: origin " + Vec3Text(ray.origin) +
                              " dir " + Vec3Text(ray.dir);
-    // Known bug: Finalize() accepts an ortho_width near DBL_MAX, and the
-    // screen extent (scale_x_ * height / width) or the ray origins overflow.
-    if (c.projection == Projection::kOrthographic && !Finite(ray.origin) && NearUnit(ray.dir)) {
-      known = kKnownBug + "huge ortho_width: " + what;
-      continue;
-    }
     if (!Finite(ray.origin) || !NearUnit(ray.dir)) return what;
     if (!(glm::dot(ray.dir, f) > 0)) return "a pixel ray points away from the view";
   }
@@ -515,7 +503,7 @@ std::string CameraValueProblem(const Camera& parsed, const std::string& file) {
       (c.projection == Projection::kPerspective ? again->fov_deg != c.fov_deg
                                                 : again->ortho_width != c.ortho_width))
     return "ToJson() reads back a different camera: " + c.ToJson() + " vs " + again->ToJson();
-  return known;
+  return "";
 }
 
 // `accepted`, if given, tells whether the parse succeeded.
@@ -545,8 +533,9 @@ std::string MaterialProblem(const Material& m, const std::string& where) {
 }
 
 std::string SceneValueProblem(const Scene& s) {
-  std::string known;
-  if (!Finite(s.background_top) || !Finite(s.background_bottom)) return "non-finite background";
+  if (!Finite(s.background_top) || !Finite(s.background_bottom) ||
+      !NonNegative(s.background_top) || !NonNegative(s.background_bottom))
+    return "background " + Vec3Text(s.background_top) + " " + Vec3Text(s.background_bottom);
   if (!Finite(s.ambient) || !NonNegative(s.ambient)) return "ambient " + Vec3Text(s.ambient);
   if (s.default_lights && !s.lights.empty()) return "default_lights with explicit lights";
   for (size_t i = 0; i < s.lights.size(); ++i) {
@@ -555,20 +544,17 @@ std::string SceneValueProblem(const Scene& s) {
     if (!Finite(l.color) || !NonNegative(l.color)) return where + ".color " + Vec3Text(l.color);
     if (!std::isfinite(l.intensity) || l.intensity < 0) return where + ".intensity";
     if (!Finite(l.position)) return where + ".position";
-    // scene.h: "direction" is a unit vector. Known bug: a component above
-    // ~1.3e154 overflows glm::length() to inf, and dividing by it gives the
-    // zero vector, a light that silently lights nothing.
-    if (l.type == Light::Type::kDirectional && l.direction == glm::dvec3(0.0)) {
-      known = kKnownBug + where + ".direction became the zero vector";
-      continue;
-    }
+    // scene.h: "direction" is a unit vector.
     if (l.type == Light::Type::kDirectional && !NearUnit(l.direction))
       return where + ".direction is not a unit vector: " + Vec3Text(l.direction);
   }
   if (std::string p = MaterialProblem(s.material, "material"); !p.empty()) return p;
   for (size_t i = 0; i < s.regions.size(); ++i) {
     const std::string where = "materials[" + std::to_string(i) + "]";
-    if (!Finite(s.regions[i].min) || !Finite(s.regions[i].max)) return where + ".box";
+    const MaterialRegion& reg = s.regions[i];
+    if (!Finite(reg.min) || !Finite(reg.max) || reg.min.x > reg.max.x || reg.min.y > reg.max.y ||
+        reg.min.z > reg.max.z)
+      return where + ".box";
     if (std::string p = MaterialProblem(s.regions[i].material, where); !p.empty()) return p;
   }
   const VolumeMedium& v = s.volume;
@@ -580,11 +566,10 @@ std::string SceneValueProblem(const Scene& s) {
   if (s.samples_per_pixel < 1 || s.samples_per_pixel > 1024)
     return "samples_per_pixel " + std::to_string(s.samples_per_pixel);
   // The scene's own JSON (written into EXR headers) is accepted again
-  // (a zero light direction, the known bug above, is not).
   StatusOr<Scene> again = ParseScene(s.ToJson(), "roundtrip.json");
-  if (!again.ok() && known.empty())
+  if (!again.ok())
     return "ToJson() does not parse back: " + again.status().message();
-  return known;
+  return "";
 }
 
 std::string SceneProblem(const std::string& text, const std::string& file,
@@ -616,7 +601,8 @@ std::string RayProblem(const std::string& line, bool* accepted = nullptr) {
     const std::string& m = s.message();
     if (m.find("expected 6 numbers") == std::string::npos &&
         m.find("is not a number") == std::string::npos &&
-        m.find("more than 6 numbers") == std::string::npos)
+        m.find("more than 6 numbers") == std::string::npos &&
+        m.find("NUL byte") == std::string::npos)
       return "error does not say what is wrong: " + m;
     return "";
   }
@@ -648,18 +634,7 @@ std::string RayProblem(const std::string& line, bool* accepted = nullptr) {
     else if (!SameDouble(want, got[k]))
       mismatch = "number " + std::to_string(k + 1) + " read wrongly";
   }
-  if (!mismatch.empty()) {
-    // Known bug: ParseRayLine stops at a NUL byte and ignores the rest of
-    // the line, so "1 2 3 4 5 6\0junk" is accepted.
-    const size_t nul = line.find('\0');
-    if (nul == std::string::npos) return mismatch;
-    StatusOr<Ray> head = ParseRayLine(line.substr(0, nul));
-    bool same = head.ok();
-    for (int a = 0; a < 3 && same; ++a)
-      same = SameDouble(head->origin[a], r.origin[a]) && SameDouble(head->dir[a], r.dir[a]);
-    if (!same) return mismatch;
-    return kKnownBug + "text after a NUL byte ignored: " + mismatch;
-  }
+  if (!mismatch.empty()) return mismatch;
   // ValidateRay refuses NaN, infinities and a zero direction, with a message.
   const bool bad = !Finite(r.origin) || !Finite(r.dir) || r.dir == glm::dvec3(0.0);
   const Status v = ValidateRay(r);
@@ -681,11 +656,6 @@ class Campaign {
     ++count_;
     accepted_ += accepted;
     if (problem.empty()) return;
-    if (IsKnownBug(problem)) {
-      if (known_ == 0) known_example_ = problem + "\n    input: " + Quote(input);
-      ++known_;
-      return;
-    }
     if (failures_.size() < 8) failures_.push_back(problem + "\n    input: " + Quote(input));
     ++failed_;
   }
@@ -696,15 +666,13 @@ class Campaign {
     EXPECT_EQ(failed_, 0u) << name_ << ": " << failed_ << " of " << count_
                            << " mutants broke the promise; first ones:\n"
                            << all;
-    std::printf("[ %s ] %zu mutants checked (%zu accepted), %zu failed, %zu hit known bugs\n",
-                name_.c_str(), count_, accepted_, failed_, known_);
-    if (known_ > 0) std::printf("  first known bug: %s\n", known_example_.c_str());
+    std::printf("[ %s ] %zu mutants checked (%zu accepted), %zu failed\n", name_.c_str(), count_,
+                accepted_, failed_);
   }
 
  private:
   std::string name_;
-  std::string known_example_;
-  size_t count_ = 0, accepted_ = 0, failed_ = 0, known_ = 0;
+  size_t count_ = 0, accepted_ = 0, failed_ = 0;
   std::vector<std::string> failures_;
 };
 
@@ -857,13 +825,13 @@ TEST(ParseMutationTest, DeepNesting) {
   }
 }
 
-// Known bugs, with the exact inputs the campaigns found. Each expectation is
-// the promise (a clear error, or a usable value); each fails today.
+// The bugs the campaigns found, with their exact inputs (each failed before
+// its fix).
 
-// render/camera.cpp, Camera::Finalize: an ortho_width near DBL_MAX is
-// accepted, then scale_y_ = scale_x_ * height / width overflows before the
-// division (and origins can overflow too), so PixelRay returns NaN/inf origins.
-TEST(ParseMutationTest, DISABLED_KnownBug_HugeOrthoWidthGivesNonFiniteRays) {
+// render/camera.cpp, Camera::Finalize: scale_y_ = scale_x_ * height / width
+// overflowed before the division for an ortho_width near DBL_MAX, and
+// PixelRay returned NaN/inf origins.
+TEST(ParseMutationTest, HugeOrthoWidthGivesFiniteRays) {
   const char* const inputs[] = {
       R"({"position":[0,0,1], "look_at":[0,0,0], "projection":"orthographic", "ortho_width":1e308, "width":4, "height":4})",
       R"({"projection":"orthographic", "position":[3,-2,5], "look_at":[-1,4,0.5], "up":[0,0,1], "ortho_width":1e308, "width":640, "height":480})"};
@@ -871,17 +839,16 @@ TEST(ParseMutationTest, DISABLED_KnownBug_HugeOrthoWidthGivesNonFiniteRays) {
 }
 
 // render/scene.cpp, ParseLight: glm::length() of a direction with a component
-// above ~1.3e154 overflows to inf; dividing by it leaves the zero vector (no
-// error), the light then lights nothing, and Scene::ToJson() writes a
-// direction that ParseScene refuses.
-TEST(ParseMutationTest, DISABLED_KnownBug_HugeLightDirectionBecomesZero) {
+// above ~1.3e154 overflowed to inf, and dividing by it left the zero vector:
+// a light that lit nothing, and a Scene::ToJson() that ParseScene refused.
+TEST(ParseMutationTest, HugeLightDirectionStaysAUnitVector) {
   const char* t = R"({"lights":[{"type":"directional", "direction":[1e200,0,0]}]})";
   EXPECT_EQ(SceneProblem(t, "scene.json"), "") << t;
 }
 
-// core/ray_text.cpp, ParseRayLine: the line is read as a C string, so
-// anything after a NUL byte is ignored and "1 2 3 4 5 6\0junk" is accepted.
-TEST(ParseMutationTest, DISABLED_KnownBug_RayLineIgnoresTextAfterNul) {
+// core/ray_text.cpp, ParseRayLine: the line was read as a C string, so
+// anything after a NUL byte was ignored and "1 2 3 4 5 6\0junk" accepted.
+TEST(ParseMutationTest, RayLineWithANulByteIsRefused) {
   for (std::string_view t : {"1 2 3 4 5 6\0junk"sv, "1 2 3 4 5 6\0 7"sv})
     EXPECT_EQ(RayProblem(std::string(t)), "") << Quote(t);
 }
