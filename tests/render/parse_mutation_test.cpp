@@ -25,6 +25,7 @@
 #include <functional>
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
+#include <iterator>
 #include <optional>
 #include <random>
 #include <string>
@@ -49,34 +50,22 @@ const char* const kCameraOrthographic =
     R"({"position":[1,2,10], "look_at":[1,2,0], "ortho_width":8, "width":8, "height":4, "projection":"orthographic"})";
 const char* const kCameraMinimal =
     R"({"position":[0,0,1], "look_at":[0,0,0], "fov_deg":40, "width":4, "height":4})";
-// scripts/demo/cam.json.
-const char* const kCameraDemo = R"({
-  "position": [
-    1.1,
-    0.9,
-    3.0
-  ],
-  "look_at": [
-    0.0,
-    -0.05,
-    0.0
-  ],
-  "up": [
-    0,
-    1,
-    0
-  ],
-  "fov_deg": 36,
-  "width": 1024,
-  "height": 768,
-  "projection": "perspective"
-})";
-// An oblique orthographic camera with a z-up frame.
 const char* const kCameraOblique =
     R"({"projection":"orthographic", "position":[3,-2,5], "look_at":[-1,4,0.5], "up":[0,0,1], "ortho_width":2.5, "width":640, "height":480})";
 
-const char* const kCameraSeeds[] = {kCameraPerspective, kCameraOrthographic, kCameraMinimal,
-                                    kCameraDemo, kCameraOblique};
+// The demo's own files (scripts/demo/), read where the source tree has them.
+std::string DemoFile(const char* name) {
+  const std::string path = std::string(VOX_DEMO_DIR) + "/" + name;
+  std::ifstream in(path, std::ios::binary);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (text.empty()) ADD_FAILURE() << "cannot read " << path;
+  return text;
+}
+
+std::vector<std::string> CameraSeeds() {
+  return {kCameraPerspective, kCameraOrthographic, kCameraMinimal, DemoFile("cam.json"),
+          kCameraOblique};
+}
 
 // From tests/render/camera_scene_test.cpp.
 const char* const kSceneFull = R"({
@@ -88,101 +77,14 @@ const char* const kSceneFull = R"({
     "volume": {"absorption":0.2, "scattering":0.7},
     "max_depth": 3, "samples_per_pixel": 4})";
 const char* const kSceneNoLights = R"({"lights": []})";
-// scripts/demo/scene.json.
-const char* const kSceneDemo = R"({
-  "background": {
-    "top": [
-      0.36,
-      0.42,
-      0.55
-    ],
-    "bottom": [
-      0.1,
-      0.1,
-      0.12
-    ]
-  },
-  "ambient": [
-    0.1,
-    0.1,
-    0.12
-  ],
-  "lights": [
-    {
-      "type": "directional",
-      "direction": [
-        -0.5,
-        -1.0,
-        -0.6
-      ],
-      "color": [
-        1.0,
-        0.95,
-        0.85
-      ],
-      "intensity": 1.0,
-      "shadows": true
-    },
-    {
-      "type": "point",
-      "position": [
-        -1.5,
-        0.8,
-        1.5
-      ],
-      "color": [
-        0.5,
-        0.6,
-        0.9
-      ],
-      "intensity": 2.0,
-      "shadows": false
-    }
-  ],
-  "material": {
-    "color": [
-      0.85,
-      0.55,
-      0.35
-    ],
-    "diffuse": 0.85,
-    "specular": 0.2,
-    "shininess": 30
-  },
-  "materials": [
-    {
-      "box": {
-        "min": [
-          0.14,
-          -0.41,
-          -0.21
-        ],
-        "max": [
-          0.76,
-          0.21,
-          0.41
-        ]
-      },
-      "color": [
-        0.75,
-        0.8,
-        0.85
-      ],
-      "diffuse": 0.5,
-      "specular": 0.6,
-      "shininess": 80,
-      "reflect": 0.45
-    }
-  ],
-  "max_depth": 3,
-  "samples_per_pixel": 1
-})";
 // The fields the others leave out: background as one colour, a tinted
 // volume, transmission, the range limits of max_depth and samples_per_pixel.
 const char* const kSceneEdges =
     R"({"background":[0.2,0.3,0.4], "ambient":[0,0,0], "volume":{"absorption":0,"scattering":2,"color":[1,0.9,0.8]}, "lights":[{"type":"point","position":[0,5,0],"intensity":3,"color":[2,2,2]}], "material":{"transmit":0.5,"reflect":0.5,"ior":1.33}, "max_depth":16, "samples_per_pixel":1024})";
 
-const char* const kSceneSeeds[] = {kSceneFull, kSceneNoLights, kSceneDemo, kSceneEdges};
+std::vector<std::string> SceneSeeds() {
+  return {kSceneFull, kSceneNoLights, DemoFile("scene.json"), kSceneEdges};
+}
 
 // Ray lines: decimal, C99 hex floats, odd spacing, a CRLF ending.
 const char* const kRaySeeds[] = {
@@ -717,7 +619,7 @@ void RunJsonCampaign(Campaign* campaign, const std::vector<Seed>& seeds, const J
 
 TEST(ParseMutationTest, CameraJson) {
   std::vector<Seed> seeds;
-  for (const char* s : kCameraSeeds) seeds.push_back(MakeCameraSeed(s));
+  for (const std::string& s : CameraSeeds()) seeds.push_back(MakeCameraSeed(s));
   Campaign campaign("camera");
   RunJsonCampaign(&campaign, seeds, [](const std::string& t, const std::string& f, bool* a) {
     return CameraProblem(t, f, a);
@@ -727,7 +629,7 @@ TEST(ParseMutationTest, CameraJson) {
 
 TEST(ParseMutationTest, SceneJson) {
   std::vector<Seed> seeds;
-  for (const char* s : kSceneSeeds) seeds.push_back(MakeSeed(s));
+  for (const std::string& s : SceneSeeds()) seeds.push_back(MakeSeed(s));
   for (const Seed& s : seeds) {
     StatusOr<Scene> scene = ParseScene(s.text, "seed.json");
     ASSERT_TRUE(scene.ok()) << scene.status().ToString();
@@ -780,10 +682,10 @@ TEST(ParseMutationTest, RayLines) {
 TEST(ParseMutationTest, LoadNamesThePath) {
   const std::string dir = ::testing::TempDir();
   Mutator m(kRngSeed + 2);
+  const std::vector<std::string> cameras = CameraSeeds(), scenes = SceneSeeds();
   for (int i = 0; i < 40; ++i) {
     const bool camera = i % 2 == 0;
-    std::string t = camera ? kCameraSeeds[m.Below(std::size(kCameraSeeds))]
-                           : kSceneSeeds[m.Below(std::size(kSceneSeeds))];
+    std::string t = camera ? cameras[m.Below(cameras.size())] : scenes[m.Below(scenes.size())];
     if (i >= 4)  // the first ones load unmodified seeds
       for (size_t j = 1 + m.Below(3); j > 0; --j) m.MutateBytes(&t, kJsonAlphabet);
     const std::string path =
