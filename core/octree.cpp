@@ -1,6 +1,7 @@
 #include "core/octree.h"
 
 #include <algorithm>
+#include <utility>
 #include <string>
 
 namespace vox {
@@ -51,6 +52,33 @@ bool MortonLess(const LeafPoint& a, const LeafPoint& b) {
   }
 }
 
+void SortMorton(std::vector<LeafPoint>* points) {
+  std::vector<LeafPoint>& p = *points;
+  if (p.size() < 2) return;
+  // One pass: do all coordinates fit 21 bits, and are the keys in order?
+  uint64_t bits = p[0].x | p[0].y | p[0].z;
+  uint64_t prev = MortonKey21(p[0].x, p[0].y, p[0].z);
+  bool sorted = true;
+  for (size_t i = 1; i < p.size(); ++i) {
+    bits |= p[i].x | p[i].y | p[i].z;
+    const uint64_t key = MortonKey21(p[i].x, p[i].y, p[i].z);
+    sorted = sorted && !(key < prev);
+    prev = key;
+  }
+  if (bits >> 21 == 0) {
+    if (sorted) return;
+    std::vector<std::pair<uint64_t, size_t>> keyed(p.size());
+    for (size_t i = 0; i < p.size(); ++i) keyed[i] = {MortonKey21(p[i].x, p[i].y, p[i].z), i};
+    std::sort(keyed.begin(), keyed.end());  // ties by position: stable
+    std::vector<LeafPoint> out(p.size());
+    for (size_t k = 0; k < keyed.size(); ++k) out[k] = p[keyed[k].second];
+    p.swap(out);
+    return;
+  }
+  if (!std::is_sorted(p.begin(), p.end(), MortonLess))
+    std::stable_sort(p.begin(), p.end(), MortonLess);
+}
+
 std::vector<Cell> BuildCells(std::span<const LeafPoint> points, int levels) {
   std::vector<Cell> cells;
   if (points.empty()) {
@@ -75,7 +103,7 @@ StatusOr<std::unique_ptr<MemoryOctree>> MemoryOctree::Build(std::vector<LeafPoin
       return InvalidArgumentError("voxel (" + std::to_string(v.x) + "," + std::to_string(v.y) +
                                   "," + std::to_string(v.z) + ") outside a 2^" +
                                   std::to_string(levels) + " grid");
-  std::sort(voxels.begin(), voxels.end(), MortonLess);
+  SortMorton(&voxels);
   voxels.erase(std::unique(voxels.begin(), voxels.end(),
                            [](const LeafPoint& a, const LeafPoint& b) {
                              return a.x == b.x && a.y == b.y && a.z == b.z;

@@ -116,6 +116,12 @@ inline uint64_t MortonKey21(uint64_t x, uint64_t y, uint64_t z) {
 // `levels` need not be known: coordinates of up to 64 bits compare correctly.
 bool MortonLess(const LeafPoint& a, const LeafPoint& b);
 
+// Puts `points` in MortonLess order, stably (equal points keep their order).
+// Points whose coordinates all fit 21 bits are ordered by MortonKey21; points
+// already in order cost one pass over them and no allocation, so a producer
+// that hands over sorted points (ingest) is never sorted twice.
+void SortMorton(std::vector<LeafPoint>* points);
+
 // Builds the cell pool of a `levels`-level octree over `points`, which must be
 // sorted by MortonLess, unique, and have coordinates < 2^levels. Each point's
 // `ref` is stored at the last level. An empty span gives one empty root cell.

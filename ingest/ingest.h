@@ -9,11 +9,8 @@
 // gradient in index space), fog volumes the density, and `color_grid` (a
 // vec3 grid) an RGB colour sampled at each occupied voxel.
 //
-// Placement: origin = occupied bbox min aligned down to the brick size
-// 2^(levels - brick_level); levels = the smallest N that covers the bbox.
-// "auto" chooses 32^3 bricks (5 brick levels), at least one level above
-// them, and at most 20 levels above them (more brick levels for huge grids).
-// An empty grid (nothing occupied) makes a valid empty store.
+// Placement (levels, origin): see ingest/placement.h. An empty grid (nothing
+// occupied) makes a valid empty store.
 //
 // OpenVDB stays inside this library: nothing here includes it, and no
 // OpenVDB exception crosses Ingest(); every failure is a Status naming the
@@ -33,6 +30,7 @@
 #include <string_view>
 
 #include "core/status.h"
+#include "ingest/placement.h"
 #include "storage/store.h"
 
 namespace vox {
@@ -51,24 +49,6 @@ struct IngestOptions {
   bool force = false;       // replace an existing store
   std::string command_line; // recorded in the store's build_options
 };
-
-// Where the levels come from: `levels` "auto" or "N1+N2". Exposed for tests.
-struct LevelsChoice {
-  bool automatic = true;
-  int brick_level = 0;  // N1 when !automatic
-  int brick_depth = 0;  // N2 when !automatic: levels inside a brick
-};
-StatusOr<LevelsChoice> ParseLevels(std::string_view text);
-
-// Integer placement of an occupied index bbox (inclusive) under a choice.
-// Exposed for tests. For an empty bbox (min > max) gives origin 0.
-struct Placement {
-  int64_t origin[3] = {0, 0, 0};
-  int levels = 0;
-  int brick_level = 0;
-};
-StatusOr<Placement> PlaceGrid(const int64_t bbox_min[3], const int64_t bbox_max[3],
-                              const LevelsChoice& choice);
 
 struct IngestStats {
   StoreMeta meta;                   // what was handed to the writer (counts as far as known)

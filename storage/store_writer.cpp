@@ -47,28 +47,12 @@ ZSTD_CCtx* ThreadCCtx() {
   return cctx.get();
 }
 
-// Orders `voxels` as MortonLess would: by a 63-bit key (digit x | y << 1 |
-// z << 2 per level) when coordinates fit 21 bits, else by MortonLess. The
-// points' refs are the voxels' indices.
-std::vector<LeafPoint> MortonOrder(const std::vector<BrickVoxel>& voxels, int depth) {
+// The voxels as points in Morton order; each point's ref is its voxel's index.
+std::vector<LeafPoint> MortonOrder(const std::vector<BrickVoxel>& voxels) {
   std::vector<LeafPoint> pts(voxels.size());
-  if (depth <= 21) {
-    std::vector<std::pair<uint64_t, uint32_t>> keyed(voxels.size());
-    for (size_t i = 0; i < voxels.size(); ++i) {
-      const BrickVoxel& v = voxels[i];
-      keyed[i] = {MortonKey21(v.x, v.y, v.z), uint32_t(i)};
-    }
-    // Writers that already hand voxels over in Morton order pay no sort.
-    if (!std::is_sorted(keyed.begin(), keyed.end())) std::sort(keyed.begin(), keyed.end());
-    for (size_t k = 0; k < keyed.size(); ++k) {
-      const BrickVoxel& v = voxels[keyed[k].second];
-      pts[k] = {v.x, v.y, v.z, NodeRef(keyed[k].second)};
-    }
-    return pts;
-  }
   for (size_t i = 0; i < voxels.size(); ++i)
     pts[i] = {voxels[i].x, voxels[i].y, voxels[i].z, NodeRef(i)};
-  std::sort(pts.begin(), pts.end(), MortonLess);
+  SortMorton(&pts);  // voxels handed over in Morton order (ingest's) cost one pass
   return pts;
 }
 
@@ -150,7 +134,7 @@ class StoreWriterImpl : public StoreWriter {
     }
 
     // Morton order; payload k is the k-th voxel in that order.
-    std::vector<LeafPoint> pts = MortonOrder(voxels, depth_);
+    std::vector<LeafPoint> pts = MortonOrder(voxels);
     std::vector<VoxelAttributes> attrs(pts.size());
     for (size_t k = 0; k < pts.size(); ++k) {
       if (k > 0 && pts[k].x == pts[k - 1].x && pts[k].y == pts[k - 1].y && pts[k].z == pts[k - 1].z)
@@ -248,21 +232,23 @@ class StoreWriterImpl : public StoreWriter {
     std::vector<LeafPoint> pts;
     std::string top_attr;
     if (depth_ == 0) {
-      std::sort(top_voxels_.begin(), top_voxels_.end(),
-                [](const auto& a, const auto& b) { return MortonLess(a.first, b.first); });
-      std::vector<VoxelAttributes> attrs;
-      for (size_t k = 0; k < top_voxels_.size(); ++k) {
-        LeafPoint p = top_voxels_[k].first;
-        p.ref = MakeLeafRef(uint32_t(k));
-        pts.push_back(p);
-        attrs.push_back(top_voxels_[k].second);
+      pts.resize(top_voxels_.size());
+      for (size_t i = 0; i < top_voxels_.size(); ++i) {
+        pts[i] = top_voxels_[i].first;
+        pts[i].ref = NodeRef(i);
+      }
+      SortMorton(&pts);
+      std::vector<VoxelAttributes> attrs(pts.size());
+      for (size_t k = 0; k < pts.size(); ++k) {
+        attrs[k] = top_voxels_[pts[k].ref].second;
+        pts[k].ref = MakeLeafRef(uint32_t(k));
       }
       WriteAttributes(attrs, flags_, &top_attr, options_.normal_bits);
     } else {
       std::vector<LeafPoint> order(entries_.size());
       for (size_t i = 0; i < entries_.size(); ++i)
         order[i] = {entries_[i].x, entries_[i].y, entries_[i].z, NodeRef(i)};
-      std::sort(order.begin(), order.end(), MortonLess);
+      SortMorton(&order);
       std::vector<BrickEntry> sorted(entries_.size());
       for (size_t id = 0; id < order.size(); ++id) {
         sorted[id] = entries_[order[id].ref];

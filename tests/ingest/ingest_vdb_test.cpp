@@ -415,48 +415,6 @@ TEST_F(IngestTest, ExplicitLevelsAndThreads) {
   EXPECT_TRUE(r.store.bricks.empty());
 }
 
-TEST(PlacementTest, ParseLevels) {
-  EXPECT_TRUE(ParseLevels("auto")->automatic);
-  auto c = ParseLevels("12+5");
-  ASSERT_TRUE(c.ok());
-  EXPECT_FALSE(c->automatic);
-  EXPECT_EQ(c->brick_level, 12);
-  EXPECT_EQ(c->brick_depth, 5);
-  for (const char* bad : {"", "12", "12+", "+5", "0+5", "5+0", "21+5", "5+21", "a+b", "20+20+1",
-                          "-1+5", "12 + 5", "Auto"})
-    EXPECT_FALSE(ParseLevels(bad).ok()) << bad;
-  EXPECT_TRUE(ParseLevels("20+20").ok());
-}
-
-TEST(PlacementTest, AutoPlacement) {
-  LevelsChoice a;
-  {
-    int64_t lo[3] = {-1, -1, -1}, hi[3] = {0, 0, 0};  // straddles an aligned boundary
-    auto p = PlaceGrid(lo, hi, a);
-    ASSERT_TRUE(p.ok());
-    EXPECT_EQ(p->origin[0], -32);
-    EXPECT_EQ(p->levels, 6);
-    EXPECT_EQ(p->brick_level, 1);
-  }
-  {
-    int64_t lo[3] = {-1000, 0, 5}, hi[3] = {1000, 10, 5};
-    auto p = PlaceGrid(lo, hi, a);
-    ASSERT_TRUE(p.ok());
-    EXPECT_EQ(p->origin[0], -1024);
-    EXPECT_EQ(p->origin[2], 0);
-    EXPECT_EQ(p->levels, 11);  // 2025 voxels from the origin
-    EXPECT_EQ(p->brick_level, 6);
-  }
-  {
-    // OpenVDB's whole index range: 2^32 voxels; bricks deepen so the top keeps 20 levels.
-    int64_t lo[3] = {INT32_MIN, 0, 0}, hi[3] = {INT32_MAX, 0, 0};
-    auto p = PlaceGrid(lo, hi, a);
-    ASSERT_TRUE(p.ok());
-    EXPECT_EQ(p->levels, 32);
-    EXPECT_EQ(p->brick_level, 20);
-  }
-}
-
 // ---------------------------------------------------------------------------
 // Bad input: each a clear error naming the problem and the file.
 

@@ -1,0 +1,488 @@
+// Brick extraction: the ingest of one float or double grid. See grid_ingest.h.
+//
+// How it streams. The file is opened with OpenVDB's delayed loading: reading
+// the grid loads its tree topology (nodes and active masks) but leaves every
+// leaf buffer on disk (memory-mapped) until a value is read. Values are only
+// ever read through private copies of leaf buffers (leaf_values.h), so the
+// tree itself stays topology-only for the whole ingest. Then:
+//  1. Topology pass: list the leaves with active voxels (and their node box) and
+//     the active tiles; no voxel values are read.
+//  2. Exact occupied bbox: scan the leaves from each of the 6 sides in order
+//     of their node box until no further leaf can move the bound; each
+//     scanned leaf is decoded and dropped. Usually a few hundred leaves; all
+//     of them when nothing is occupied.
+//  3. Placement (origin, levels), the StoreWriter, and the brick map: brick
+//     coordinate -> the leaves and tiles that overlap it.
+//  4. Bricks go through a TBB pipeline: a parallel stage decodes the brick's
+//     leaves (and, for the gradient, the face neighbours it touches), builds
+//     its voxels (voxel_builder.h) in Morton order and hands them to the
+//     writer (which compresses in the calling thread); a serial in-order stage
+//     keeps the books. Peak memory: the topology + the bricks in flight (2 per
+//     thread). Leaves on a brick's faces are decoded by both bricks (a few %
+//     of CPU).
+#include "ingest/internal/grid_ingest.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+
+#include "core/octree.h"
+#include "ingest/internal/leaf_values.h"
+#include "ingest/internal/voxel_builder.h"
+
+namespace vox::ingest_internal {
+namespace {
+
+using openvdb::Coord;
+using openvdb::CoordBBox;
+
+double Now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+std::string Quote(const std::string& s) { return "'" + s + "'"; }
+
+template <class GridT>
+class GridIngest {
+ public:
+  using TreeT = typename GridT::TreeType;
+  using LeafT = typename TreeT::LeafNodeType;
+  using ValueT = typename GridT::ValueType;
+
+  GridIngest(GridT& grid, Context& cx) : grid_(grid), tree_(grid.tree()), cx_(cx) {}
+
+  Status Run() {
+    const bool level_set = cx_.meta.grid_class == GridClass::kLevelSet;
+    level_set_ = level_set;
+    iso_ = ValueT(cx_.meta.isovalue);
+    threshold_ = ValueT(cx_.meta.threshold);
+
+    // 1. Topology.
+    double t0 = Now();
+    uint64_t leaf_count = 0;
+    for (auto it = tree_.beginLeaf(); it; ++it) {
+      LeafT* leaf = it.getLeaf();
+      ++leaf_count;
+      if (leaf->isEmpty()) continue;  // no active voxel
+      LeafInfo li;
+      li.leaf = leaf;
+      li.active = leaf->getNodeBoundingBox();  // bounds the active voxels; no per-voxel scan
+      leaves_.push_back(li);
+    }
+    {
+      auto it = tree_.cbeginValueOn();
+      it.setMaxDepth(TreeT::ValueOnCIter::LEAF_DEPTH - 1);  // tiles only
+      for (; it; ++it) {
+        if (!it.isTileValue()) continue;
+        ++cx_.stats->active_tiles;
+        if (!Occupied(*it)) continue;
+        CoordBBox b;
+        it.getBoundingBox(b);
+        tiles_.push_back({b, *it});
+        cx_.stats->occupied_tile_voxels += b.volume();
+      }
+    }
+    cx_.stats->leaf_nodes = leaf_count;
+    cx_.stats->active_voxels = tree_.activeVoxelCount();
+    cx_.stats->seconds_open += Now() - t0;
+    Message("grid " + Quote(cx_.meta.grid_name) + ": " + std::to_string(leaf_count) +
+            " leaf nodes, " + std::to_string(cx_.stats->active_tiles) + " active tiles, " +
+            std::to_string(cx_.stats->active_voxels) + " active voxels");
+
+    // 2. Exact occupied bbox.
+    t0 = Now();
+    CoordBBox occ = OccupiedBBox();
+    cx_.stats->seconds_bbox = Now() - t0;
+
+    // 3. Placement and writer.
+    int64_t bmin[3], bmax[3];
+    const bool empty = occ.empty();
+    for (int a = 0; a < 3; ++a) {
+      bmin[a] = empty ? 0 : occ.min()[a];
+      bmax[a] = empty ? -1 : occ.max()[a];
+    }
+    VOX_ASSIGN_OR_RETURN(Placement pl, PlaceGrid(bmin, bmax, cx_.choice));
+    StoreMeta& meta = cx_.meta;
+    meta.levels = pl.levels;
+    meta.brick_level = pl.brick_level;
+    meta.origin = glm::i64vec3(pl.origin[0], pl.origin[1], pl.origin[2]);
+    meta.bbox_min = glm::i64vec3(bmin[0], bmin[1], bmin[2]);
+    meta.bbox_max = glm::i64vec3(bmax[0], bmax[1], bmax[2]);
+    cx_.stats->meta = meta;
+    B_ = pl.levels - pl.brick_level;
+    for (int a = 0; a < 3; ++a) origin_[a] = pl.origin[a];
+    if (empty) {
+      Message("nothing occupied: writing an empty store");
+    } else {
+      Message("occupied bbox [" + std::to_string(bmin[0]) + "," + std::to_string(bmin[1]) + "," +
+              std::to_string(bmin[2]) + "] -> [" + std::to_string(bmax[0]) + "," +
+              std::to_string(bmax[1]) + "," + std::to_string(bmax[2]) + "], levels " +
+              std::to_string(pl.brick_level) + "+" + std::to_string(B_) + " (" +
+              std::to_string(cx_.stats->bbox_leaves_read) + " leaves read for the bbox)");
+    }
+    WriteOptions wo;
+    wo.zstd_level = cx_.options.zstd_level;
+    wo.normal_bits = cx_.options.normal_bits;
+    wo.force = cx_.options.force;
+    auto writer_or = cx_.factory(cx_.options.output, meta, wo);
+    if (!writer_or.ok()) return writer_or.status();
+    std::unique_ptr<StoreWriter> writer = std::move(writer_or).value();
+
+    // 4. Bricks.
+    t0 = Now();
+    if (!empty) {
+      VOX_RETURN_IF_ERROR(BuildBrickMap(occ));
+      VOX_RETURN_IF_ERROR(WriteBricks(writer.get()));
+    }
+    cx_.stats->seconds_bricks = Now() - t0;
+    // Streaming check: no leaf buffer was loaded into the tree itself.
+    for (auto it = tree_.cbeginLeaf(); it; ++it)
+      if (!it->buffer().isOutOfCore()) ++cx_.stats->leaves_resident_in_tree;
+    t0 = Now();
+    VOX_RETURN_IF_ERROR(writer->Finish());
+    cx_.stats->seconds_finish = Now() - t0;
+    return OkStatus();
+  }
+
+ private:
+  struct LeafInfo {
+    LeafT* leaf = nullptr;
+    CoordBBox active;    // bounds of its active voxels: the leaf's node box
+    int state = 0;       // 0: not decoded, 1: decoded
+    CoordBBox occupied;  // once decoded
+  };
+  struct Tile {
+    CoordBBox box;
+    ValueT value;
+  };
+  struct BrickWork {
+    uint64_t key = 0;
+    std::vector<uint32_t> leaves;
+    std::vector<uint32_t> tiles;
+  };
+
+  bool Occupied(ValueT v) const { return level_set_ ? !(v > iso_) : v > threshold_; }
+
+  void Message(const std::string& m) {
+    if (cx_.progress) cx_.progress->Message(m);
+  }
+
+  // Decodes a leaf into a private buffer copy (the tree's leaf stays on disk).
+  void DecodeOccupied(LeafInfo& li) {
+    if (li.state) return;
+    LeafValues<LeafT> values;
+    const ValueT* d = values.Get(li.leaf);
+    const Coord o = li.leaf->origin();
+    for (auto m = li.leaf->getValueMask().beginOn(); m; ++m) {
+      openvdb::Index n = m.pos();
+      if (!Occupied(d[n])) continue;
+      li.occupied.expand(o + Coord(int(n >> 6), int((n >> 3) & 7), int(n & 7)));
+    }
+    li.state = 1;
+    ++cx_.stats->bbox_leaves_read;
+  }
+
+  CoordBBox OccupiedBBox() {
+    CoordBBox tiles_box;
+    for (const Tile& t : tiles_) tiles_box.expand(t.box);
+    int64_t lo[3], hi[3];
+    const int64_t kBig = std::numeric_limits<int64_t>::max();
+    std::vector<uint32_t> order(leaves_.size());
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = tiles_box.empty() ? kBig : tiles_box.min()[a];
+      hi[a] = tiles_box.empty() ? -kBig : tiles_box.max()[a];
+      for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+      std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) {
+        return leaves_[x].active.min()[a] < leaves_[y].active.min()[a];
+      });
+      for (uint32_t i : order) {
+        LeafInfo& li = leaves_[i];
+        if (li.active.min()[a] >= lo[a]) break;
+        DecodeOccupied(li);
+        if (!li.occupied.empty()) lo[a] = std::min<int64_t>(lo[a], li.occupied.min()[a]);
+      }
+      std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) {
+        return leaves_[x].active.max()[a] > leaves_[y].active.max()[a];
+      });
+      for (uint32_t i : order) {
+        LeafInfo& li = leaves_[i];
+        if (li.active.max()[a] <= hi[a]) break;
+        DecodeOccupied(li);
+        if (!li.occupied.empty()) hi[a] = std::max<int64_t>(hi[a], li.occupied.max()[a]);
+      }
+      if (lo[a] == kBig) return CoordBBox();  // nothing occupied anywhere
+    }
+    return CoordBBox(Coord(int(lo[0]), int(lo[1]), int(lo[2])),
+                     Coord(int(hi[0]), int(hi[1]), int(hi[2])));
+  }
+
+  static constexpr int kKeyBits = 21;
+  static uint64_t Key(int64_t x, int64_t y, int64_t z) {
+    return uint64_t(x) | (uint64_t(y) << kKeyBits) | (uint64_t(z) << (2 * kKeyBits));
+  }
+  static int64_t KeyCoord(uint64_t k, int a) {
+    return int64_t((k >> (a * kKeyBits)) & ((uint64_t(1) << kKeyBits) - 1));
+  }
+
+  Status BuildBrickMap(const CoordBBox& occ) {
+    // Brick coordinate range of a box, clipped to the occupied bbox.
+    auto range = [&](const CoordBBox& box, int64_t lo[3], int64_t hi[3]) {
+      for (int a = 0; a < 3; ++a) {
+        int64_t mn = std::max<int64_t>(box.min()[a], occ.min()[a]);
+        int64_t mx = std::min<int64_t>(box.max()[a], occ.max()[a]);
+        if (mn > mx) return false;
+        lo[a] = (mn - origin_[a]) >> B_;
+        hi[a] = (mx - origin_[a]) >> B_;
+      }
+      return true;
+    };
+    std::unordered_map<uint64_t, uint32_t> index;
+    auto brick = [&](int64_t x, int64_t y, int64_t z) -> BrickWork& {
+      uint64_t k = Key(x, y, z);
+      auto [it, inserted] = index.try_emplace(k, uint32_t(bricks_.size()));
+      if (inserted) {
+        bricks_.emplace_back();
+        bricks_.back().key = k;
+      }
+      return bricks_[it->second];
+    };
+    int64_t lo[3], hi[3];
+    // Bricks the occupied tiles cover: refuse counts a store cannot index.
+    long double tile_bricks = 0;
+    for (const Tile& t : tiles_)
+      if (range(t.box, lo, hi))
+        tile_bricks += (long double)(hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1);
+    if (tile_bricks > (long double)(uint64_t(1) << 26))
+      return ResourceExhaustedError(
+          cx_.options.input + ": grid " + Quote(cx_.meta.grid_name) +
+          " has occupied active tiles covering " + std::to_string(double(tile_bricks)) +
+          " bricks of " + std::to_string(int64_t(1) << B_) + "^3 voxels; vox expands tiles to "
+          "voxels and cannot index that many");
+    for (uint32_t i = 0; i < leaves_.size(); ++i) {
+      if (!range(leaves_[i].active, lo, hi)) continue;
+      for (int64_t z = lo[2]; z <= hi[2]; ++z)
+        for (int64_t y = lo[1]; y <= hi[1]; ++y)
+          for (int64_t x = lo[0]; x <= hi[0]; ++x) brick(x, y, z).leaves.push_back(i);
+    }
+    for (uint32_t i = 0; i < tiles_.size(); ++i) {
+      if (!range(tiles_[i].box, lo, hi)) continue;
+      for (int64_t z = lo[2]; z <= hi[2]; ++z)
+        for (int64_t y = lo[1]; y <= hi[1]; ++y)
+          for (int64_t x = lo[0]; x <= hi[0]; ++x) brick(x, y, z).tiles.push_back(i);
+    }
+    // Bricks in z, y, x order of their coordinates: neighbours stay close.
+    std::sort(bricks_.begin(), bricks_.end(), [&](const BrickWork& p, const BrickWork& q) {
+      for (int a : {2, 1, 0}) {
+        int64_t u = KeyCoord(p.key, a), v = KeyCoord(q.key, a);
+        if (u != v) return u < v;
+      }
+      return false;
+    });
+    return OkStatus();
+  }
+
+  // One brick's voxels in Morton order. Runs concurrently on many bricks;
+  // reads leaf values only through private decoded copies (leaf_values.h).
+  std::vector<BrickVoxel> ExtractBrick(const BrickWork& bw) {
+    const int64_t size = int64_t(1) << B_;
+    int64_t rmin[3], rmax[3];
+    for (int a = 0; a < 3; ++a) {
+      rmin[a] = origin_[a] + (KeyCoord(bw.key, a) << B_);
+      rmax[a] = rmin[a] + size - 1;
+    }
+    std::vector<BrickVoxel> out;
+    std::unique_ptr<ColorReader> color = cx_.color ? cx_.color->NewReader() : nullptr;
+    VoxelBuilder<GridT> builder(grid_, level_set_, color.get(), rmin);
+
+    // Fast path: bricks of at least 8^3 without tiles hold whole leaves
+    // (the origin is aligned to the brick size); visiting the leaves in
+    // Morton order and each leaf's voxels in Morton order gives the voxels
+    // in the writer's order without a sort.
+    const bool morton_walk = B_ >= 3 && bw.tiles.empty();
+    if (morton_walk) {
+      std::vector<LeafPoint> order(bw.leaves.size());  // leaf coordinates in the brick
+      uint64_t expected = 0;
+      for (size_t i = 0; i < bw.leaves.size(); ++i) {
+        const LeafT* leaf = leaves_[bw.leaves[i]].leaf;
+        const Coord o = leaf->origin();
+        order[i] = {uint64_t(o.x() - rmin[0]) >> 3, uint64_t(o.y() - rmin[1]) >> 3,
+                    uint64_t(o.z() - rmin[2]) >> 3, NodeRef(i)};
+        expected += leaf->onVoxelCount();
+      }
+      SortMorton(&order);
+      out.reserve(size_t(expected));
+      const auto& table = MortonLeafOrder();
+      for (const LeafPoint& p : order) {
+        const LeafT* leaf = leaves_[bw.leaves[p.ref]].leaf;
+        builder.BeginLeaf(leaf);
+        const auto& mask = leaf->getValueMask();
+        for (uint16_t n : table) {
+          if (!mask.isOn(n)) continue;
+          const ValueT v = builder.LeafValue(n);
+          if (Occupied(v)) out.push_back(builder.FromLeaf(n, v));
+        }
+      }
+      return out;
+    }
+    for (uint32_t li_index : bw.leaves) {
+      const LeafT* leaf = leaves_[li_index].leaf;
+      builder.BeginLeaf(leaf);
+      const Coord o = leaf->origin();
+      for (auto m = leaf->getValueMask().beginOn(); m; ++m) {
+        const openvdb::Index n = m.pos();
+        const int64_t x = int64_t(o.x()) + int(n >> 6), y = int64_t(o.y()) + int((n >> 3) & 7),
+                      z = int64_t(o.z()) + int(n & 7);
+        if (x < rmin[0] || x > rmax[0] || y < rmin[1] || y > rmax[1] || z < rmin[2] ||
+            z > rmax[2])
+          continue;
+        const ValueT v = builder.LeafValue(n);
+        if (Occupied(v)) out.push_back(builder.FromLeaf(n, v));
+      }
+    }
+    for (uint32_t ti : bw.tiles) {
+      const Tile& t = tiles_[ti];
+      int64_t lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::max<int64_t>(t.box.min()[a], rmin[a]);
+        hi[a] = std::min<int64_t>(t.box.max()[a], rmax[a]);
+      }
+      for (int64_t x = lo[0]; x <= hi[0]; ++x)
+        for (int64_t y = lo[1]; y <= hi[1]; ++y)
+          for (int64_t z = lo[2]; z <= hi[2]; ++z)
+            out.push_back(builder.FromTile(Coord{int(x), int(y), int(z)}, t.value));
+    }
+    // Morton order (octal digit x | y << 1 | z << 2), which the writer
+    // builds its cells in, so its sort finds them sorted.
+    std::vector<LeafPoint> order(out.size());
+    for (size_t i = 0; i < out.size(); ++i) order[i] = {out[i].x, out[i].y, out[i].z, NodeRef(i)};
+    SortMorton(&order);
+    std::vector<BrickVoxel> sorted(out.size());
+    for (size_t k = 0; k < order.size(); ++k) sorted[k] = out[order[k].ref];
+    return sorted;
+  }
+
+  // Leaf offsets (x << 6 | y << 3 | z) of an 8^3 leaf in Morton order.
+  static const std::array<uint16_t, 512>& MortonLeafOrder() {
+    static const std::array<uint16_t, 512> table = [] {
+      std::array<uint16_t, 512> t{};
+      for (unsigned m = 0; m < 512; ++m) {
+        unsigned x = 0, y = 0, z = 0;
+        for (int b = 0; b < 3; ++b) {
+          x |= ((m >> (3 * b)) & 1) << b;
+          y |= ((m >> (3 * b + 1)) & 1) << b;
+          z |= ((m >> (3 * b + 2)) & 1) << b;
+        }
+        t[m] = uint16_t(x << 6 | y << 3 | z);
+      }
+      return t;
+    }();
+    return table;
+  }
+
+  // Bricks go through a pipeline: the parallel stage builds a brick's voxels
+  // and hands them to the writer (AddBrick is thread-safe: it encodes and
+  // compresses in the calling thread); the serial in-order stage reports
+  // progress.
+  Status WriteBricks(StoreWriter* writer) {
+    struct Item {
+      size_t index = 0;
+      size_t voxels = 0;
+    };
+    const size_t total = bricks_.size();
+    Message("writing " + std::to_string(total) + " bricks of " + std::to_string(1 << B_) +
+            "^3 voxels");
+    std::atomic<bool> failed{false};
+    std::mutex error_mu;
+    Status first_error;
+    auto fail = [&](Status s) {
+      std::lock_guard<std::mutex> lock(error_mu);
+      if (first_error.ok()) first_error = std::move(s);
+      failed.store(true);
+    };
+    size_t next = 0, written = 0;
+    uint64_t voxels_done = 0;
+    const size_t tokens = size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
+    tbb::parallel_pipeline(
+        tokens,
+        tbb::make_filter<void, Item>(
+            tbb::filter_mode::serial_in_order,
+            [&](tbb::flow_control& fc) -> Item {
+              if (next >= total || failed.load()) {
+                fc.stop();
+                return Item{};
+              }
+              return Item{next++, 0};
+            }) &
+            tbb::make_filter<Item, Item>(
+                tbb::filter_mode::parallel,
+                [&](Item it) -> Item {
+                  if (failed.load()) return it;
+                  const BrickWork& bw = bricks_[it.index];
+                  try {
+                    std::vector<BrickVoxel> voxels = ExtractBrick(bw);
+                    it.voxels = voxels.size();
+                    if (!voxels.empty()) {
+                      Status s = writer->AddBrick(
+                          glm::u64vec3(KeyCoord(bw.key, 0), KeyCoord(bw.key, 1),
+                                       KeyCoord(bw.key, 2)),
+                          std::move(voxels));
+                      if (!s.ok()) fail(s);
+                    }
+                  } catch (const openvdb::Exception& e) {
+                    fail(CorruptionError(cx_.options.input + ": grid " +
+                                         Quote(cx_.meta.grid_name) +
+                                         ": cannot read voxel data: " + e.what()));
+                  } catch (const std::bad_alloc&) {
+                    fail(ResourceExhaustedError("out of memory while building brick " +
+                                                std::to_string(it.index) + " of " +
+                                                cx_.options.input));
+                  } catch (const std::exception& e) {
+                    fail(InternalError(cx_.options.input + ": " + e.what()));
+                  }
+                  return it;
+                }) &
+            tbb::make_filter<Item, void>(
+                tbb::filter_mode::serial_in_order, [&](Item it) {
+                  if (failed.load()) return;
+                  voxels_done += it.voxels;
+                  if (it.voxels) ++written;
+                  if (cx_.progress) cx_.progress->Progress(it.index + 1, total, voxels_done);
+                }));
+    if (!first_error.ok()) return first_error;
+    cx_.stats->occupied_voxels = voxels_done;
+    cx_.stats->bricks = written;
+    return OkStatus();
+  }
+
+  GridT& grid_;
+  TreeT& tree_;
+  Context& cx_;
+  bool level_set_ = true;
+  ValueT iso_{}, threshold_{};
+  std::vector<LeafInfo> leaves_;  // leaves with active voxels
+  std::vector<Tile> tiles_;       // occupied active tiles
+  int B_ = 0;
+  int64_t origin_[3] = {0, 0, 0};
+  std::vector<BrickWork> bricks_;
+};
+}  // namespace
+
+Status IngestGrid(openvdb::GridBase& grid, Context& cx) {
+  if (auto* fg = dynamic_cast<openvdb::FloatGrid*>(&grid))
+    return GridIngest<openvdb::FloatGrid>(*fg, cx).Run();
+  if (auto* dg = dynamic_cast<openvdb::DoubleGrid*>(&grid))
+    return GridIngest<openvdb::DoubleGrid>(*dg, cx).Run();
+  return InternalError("grid " + Quote(cx.meta.grid_name) + " in " + cx.options.input +
+                       ": grid type changed between metadata and read");
+}
+
+}  // namespace vox::ingest_internal

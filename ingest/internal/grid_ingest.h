@@ -1,0 +1,36 @@
+// Brick extraction: the ingest of one float or double grid whose metadata
+// ingest.cpp has read and checked. Lists the topology, finds the exact
+// occupied bbox, places the grid (ingest/placement.h), creates the writer and
+// streams the bricks through it (see grid_ingest.cpp for how). Private to
+// ingest and its tests.
+//
+// Thread safety: IngestGrid runs its pipeline in the calling thread's TBB
+// arena; one call per grid.
+#ifndef VOX_INGEST_INTERNAL_GRID_INGEST_H_
+#define VOX_INGEST_INTERNAL_GRID_INGEST_H_
+
+#include <openvdb/openvdb.h>
+
+#include "core/status.h"
+#include "ingest/ingest.h"
+#include "ingest/internal/color.h"
+
+namespace vox::ingest_internal {
+
+struct Context {
+  const IngestOptions& options;
+  const WriterFactory& factory;
+  ProgressSink* progress;  // may be null
+  IngestStats* stats;
+  LevelsChoice choice;
+  StoreMeta meta;  // source, grid, class, transform, options filled in by the caller
+  ColorSource* color = nullptr;
+};
+
+// Ingests `grid` (a FloatGrid or DoubleGrid, read with delayed loading) into
+// a store made by cx.factory; fills cx.meta's placement and cx.stats.
+Status IngestGrid(openvdb::GridBase& grid, Context& cx);
+
+}  // namespace vox::ingest_internal
+
+#endif  // VOX_INGEST_INTERNAL_GRID_INGEST_H_
