@@ -1,6 +1,7 @@
 // Placement (ingest/placement.h): parsing --levels, and the origin and
 // levels chosen for occupied bboxes, checked against the placement rules
 // computed independently by brute force.
+#include <algorithm>
 #include <climits>
 #include <cstdint>
 #include <random>
