@@ -1,14 +1,16 @@
 // vox::Tracer: the paper's discrete ray traversal of an octree (Stolte &
-// Caubet; restated in ../shared/design/algorithm.md): octree walk with the
-// packed XYZ register and level mask, skip loop, ascent by XOR, the integer
-// DDA in fixed point, and the two-step transition.
+// Caubet; described in docs/algorithm.md): octree walk with the packed XYZ
+// register and level mask, skip loop, ascent by XOR (internal/octree_walk.h),
+// the two steps (internal/two_step_walk.h), and here the per-ray set-up, the
+// integer DDA in fixed point and the two-step transition.
 //
 // Template requirements:
 //   Fixed: a FixedPoint<Word, Frac> (fixed_point.h) with kIntBits >= 23, so
 //          oriented coordinates and saturated slopes of a 20-level step fit.
-//   Real:  float, double, long double or ExactReal (exact_real.h): the type
-//          of the per-ray set-up (clipping, first h and l) and of the
-//          transition's entry point.
+//   Real:  float, double, long double, or an exact type with the same
+//          operators, fabs, floor and ldexp (the accuracy study's ExactReal,
+//          tools/study/exact_real.h): the type of the per-ray set-up
+//          (clipping, first h and l) and of the transition's entry point.
 //
 // A Tracer is immutable once created: Traverse and FirstHit are const and may
 // run concurrently on many threads if the tree's BrickSource is thread-safe.
@@ -27,6 +29,7 @@
 
 #include "core/fixed_point.h"
 #include "core/internal/octree_walk.h"
+#include "core/internal/two_step_walk.h"
 #include "core/octree.h"
 #include "core/ray.h"
 #include "core/status.h"
@@ -80,49 +83,8 @@ class Tracer {
   // error for an invalid ray or a brick that cannot be fetched.
   template <class Visitor>
   Status Traverse(const Ray& ray, Visitor&& visit, TraceCounters* counters = nullptr) const {
-    VOX_RETURN_IF_ERROR(ValidateRay(ray));
-    Ctx cx{ray};
-    TraceCounters local;
-    TraceCounters& c = counters ? *counters : local;
-    ++c.rays;
-    if (!Setup(ray, &cx)) return OkStatus();
-    Real p1[3];
-    for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * down2_;
-    const internal::StepLayout l1(n1_), l2(n2_);
-    Dda dda = InitStep(cx, l1, p1);
-    internal::BrickPinner pinner(tree_.bricks);
-    internal::WalkStats stats;
-    const int64_t base0[3] = {0, 0, 0};
-    // An occupied voxel of the last level: a hit.
-    auto leaf = [&](const internal::StepLayout& lay, const int64_t base[3], NodeRef child,
-                    const Cell* pool, uint64_t xyz) {
-      Hit h = internal::LeafHit(ray, lay, base, xyz, child,
-                                pool != tree_.top, pinner);
-      return visit(h) ? internal::Flow::kLeft : internal::Flow::kStop;
-    };
-    auto occupied1 = [&](NodeRef child, const Cell* pool, uint64_t xyz, uint64_t prev,
-                         const Dda& d1) -> internal::Flow {
-      if (n2_ == 0) return leaf(l1, base0, child, pool, xyz);
-      // An occupied first-step voxel: trace the second step in it; a miss
-      // there skips it and the first step goes on with its state untouched.
-      const Cell* c2 = nullptr;
-      const Cell* p2 = pool;
-      if (!pinner.Resolve(child, c2, p2)) return internal::Flow::kError;
-      ++c.transitions;
-      Dda d2 = Transition(cx, l1, l2, xyz, prev, d1);
-      const int64_t base2[3] = {l1.Coord(xyz, 0) << n2_, l1.Coord(xyz, 1) << n2_,
-                                l1.Coord(xyz, 2) << n2_};
-      auto occupied2 = [&](NodeRef ch, const Cell* pl, uint64_t x2, uint64_t, const Dda&) {
-        return leaf(l2, base2, ch, pl, x2);
-      };
-      internal::Flow f = internal::WalkStep(l2, d2.xyz, d2, c2, p2, pinner, occupied2, &stats);
-      d2.AddTo(cx, &c);
-      return f;
-    };
-    internal::Flow f =
-        internal::WalkStep(l1, dda.xyz, dda, tree_.top, tree_.top, pinner, occupied1, &stats);
-    dda.AddTo(cx, &c);
-    return internal::FinishWalk(f, stats, pinner, &c);
+    PerRay r{*this, Ctx{ray}};
+    return internal::TraceTwoSteps(tree_, n1_, n2_, ray, r, visit, counters);
   }
 
   // The first occupied voxel along the ray, or nullopt on a miss.
@@ -131,11 +93,10 @@ class Tracer {
   }
 
  private:
-  // A step's DDA state (figures 4 and 5): the start register, the oriented
-  // driving coordinate d', limit, l1 and l2, the per-ray slopes and
-  // increments, and move counters.
+  // A step's DDA state (docs/algorithm.md, section 3; the paper's figures 4
+  // and 5): the oriented driving coordinate d', limit, l1 and l2, the per-ray
+  // slopes and increments, and move counters.
   struct Dda {
-    uint64_t xyz = 0;  // start voxel (WalkStep keeps the current one)
     int64_t dprime = 0, limit = 0;
     Word l1 = 0, l2 = 0;
     Word q1 = 0, q2 = 0;
@@ -185,6 +146,25 @@ class Tracer {
     Real r1 = 0, r2 = 0;  // D_i / D_d, computed at the first transition
   };
 
+  // One ray's state and arithmetic for internal::TraceTwoSteps.
+  struct PerRay {
+    using Dda = Tracer::Dda;
+    const Tracer& t;
+    Ctx cx;
+
+    bool Setup(const Ray& ray) { return t.Setup(ray, &cx); }
+    Dda FirstStep(const internal::StepLayout& l1, uint64_t* xyz) {
+      Real p1[3];
+      for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * t.down2_;
+      return t.InitStep(cx, l1, p1, xyz);
+    }
+    Dda SecondStep(const internal::StepLayout& l1, const internal::StepLayout& l2, uint64_t xyz,
+                   uint64_t prev, const Dda& first, uint64_t* xyz2) {
+      return t.Transition(cx, l1, l2, xyz, prev, first, xyz2);
+    }
+    void AddMoves(const Dda& dda, TraceCounters* c) const { dda.AddTo(cx, c); }
+  };
+
   // Scales the direction, picks the axes, computes the slopes and clips the
   // ray to the grid. Returns false when the ray misses the grid.
   bool Setup(const Ray& ray, Ctx* cx) const {
@@ -230,9 +210,10 @@ class Tracer {
     return Fixed::FromReal(l);
   }
 
-  // Section 4: a step's DDA state from a start point in the step's units.
-  // Axes in the bit mask `before` take BeforeVoxel instead of StartVoxel.
-  Dda InitStep(const Ctx& cx, const internal::StepLayout& lay, const Real p[3],
+  // docs/algorithm.md, section 3: a step's DDA state from a start point in
+  // the step's units, and its start voxel packed per `lay`. Axes in the bit
+  // mask `before` take BeforeVoxel instead of StartVoxel.
+  Dda InitStep(const Ctx& cx, const internal::StepLayout& lay, const Real p[3], uint64_t* xyz,
                unsigned before = 0) const {
     int64_t size = int64_t(1) << lay.n;
     int64_t v[3];
@@ -245,7 +226,7 @@ class Tracer {
     st.l1 = LValue(ud, H(p[cx.i1], v[cx.i1], cx.s[cx.i1]), cx.q1r);
     st.l2 = LValue(ud, H(p[cx.i2], v[cx.i2], cx.s[cx.i2]), cx.q2r);
     st.limit = Fixed::Floor(std::min(st.l1, st.l2));
-    st.xyz = lay.Pack(v);
+    *xyz = lay.Pack(v);
     return st;
   }
 
@@ -260,10 +241,13 @@ class Tracer {
     return st;
   }
 
-  // Section 5: the second step's state on entering first-step voxel C.
-  // `prev` is XYZ before the last first-step move (== xyz when none).
+  // docs/algorithm.md, section 4: the second step's state on entering
+  // first-step voxel C (cases A, B, C; the start voxels on exact boundaries
+  // follow section 6).
+  // `prev` is XYZ before the last first-step move (== xyz when none). Sets
+  // *xyz2 to the second step's start voxel.
   Dda Transition(Ctx& cx, const internal::StepLayout& lay1, const internal::StepLayout& lay2,
-                 uint64_t xyz, uint64_t prev, const Dda& first) const {
+                 uint64_t xyz, uint64_t prev, const Dda& first, uint64_t* xyz2) const {
     const int n2 = n2_;
     const int64_t size2 = int64_t(1) << n2;
     int64_t C[3];
@@ -274,7 +258,7 @@ class Tracer {
     if (diff == 0) {
       // Case A: the ray starts in C.
       for (int a = 0; a < 3; ++a) p2[a] = cx.p[a] - Real(C[a] << n2);
-      return InitStep(cx, lay2, p2);
+      return InitStep(cx, lay2, p2, xyz2);
     }
     if (!cx.ratios_ready) {
       cx.r1 = cx.D[cx.i1] / cx.D[d];
@@ -298,7 +282,7 @@ class Tracer {
       unsigned before = 0;
       for (int a : {cx.i1, cx.i2})
         if (p2[a] != cx.p[a] - Real(C[a] << n2)) before |= 1u << a;
-      return InitStep(cx, lay2, p2, before);
+      return InitStep(cx, lay2, p2, xyz2, before);
     }
     // Case C: entry through the face perpendicular to passive axis c, where
     // the first step crossed it (its l before the increment), in fixed point.
@@ -327,7 +311,7 @@ class Tracer {
     st.l1 = c_is_1 ? lc : lo_w;
     st.l2 = c_is_1 ? lo_w : lc;
     st.limit = Fixed::Floor(std::min(st.l1, st.l2));
-    st.xyz = lay2.Pack(v);
+    *xyz2 = lay2.Pack(v);
     return st;
   }
 

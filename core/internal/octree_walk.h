@@ -1,9 +1,10 @@
-// The part of the paper's traversal (figure 1) that does not depend on how a
-// DDA does its arithmetic: descend (loop 3), the skip loop that leaves an
-// empty octant by one bit test, and the ascent by XOR (loop 2), over a packed
-// XYZ register with carry bits. Tracer (the paper's fixed-point DDA) and
-// AwTracer (Amanatides-Woo, for the accuracy study) both run on it, so the
-// two differ only in their arithmetic. Also the per-ray helpers they share:
+// The part of the paper's traversal (its figure 1; docs/algorithm.md,
+// section 2) that does not depend on how a DDA does its arithmetic: descend
+// (loop 3), the skip loop that leaves an empty octant by one bit test, and
+// the ascent by XOR (loop 2), over a packed XYZ register with carry bits.
+// Tracer (the paper's fixed-point DDA) and AwTracer (Amanatides-Woo, in the
+// accuracy study's tools/study/aw_tracer.h) both run on it, through
+// two_step_walk.h, so the two differ only in their arithmetic. Also the per-ray helpers they share:
 // clipping to the grid, start voxels, brick pinning.
 //
 // Internal to core. Stateless functions; thread-safe.
@@ -113,7 +114,7 @@ struct WalkStats {
   uint64_t skips = 0, cells = 0;
 };
 
-// Figure 1 over one step's grid, starting in voxel `xyz` (packed per
+// The paper's figure 1 over one step's grid, starting in voxel `xyz` (packed per
 // `layout`) with `root` the step's root cell in `root_pool`.
 //
 // Dda must provide `void Move(uint64_t& xyz)`: one 6-connected move (adds
@@ -305,7 +306,8 @@ int64_t StartVoxel(Real p, int s, int64_t size) {
 }
 
 // The voxel the ray is in just *before* reaching p on one axis: differs from
-// StartVoxel only when p lies exactly on a voxel boundary.
+// StartVoxel only when p lies exactly on a voxel boundary. The transition
+// starts there on the axes of docs/algorithm.md, section 6.
 template <class Real>
 int64_t BeforeVoxel(Real p, int s, int64_t size) {
   if (!(p > Real(0))) return 0;

@@ -13,7 +13,7 @@
 #include "core/octree.h"
 #include "core/ray.h"
 #include "core/tracer.h"
-#include "tests/core/reference.h"
+#include "tools/study/reference.h"
 
 namespace vox::testing {
 

@@ -12,7 +12,7 @@
 #include <cstdio>
 #include <functional>
 
-#include "tests/core/reference.h"
+#include "tools/study/reference.h"
 #include "tests/core/test_util.h"
 
 namespace vox::testing {

@@ -22,7 +22,7 @@
 #include "core/tracer.h"
 #include "ingest/ingest.h"
 #include "storage/store.h"
-#include "tests/core/reference.h"
+#include "tools/study/reference.h"
 #include "tests/core/test_util.h"
 #include "tests/ingest/ingest_test_util.h"
 

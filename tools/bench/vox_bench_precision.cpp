@@ -12,9 +12,9 @@
 #include <map>
 
 #include "core/shapes.h"
-#include "core/variants.h"
+#include "tools/study/variants.h"
 #include "render/volume.h"
-#include "tests/core/reference.h"
+#include "tools/study/reference.h"
 #include "tests/core/test_util.h"
 #include "tools/bench/vox_bench.h"
 

@@ -3,8 +3,8 @@
 // the accuracy study (Tracer<Fixed, ExactReal>). Only what the tracer uses is
 // defined. Slow by design: a study variant, not a rendering path.
 // Value type; thread-compatible.
-#ifndef VOX_CORE_EXACT_REAL_H_
-#define VOX_CORE_EXACT_REAL_H_
+#ifndef VOX_TOOLS_STUDY_EXACT_REAL_H_
+#define VOX_TOOLS_STUDY_EXACT_REAL_H_
 
 #include <gmpxx.h>
 
@@ -137,4 +137,4 @@ class numeric_limits<vox::ExactReal> : public numeric_limits<double> {
 };
 }  // namespace std
 
-#endif  // VOX_CORE_EXACT_REAL_H_
+#endif  // VOX_TOOLS_STUDY_EXACT_REAL_H_

@@ -1,9 +1,10 @@
-// vox::testing::Reference: an exact first-hit oracle for the core tracer
-// tests, written independently of core's tracer, Ray helpers and octree
-// builder. It shares only the Ray/Hit value types (for the acceptance check).
+// vox::testing::Reference: an exact first-hit oracle for the tracer tests and
+// the accuracy study (vox-bench), written independently of core's tracer, Ray
+// helpers and octree builder. It shares only the Ray/Hit value types (for the
+// acceptance check).
 //
 // Semantics. A ray is origin + t * dir, t >= 0, with the six doubles taken as
-// exact rationals. Voxel v is the half-open cube [v, v+1)^3 (issue 2); its
+// exact rationals. Voxel v is the half-open cube [v, v+1)^3; its
 // closed cube is [v, v+1]^3.
 //   - The ray *meets* v when it meets the half-open cube in a segment of
 //     positive length. For an axis whose direction is nonzero this is the same
@@ -28,8 +29,8 @@
 //
 // Thread safety: a Reference is immutable after construction; its queries are
 // const and may run concurrently.
-#ifndef VOX_TESTS_CORE_REFERENCE_H_
-#define VOX_TESTS_CORE_REFERENCE_H_
+#ifndef VOX_TOOLS_STUDY_REFERENCE_H_
+#define VOX_TOOLS_STUDY_REFERENCE_H_
 
 #include <gmpxx.h>
 
@@ -134,7 +135,12 @@ class Reference {
 };
 
 // Why a tracer's first-hit answer is unacceptable, or "" when it is
-// acceptable (the rule of issue 2, stated in reference.cpp).
+// acceptable. The rule: when the reference hits unambiguously, the tracer
+// must hit that voxel; when the reference's hit is ambiguous, any occupied
+// voxel the ray touches at or before the reference's entry; when the
+// reference misses, a miss or any occupied voxel the ray touches. The hit's t
+// must match the exact entry (touch) parameter of its voxel to 1e-9
+// (relative, or absolute near 0).
 std::string CheckFirstHit(const Reference& ref, const ExactRay& ray, const RefHit& expected,
                           const std::optional<Hit>& got);
 // For an answer CheckFirstHit refuses: true when it is explained by a ray
@@ -157,4 +163,4 @@ Voxel ToVoxel(const Hit& h);
 
 }  // namespace vox::testing
 
-#endif  // VOX_TESTS_CORE_REFERENCE_H_
+#endif  // VOX_TOOLS_STUDY_REFERENCE_H_

@@ -1,4 +1,4 @@
-#include "tests/core/reference.h"
+#include "tools/study/reference.h"
 
 #include <algorithm>
 #include <cfloat>

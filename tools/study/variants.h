@@ -1,4 +1,4 @@
-// Traversal variants for the accuracy/time study (issue 5): the paper's
+// Traversal variants for the accuracy/time study (vox-bench): the paper's
 // tracer with other fixed-point words and fractional bits, its transition in
 // other floating-point types or in exact rational arithmetic, and the
 // floating-point 3D DDA of Amanatides and Woo that the paper argued against,
@@ -8,8 +8,8 @@
 //
 // Thread safety: an AnyTracer is immutable; FirstHit is const and
 // thread-safe when the tree's BrickSource is.
-#ifndef VOX_CORE_VARIANTS_H_
-#define VOX_CORE_VARIANTS_H_
+#ifndef VOX_TOOLS_STUDY_VARIANTS_H_
+#define VOX_TOOLS_STUDY_VARIANTS_H_
 
 #include <functional>
 #include <memory>
@@ -47,4 +47,4 @@ std::vector<TraversalVariant> TraversalVariants();
 
 }  // namespace vox
 
-#endif  // VOX_CORE_VARIANTS_H_
+#endif  // VOX_TOOLS_STUDY_VARIANTS_H_

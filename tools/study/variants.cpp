@@ -1,9 +1,9 @@
-#include "core/variants.h"
+#include "tools/study/variants.h"
 
-#include "core/aw_tracer.h"
-#include "core/exact_real.h"
 #include "core/fixed_point.h"
 #include "core/tracer.h"
+#include "tools/study/aw_tracer.h"
+#include "tools/study/exact_real.h"
 
 namespace vox {
 namespace {
