@@ -28,7 +28,6 @@
 #include <array>
 #include <atomic>
 #include <cerrno>
-#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -42,15 +41,13 @@
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
 
+#include "core/stopwatch.h"
+
 namespace vox {
 namespace {
 
 using openvdb::Coord;
 using openvdb::CoordBBox;
-
-double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
 
 void InitOpenVdb() {
   static std::once_flag once;
@@ -252,7 +249,7 @@ class GridIngest {
     threshold_ = ValueT(cx_.meta.threshold);
 
     // 1. Topology.
-    double t0 = Now();
+    Stopwatch t0;
     uint64_t leaf_count = 0;
     for (auto it = tree_.beginLeaf(); it; ++it) {
       LeafT* leaf = it.getLeaf();
@@ -278,15 +275,15 @@ class GridIngest {
     }
     cx_.stats->leaf_nodes = leaf_count;
     cx_.stats->active_voxels = tree_.activeVoxelCount();
-    cx_.stats->seconds_open += Now() - t0;
+    cx_.stats->seconds_open += t0.Seconds();
     Message("grid " + Quote(cx_.meta.grid_name) + ": " + std::to_string(leaf_count) +
             " leaf nodes, " + std::to_string(cx_.stats->active_tiles) + " active tiles, " +
             std::to_string(cx_.stats->active_voxels) + " active voxels");
 
     // 2. Exact occupied bbox.
-    t0 = Now();
+    t0.Restart();
     CoordBBox occ = OccupiedBBox();
-    cx_.stats->seconds_bbox = Now() - t0;
+    cx_.stats->seconds_bbox = t0.Seconds();
 
     // 3. Placement and writer.
     int64_t bmin[3], bmax[3];
@@ -323,18 +320,18 @@ class GridIngest {
     std::unique_ptr<StoreWriter> writer = std::move(writer_or).value();
 
     // 4. Bricks.
-    t0 = Now();
+    t0.Restart();
     if (!empty) {
       VOX_RETURN_IF_ERROR(BuildBrickMap(occ));
       VOX_RETURN_IF_ERROR(WriteBricks(writer.get()));
     }
-    cx_.stats->seconds_bricks = Now() - t0;
+    cx_.stats->seconds_bricks = t0.Seconds();
     // Streaming check: no leaf buffer was loaded into the tree itself.
     for (auto it = tree_.cbeginLeaf(); it; ++it)
       if (!it->buffer().isOutOfCore()) ++cx_.stats->leaves_resident_in_tree;
-    t0 = Now();
+    t0.Restart();
     VOX_RETURN_IF_ERROR(writer->Finish());
-    cx_.stats->seconds_finish = Now() - t0;
+    cx_.stats->seconds_finish = t0.Seconds();
     return OkStatus();
   }
 
@@ -875,7 +872,7 @@ std::string FormatDouble(double v) {
 
 StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& factory,
                                  ProgressSink* progress) {
-  const double t_start = Now();
+  const Stopwatch t_start;
   IngestStats stats;
   if (o.input.empty()) return InvalidArgumentError("no input .vdb file given");
   if (o.output.empty()) return InvalidArgumentError("no output store directory given");
@@ -904,7 +901,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
   if (!o.force && ::access(o.output.c_str(), F_OK) == 0)
     return InvalidArgumentError(o.output + ": already exists; pass --force to replace it");
 
-  double t0 = Now();
+  Stopwatch t0;
   VOX_RETURN_IF_ERROR(CheckVdbLayout(o.input));
   InitOpenVdb();
   openvdb::io::File file(o.input);
@@ -1023,7 +1020,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
     meta.has_color = true;
     cx.color = color.get();
   }
-  stats.seconds_open = Now() - t0;
+  stats.seconds_open = t0.Seconds();
 
   const int threads = o.threads > 0 ? o.threads : tbb::this_task_arena::max_concurrency();
   stats.threads = threads;
@@ -1039,7 +1036,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
     }
   });
   if (!s.ok()) return s;
-  stats.seconds_total = Now() - t_start;
+  stats.seconds_total = t_start.Seconds();
   if (progress) progress->Done();
   return stats;
 }
