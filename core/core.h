@@ -1,7 +1,9 @@
 // vox core: fixed-point numbers, the packed-register octree traversal, the
 // paper's integer DDA and its two-step transition, and an in-memory octree.
 // Owns no I/O: bricks arrive through the BrickSource interface that storage
-// implements. Depends on nothing else in vox.
+// implements. Also the plumbing every layer shares: Status (core/status.h),
+// Stopwatch (core/stopwatch.h) and the progress display (core/progress.h,
+// which writes to a stream its caller gives). Depends on nothing else in vox.
 #ifndef VOX_CORE_CORE_H_
 #define VOX_CORE_CORE_H_
 

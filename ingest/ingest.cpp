@@ -9,6 +9,7 @@
 //   internal/leaf_values.h  leaf values read without loading them into the tree;
 //   internal/color.h        colour sampling from a vec3 grid;
 //   placement.h             levels and origin.
+#include "core/stopwatch.h"
 #include "ingest/ingest.h"
 
 #include <sys/stat.h>
@@ -16,7 +17,6 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -37,10 +37,6 @@ namespace {
 using ingest_internal::CheckVdbLayout;
 using ingest_internal::ColorSource;
 using ingest_internal::Context;
-
-double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
 
 void InitOpenVdb() {
   static std::once_flag once;
@@ -75,7 +71,7 @@ std::string FormatDouble(double v) {
 
 StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& factory,
                                  ProgressSink* progress) {
-  const double t_start = Now();
+  const Stopwatch t_start;
   IngestStats stats;
   if (o.input.empty()) return InvalidArgumentError("no input .vdb file given");
   if (o.output.empty()) return InvalidArgumentError("no output store directory given");
@@ -104,7 +100,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
   if (!o.force && ::access(o.output.c_str(), F_OK) == 0)
     return InvalidArgumentError(o.output + ": already exists; pass --force to replace it");
 
-  double t0 = Now();
+  Stopwatch t0;
   VOX_RETURN_IF_ERROR(CheckVdbLayout(o.input));
   InitOpenVdb();
   openvdb::io::File file(o.input);
@@ -220,7 +216,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
     meta.has_color = true;
     cx.color = color.get();
   }
-  stats.seconds_open = Now() - t0;
+  stats.seconds_open = t0.Seconds();
 
   const int threads = o.threads > 0 ? o.threads : tbb::this_task_arena::max_concurrency();
   stats.threads = threads;
@@ -228,7 +224,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
   Status s;
   arena.execute([&] { s = ingest_internal::IngestGrid(*base, cx); });
   if (!s.ok()) return s;
-  stats.seconds_total = Now() - t_start;
+  stats.seconds_total = t_start.Seconds();
   if (progress) progress->Done();
   return stats;
 }

@@ -6,17 +6,15 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
+#include <cmath>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "core/stopwatch.h"
+
 namespace vox {
 namespace {
-
-double Seconds(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
-  return std::chrono::duration<double>(b - a).count();
-}
 
 struct Worker {
   std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> state;
@@ -27,9 +25,26 @@ struct Worker {
 
 }  // namespace
 
+std::string ProgressLine(const ProgressSnapshot& s, double elapsed) {
+  double frac = s.tiles_total > 0 ? double(s.tiles_done) / double(s.tiles_total) : 1.0;
+  double rate = elapsed > 0 ? double(s.rays) / elapsed : 0.0;
+  uint64_t lookups = s.cache_hits + s.cache_misses;
+  std::string cache =
+      lookups > 0
+          ? std::to_string(int(std::lround(100.0 * double(s.cache_hits) / double(lookups)))) + "%"
+          : "-";
+  double left = frac > 0 ? elapsed * (1.0 - frac) / frac : INFINITY;
+  char buf[256];
+  snprintf(buf, sizeof buf,
+           "tiles %lld/%lld (%3.0f%%)  %s rays/s  cache hits %s  elapsed %s  left %s",
+           (long long)s.tiles_done, (long long)s.tiles_total, 100.0 * frac,
+           Progress::Count(rate).c_str(), cache.c_str(), Progress::Duration(elapsed).c_str(),
+           Progress::Duration(left).c_str());
+  return buf;
+}
+
 Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOptions& options,
                    FrameStats* stats) {
-  using Clock = std::chrono::steady_clock;
   const Camera& cam = renderer.camera();
   if (options.tile_size < 8 || options.tile_size > 4096)
     return InvalidArgumentError("--tile-size " + std::to_string(options.tile_size) +
@@ -91,7 +106,7 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
     return s;
   };
 
-  const auto t0 = Clock::now();
+  Stopwatch frame_clock;
   tbb::task_arena arena(threads);
   arena.execute([&] {
     tbb::parallel_for(0, threads, [&](int) {
@@ -105,9 +120,9 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
         for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
         const uint64_t entries_before = w.counters.trace.brick_fetches;
         Status s = renderer.RenderTile(rect, &w.buf, &w.counters, w.state.get());
-        const auto tw = Clock::now();
+        const Stopwatch tw;
         if (s.ok() && writer) s = writer->WriteTile(rect, w.buf);
-        w.write_seconds += Seconds(tw, Clock::now());
+        w.write_seconds += tw.Seconds();
         if (!s.ok()) {
           std::lock_guard<std::mutex> lock(err_mu);
           if (first_error.ok())
@@ -122,12 +137,13 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
         brick_entries.fetch_add(w.counters.trace.brick_fetches - entries_before,
                                 std::memory_order_relaxed);
         done.fetch_add(1, std::memory_order_relaxed);
-        progress.Update(snapshot());
+        const ProgressSnapshot now = snapshot();
+        progress.Update(uint64_t(now.tiles_done), uint64_t(now.tiles_total),
+                        [&](double elapsed) { return ProgressLine(now, elapsed); });
       }
     });
   });
-  const auto t1 = Clock::now();
-  stats->render_seconds = Seconds(t0, t1);
+  stats->render_seconds = frame_clock.Lap();
   for (Worker& w : workers) {
     stats->counters.Add(w.counters);
     stats->write_seconds += w.write_seconds;
@@ -138,14 +154,16 @@ Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOp
     if (writer) (void)writer->Close();
     return first_error;
   }
-  progress.Finish(snapshot());
+  const ProgressSnapshot last = snapshot();
+  progress.Finish(uint64_t(last.tiles_done), uint64_t(last.tiles_total),
+                  [&](double elapsed) { return ProgressLine(last, elapsed); });
   if (!writer) return OkStatus();
   VOX_RETURN_IF_ERROR(writer->Close());
   nlohmann::json timings{{"render_seconds", stats->render_seconds},
                          {"write_seconds", stats->write_seconds},
                          {"threads", threads}};
   VOX_RETURN_IF_ERROR(PatchTimings(options.exr_path, stats->render_seconds, timings.dump()));
-  stats->close_seconds = Seconds(t1, Clock::now());
+  stats->close_seconds = frame_clock.Seconds();
   return OkStatus();
 }
 

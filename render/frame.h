@@ -15,14 +15,26 @@
 #include <cstdio>
 #include <string>
 
+#include "core/progress.h"
 #include "core/status.h"
 #include "render/exr.h"
-#include "render/progress.h"
 #include "render/renderer.h"
 #include "render/tiles.h"
 #include "render/volume.h"
 
 namespace vox {
+
+// What vox-render's progress reports show: tiles done, rays per second, the
+// cache hit rate and the time left.
+struct ProgressSnapshot {
+  int64_t tiles_done = 0, tiles_total = 0;
+  uint64_t rays = 0;
+  uint64_t cache_hits = 0, cache_misses = 0;  // bricks entered without / with paging in
+};
+
+// The text of one progress report (without the bar), for the display, tests
+// and logs.
+std::string ProgressLine(const ProgressSnapshot& s, double elapsed_seconds);
 
 struct FrameOptions {
   std::string exr_path;  // empty: render without writing (benchmarks)

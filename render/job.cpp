@@ -1,9 +1,9 @@
 #include "render/job.h"
 
 #include <charconv>
-#include <chrono>
 #include <fstream>
 
+#include "core/stopwatch.h"
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "render/frame.h"
@@ -13,11 +13,8 @@
 
 namespace vox {
 Status RunRenderJob(const RenderJobOptions& o) {
-  using Clock = std::chrono::steady_clock;
-  auto secs = [](Clock::time_point a, Clock::time_point b) {
-    return std::chrono::duration<double>(b - a).count();
-  };
-  const auto t_start = Clock::now();
+  const Stopwatch total;
+  Stopwatch phase;
   if (o.tile_size < 8 || o.tile_size > 4096)
     return InvalidArgumentError("--tile-size " + std::to_string(o.tile_size) +
                                 ": must be in 8..4096");
@@ -28,7 +25,7 @@ Status RunRenderJob(const RenderJobOptions& o) {
   OpenOptions open;
   open.cache_bytes = o.cache_mb << 20;
   VOX_ASSIGN_OR_RETURN(auto volume, StoreVolume::Open(o.store_dir, open));
-  const auto t_open = Clock::now();
+  const double open_seconds = phase.Lap();
   const StoreMeta& meta = volume->meta();
 
   Camera camera;
@@ -54,7 +51,7 @@ Status RunRenderJob(const RenderJobOptions& o) {
     VOX_ASSIGN_OR_RETURN(ro.n1, ParseSplit(o.split, meta.levels));
   }
   VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(volume.get(), camera, scene, ro));
-  const auto t_setup = Clock::now();
+  const double setup_seconds = phase.Lap();
 
   FrameOptions fo;
   fo.exr_path = o.exr_path;
@@ -68,16 +65,16 @@ Status RunRenderJob(const RenderJobOptions& o) {
   fo.attrs["vox:source"] = meta.source_file;
   FrameStats stats;
   VOX_RETURN_IF_ERROR(RenderFrame(*renderer, volume.get(), fo, &stats));
-  const auto t_render = Clock::now();
+  const double frame_seconds = phase.Lap();
   if (!o.preview_path.empty()) VOX_RETURN_IF_ERROR(WritePngPreview(o.exr_path, o.preview_path));
-  const auto t_preview = Clock::now();
+  const double preview_seconds = phase.Lap();
   if (!o.stats_path.empty()) {
     std::string json = StatsJson(*renderer, stats,
-                                 {{"open_seconds", secs(t_start, t_open)},
-                                  {"setup_seconds", secs(t_open, t_setup)},
-                                  {"frame_seconds", secs(t_setup, t_render)},
-                                  {"preview_seconds", secs(t_render, t_preview)},
-                                  {"total_seconds", secs(t_start, t_preview)}});
+                                 {{"open_seconds", open_seconds},
+                                  {"setup_seconds", setup_seconds},
+                                  {"frame_seconds", frame_seconds},
+                                  {"preview_seconds", preview_seconds},
+                                  {"total_seconds", total.Seconds()}});
     std::ofstream out(o.stats_path);
     out << json << "\n";
     out.close();

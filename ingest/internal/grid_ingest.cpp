@@ -20,12 +20,12 @@
 //     keeps the books. Peak memory: the topology + the bricks in flight (2 per
 //     thread). Leaves on a brick's faces are decoded by both bricks (a few %
 //     of CPU).
+#include "core/stopwatch.h"
 #include "ingest/internal/grid_ingest.h"
 
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -45,10 +45,6 @@ namespace {
 using openvdb::Coord;
 using openvdb::CoordBBox;
 
-double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
 std::string Quote(const std::string& s) { return "'" + s + "'"; }
 
 template <class GridT>
@@ -67,7 +63,7 @@ class GridIngest {
     threshold_ = ValueT(cx_.meta.threshold);
 
     // 1. Topology.
-    double t0 = Now();
+    Stopwatch t0;
     uint64_t leaf_count = 0;
     for (auto it = tree_.beginLeaf(); it; ++it) {
       LeafT* leaf = it.getLeaf();
@@ -93,15 +89,15 @@ class GridIngest {
     }
     cx_.stats->leaf_nodes = leaf_count;
     cx_.stats->active_voxels = tree_.activeVoxelCount();
-    cx_.stats->seconds_open += Now() - t0;
+    cx_.stats->seconds_open += t0.Seconds();
     Message("grid " + Quote(cx_.meta.grid_name) + ": " + std::to_string(leaf_count) +
             " leaf nodes, " + std::to_string(cx_.stats->active_tiles) + " active tiles, " +
             std::to_string(cx_.stats->active_voxels) + " active voxels");
 
     // 2. Exact occupied bbox.
-    t0 = Now();
+    t0.Restart();
     CoordBBox occ = OccupiedBBox();
-    cx_.stats->seconds_bbox = Now() - t0;
+    cx_.stats->seconds_bbox = t0.Seconds();
 
     // 3. Placement and writer.
     int64_t bmin[3], bmax[3];
@@ -138,18 +134,18 @@ class GridIngest {
     std::unique_ptr<StoreWriter> writer = std::move(writer_or).value();
 
     // 4. Bricks.
-    t0 = Now();
+    t0.Restart();
     if (!empty) {
       VOX_RETURN_IF_ERROR(BuildBrickMap(occ));
       VOX_RETURN_IF_ERROR(WriteBricks(writer.get()));
     }
-    cx_.stats->seconds_bricks = Now() - t0;
+    cx_.stats->seconds_bricks = t0.Seconds();
     // Streaming check: no leaf buffer was loaded into the tree itself.
     for (auto it = tree_.cbeginLeaf(); it; ++it)
       if (!it->buffer().isOutOfCore()) ++cx_.stats->leaves_resident_in_tree;
-    t0 = Now();
+    t0.Restart();
     VOX_RETURN_IF_ERROR(writer->Finish());
-    cx_.stats->seconds_finish = Now() - t0;
+    cx_.stats->seconds_finish = t0.Seconds();
     return OkStatus();
   }
 

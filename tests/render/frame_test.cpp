@@ -13,7 +13,6 @@
 
 #include "render/exr.h"
 #include "render/merge.h"
-#include "render/progress.h"
 #include "render/store_volume.h"
 #include "tests/render/render_util.h"
 #include "tests/render/store_util.h"
@@ -346,7 +345,7 @@ TEST(ProgressTest, LineShowsTilesRateCacheAndTimeLeft) {
   s.rays = 2000000;
   s.cache_hits = 90;
   s.cache_misses = 10;
-  std::string line = Progress::Line(s, 2.0);
+  std::string line = ProgressLine(s, 2.0);
   EXPECT_NE(line.find("tiles 25/100"), std::string::npos) << line;
   EXPECT_NE(line.find("1.00M rays/s"), std::string::npos) << line;
   EXPECT_NE(line.find("cache hits 90%"), std::string::npos) << line;

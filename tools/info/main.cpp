@@ -3,12 +3,13 @@
 //
 //   vox-info STORE_DIR [--verify] [--cache-mb M]
 // Exit status: 0 on success, 1 when the store cannot be read, 2 on bad usage.
+#include <cstdint>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
+#include <optional>
 #include <string>
 
 #include "storage/store_info.h"
+#include "tools/common/flags.h"
 
 namespace {
 
@@ -32,20 +33,21 @@ int Usage(const std::string& msg) {
 
 int main(int argc, char** argv) {
   Options opt;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    if (a == "--help" || a == "-h") {
+  vox::FlagReader flags(argc, argv);
+  while (flags.Next()) {
+    const std::string a = flags.arg();
+    if (flags.IsHelp()) {
       std::fputs(kUsage, stdout);
       return 0;
     } else if (a == "--verify") {
       opt.verify = true;
     } else if (a == "--cache-mb") {
-      if (i + 1 >= argc) return Usage("--cache-mb needs a value");
-      char* end = nullptr;
-      long long v = std::strtoll(argv[++i], &end, 10);
-      if (*end != '\0' || v < 1) return Usage(std::string("bad --cache-mb '") + argv[i] + "'");
-      opt.cache_mb = size_t(v);
-    } else if (!a.empty() && a[0] == '-') {
+      const std::optional<std::string> v = flags.Value();
+      if (!v) return Usage("--cache-mb needs a value");
+      int64_t mb = 0;
+      if (!vox::ParseInt(*v, 1, INT64_MAX >> 20, &mb)) return Usage("bad --cache-mb '" + *v + "'");
+      opt.cache_mb = size_t(mb);
+    } else if (flags.IsFlag()) {
       return Usage("unknown option '" + a + "'");
     } else if (opt.store.empty()) {
       opt.store = a;

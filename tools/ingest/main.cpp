@@ -5,14 +5,13 @@
 // Exit codes: 0 done, 1 the ingest failed, 2 bad command line.
 #include <unistd.h>
 
-#include <cerrno>
-#include <cmath>
 #include <cstdio>
-#include <cstdlib>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "ingest/ingest.h"
+#include "tools/common/flags.h"
 
 namespace {
 
@@ -38,42 +37,17 @@ int UsageError(const std::string& message) {
   return 2;
 }
 
-bool ParseInt(const std::string& s, int* out) {
-  errno = 0;
-  char* end = nullptr;
-  long v = std::strtol(s.c_str(), &end, 10);
-  if (s.empty() || *end != '\0' || errno != 0 || v < -1000000 || v > 1000000) return false;
-  *out = int(v);
-  return true;
-}
-
-bool ParseDouble(const std::string& s, double* out) {
-  errno = 0;
-  char* end = nullptr;
-  double v = std::strtod(s.c_str(), &end);
-  if (s.empty() || *end != '\0' || errno != 0 || !std::isfinite(v)) return false;
-  *out = v;
-  return true;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   vox::IngestOptions o;
   bool quiet = false;
   std::vector<std::string> positional;
-  std::string command = "vox-ingest";
-  for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
-  o.command_line = command;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto value = [&](std::string* v) {
-      if (i + 1 >= argc) return false;
-      *v = argv[++i];
-      return true;
-    };
-    std::string v;
-    if (a == "-h" || a == "--help") {
+  vox::FlagReader flags(argc, argv);
+  o.command_line = flags.CommandLine("vox-ingest");
+  while (flags.Next()) {
+    const std::string& a = flags.arg();
+    if (flags.IsHelp()) {
       std::fputs(kUsage, stdout);
       return 0;
     } else if (a == "--force") {
@@ -82,28 +56,27 @@ int main(int argc, char** argv) {
       quiet = true;
     } else if (a == "--grid" || a == "--levels" || a == "--isovalue" || a == "--threshold" ||
                a == "--color" || a == "--zstd-level" || a == "--normal-bits" || a == "--threads") {
-      if (!value(&v)) return UsageError(a + " needs a value");
-      if (a == "--grid") {
-        o.grid_name = v;
-      } else if (a == "--levels") {
-        o.levels = v;
-      } else if (a == "--color") {
-        o.color_grid = v;
-      } else if (a == "--normal-bits") {
-        int n;
-        if (!ParseInt(v, &n) || n < 8 || n > 16)
-          return UsageError("--normal-bits " + v + ": must be a whole number of bits in 8..16");
-        o.normal_bits = n;
-      } else if (a == "--isovalue" || a == "--threshold") {
+      const std::string flag = a;
+      const std::optional<std::string> v = flags.Value();
+      if (!v) return UsageError(flag + " needs a value");
+      if (flag == "--grid") {
+        o.grid_name = *v;
+      } else if (flag == "--levels") {
+        o.levels = *v;
+      } else if (flag == "--color") {
+        o.color_grid = *v;
+      } else if (flag == "--normal-bits") {
+        if (!vox::ParseInt(*v, 8, 16, &o.normal_bits))
+          return UsageError("--normal-bits " + *v + ": must be a whole number of bits in 8..16");
+      } else if (flag == "--isovalue" || flag == "--threshold") {
         double d;
-        if (!ParseDouble(v, &d)) return UsageError(a + " " + v + ": not a finite number");
-        (a == "--isovalue" ? o.isovalue : o.threshold) = d;
-      } else {
-        int n;
-        if (!ParseInt(v, &n)) return UsageError(a + " " + v + ": not a whole number");
-        (a == "--threads" ? o.threads : o.zstd_level) = n;
+        if (!vox::ParseDouble(*v, &d)) return UsageError(flag + " " + *v + ": not a finite number");
+        (flag == "--isovalue" ? o.isovalue : o.threshold) = d;
+      } else if (!vox::ParseInt(*v, -1000000, 1000000,
+                                flag == "--threads" ? &o.threads : &o.zstd_level)) {
+        return UsageError(flag + " " + *v + ": not a whole number");
       }
-    } else if (a.size() > 1 && a[0] == '-') {
+    } else if (flags.IsFlag()) {
       return UsageError("unknown option " + a);
     } else {
       positional.push_back(a);

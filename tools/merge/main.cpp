@@ -1,11 +1,13 @@
 // vox-merge: assembles the partial EXRs of `vox-render --tiles I/N` into one
 // image. Parses flags and calls vox::MergeParts.
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "render/exr.h"
 #include "render/merge.h"
+#include "tools/common/flags.h"
 
 namespace {
 
@@ -26,17 +28,19 @@ int main(int argc, char** argv) {
   std::vector<std::string> parts;
   std::string out, preview;
   bool quiet = false;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    if (a == "-h" || a == "--help") {
+  vox::FlagReader flags(argc, argv);
+  while (flags.Next()) {
+    const std::string a = flags.arg();
+    if (flags.IsHelp()) {
       fprintf(stdout, "%s", kUsage);
       return 0;
     } else if (a == "-o" || a == "--preview") {
-      if (i + 1 >= argc) return Usage(a + " needs a value");
-      (a == "-o" ? out : preview) = argv[++i];
+      const std::optional<std::string> v = flags.Value();
+      if (!v) return Usage(a + " needs a value");
+      (a == "-o" ? out : preview) = *v;
     } else if (a == "--quiet") {
       quiet = true;
-    } else if (!a.empty() && a[0] == '-') {
+    } else if (flags.IsFlag()) {
       return Usage("unknown flag " + a);
     } else {
       parts.push_back(a);

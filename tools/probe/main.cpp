@@ -6,8 +6,8 @@
 //   vox-probe store/ [options] < rays.txt
 // Options: --split N1+N2|N1, --single-step, --cache-mb M, --stats,
 //   --fixed auto|64|128 (fixed-point word; auto: 64 up to 2^26 grids, else 128)
+#include <cstdint>
 #include <cstdio>
-#include <cstring>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -17,6 +17,7 @@
 #include "core/ray_text.h"
 #include "core/shapes.h"
 #include "storage/store.h"
+#include "tools/common/flags.h"
 
 namespace {
 
@@ -80,39 +81,38 @@ int Run(const TracerT& tracer, const glm::i64vec3& origin, bool stats) {
 
 int main(int argc, char** argv) {
   Options opt;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto value = [&](const char* name) -> std::optional<std::string> {
-      if (i + 1 >= argc) return std::nullopt;
-      (void)name;
-      return std::string(argv[++i]);
-    };
+  vox::FlagReader flags(argc, argv);
+  while (flags.Next()) {
+    const std::string a = flags.arg();
     std::optional<std::string> v;
-    if (a == "--help" || a == "-h") {
+    if (flags.IsHelp()) {
       std::fputs(kUsage, stdout);
       return 0;
     } else if (a == "--generate") {
-      if (!(v = value("--generate"))) return Fail("--generate needs a shape\n" + std::string(kUsage));
+      if (!(v = flags.Value())) return Fail("--generate needs a shape\n" + std::string(kUsage));
       opt.generate = *v;
     } else if (a == "--split") {
-      if (!(v = value("--split"))) return Fail("--split needs N1+N2 or N1");
+      if (!(v = flags.Value())) return Fail("--split needs N1+N2 or N1");
       opt.split = *v;
     } else if (a == "--single-step") {
       opt.single_step = true;
     } else if (a == "--stats") {
       opt.stats = true;
-    } else if (a == "--fixed" && i + 1 < argc && std::string(argv[i + 1]) == "auto") {
-      ++i;
-      opt.fixed = 0;
     } else if (a == "--brick-level" || a == "--cache-mb" || a == "--fixed") {
-      if (!(v = value(a.c_str()))) return Fail(a + " needs a number");
-      char* end = nullptr;
-      long n = std::strtol(v->c_str(), &end, 10);
-      if (*end != '\0' || n < 0) return Fail(a + ": '" + *v + "' is not a non-negative integer");
-      if (a == "--brick-level") opt.brick_level = int(n);
-      if (a == "--cache-mb") opt.cache_mb = size_t(n);
-      if (a == "--fixed") opt.fixed = int(n);
-    } else if (!a.empty() && a[0] == '-') {
+      if (!(v = flags.Value())) return Fail(a + " needs a number");
+      int64_t n = 0;
+      if (a == "--fixed" && *v == "auto") {
+        opt.fixed = 0;
+      } else if (!vox::ParseInt(*v, 0, a == "--cache-mb" ? INT64_MAX >> 20 : INT32_MAX, &n)) {
+        return Fail(a + ": '" + *v + "' is not a non-negative integer");
+      } else if (a == "--brick-level") {
+        opt.brick_level = int(n);
+      } else if (a == "--cache-mb") {
+        opt.cache_mb = size_t(n);
+      } else {
+        opt.fixed = int(n);
+      }
+    } else if (flags.IsFlag()) {
       return Fail("unknown option " + a + "\n" + kUsage);
     } else if (opt.store.empty()) {
       opt.store = a;

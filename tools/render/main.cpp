@@ -1,13 +1,12 @@
 // vox-render: renders a vox store to a tiled OpenEXR by discrete ray tracing.
 // Parses flags into RenderJobOptions and calls vox::RunRenderJob.
-#include <cerrno>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
+#include <optional>
 #include <string>
 
 #include "render/camera.h"
 #include "render/job.h"
+#include "tools/common/flags.h"
 
 namespace {
 
@@ -38,27 +37,14 @@ int Usage(const std::string& error) {
   return 2;
 }
 
-bool ParseInt(const char* s, long lo, long hi, int* out) {
-  char* end = nullptr;
-  errno = 0;
-  long v = std::strtol(s, &end, 10);
-  if (errno != 0 || end == s || *end != '\0' || v < lo || v > hi) return false;
-  *out = int(v);
-  return true;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
   vox::RenderJobOptions o;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto value = [&](const char* flag) -> const char* {
-      if (i + 1 >= argc) return nullptr;
-      (void)flag;
-      return argv[++i];
-    };
-    if (a == "-h" || a == "--help") {
+  vox::FlagReader flags(argc, argv);
+  while (flags.Next()) {
+    const std::string a = flags.arg();
+    if (flags.IsHelp()) {
       fprintf(stdout, "%s", kUsage);
       return 0;
     } else if (a == "--single-step") {
@@ -68,8 +54,9 @@ int main(int argc, char** argv) {
     } else if (a == "--cam" || a == "--scene" || a == "-o" || a == "--preview" || a == "--split" ||
                a == "--cache-mb" || a == "--threads" || a == "--tile-size" || a == "--tiles" ||
                a == "--stats" || a == "--layers" || a == "--size") {
-      const char* v = value(a.c_str());
-      if (!v) return Usage(a + " needs a value");
+      const std::optional<std::string> value = flags.Value();
+      if (!value) return Usage(a + " needs a value");
+      const std::string& v = *value;
       if (a == "--cam")
         o.camera_path = v;
       else if (a == "--scene")
@@ -84,44 +71,36 @@ int main(int argc, char** argv) {
         o.stats_path = v;
       else if (a == "--cache-mb") {
         int mb = 0;
-        if (!ParseInt(v, 1, 1 << 22, &mb))
-          return Usage(std::string("--cache-mb '") + v + "': expected a positive integer");
+        if (!vox::ParseInt(v, 1, 1 << 22, &mb))
+          return Usage("--cache-mb '" + v + "': expected a positive integer");
         o.cache_mb = size_t(mb);
       } else if (a == "--threads") {
-        if (!ParseInt(v, 0, 4096, &o.threads))
-          return Usage(std::string("--threads '") + v + "': expected 0..4096");
+        if (!vox::ParseInt(v, 0, 4096, &o.threads))
+          return Usage("--threads '" + v + "': expected 0..4096");
       } else if (a == "--tile-size") {
-        if (!ParseInt(v, 8, 4096, &o.tile_size))
-          return Usage(std::string("--tile-size '") + v + "': expected 8..4096");
+        if (!vox::ParseInt(v, 8, 4096, &o.tile_size))
+          return Usage("--tile-size '" + v + "': expected 8..4096");
       } else if (a == "--tiles") {
         auto part = vox::ParsePartSpec(v);
         if (!part.ok()) return Usage(part.status().message());
         o.part = *part;
       } else if (a == "--layers") {
-        std::string list = v;
-        size_t start = 0;
-        while (start <= list.size()) {
-          size_t comma = list.find(',', start);
-          std::string item =
-              list.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+        for (const std::string& item : vox::SplitList(v)) {
           if (item == "normal")
             o.layers.normal = true;
           else if (item == "voxel")
             o.layers.voxel = true;
           else
             return Usage("--layers: unknown layer '" + item + "' (normal, voxel)");
-          if (comma == std::string::npos) break;
-          start = comma + 1;
         }
       } else if (a == "--size") {
-        std::string s = v;
-        size_t x = s.find('x');
+        size_t x = v.find('x');
         if (x == std::string::npos ||
-            !ParseInt(s.substr(0, x).c_str(), 1, vox::kMaxImageSide, &o.default_width) ||
-            !ParseInt(s.substr(x + 1).c_str(), 1, vox::kMaxImageSide, &o.default_height))
-          return Usage("--size '" + s + "': expected WxH");
+            !vox::ParseInt(v.substr(0, x), 1, vox::kMaxImageSide, &o.default_width) ||
+            !vox::ParseInt(v.substr(x + 1), 1, vox::kMaxImageSide, &o.default_height))
+          return Usage("--size '" + v + "': expected WxH");
       }
-    } else if (!a.empty() && a[0] == '-') {
+    } else if (flags.IsFlag()) {
       return Usage("unknown flag " + a);
     } else if (o.store_dir.empty()) {
       o.store_dir = a;

@@ -15,6 +15,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <optional>
 #include <cinttypes>
 #include <thread>
 #include <cmath>
@@ -25,16 +26,13 @@
 #include <unistd.h>
 
 #include "core/shapes.h"
+#include "core/stopwatch.h"
 #include "core/tracer.h"
 #include "storage/store.h"
 #include "storage/store_info.h"
+#include "tools/common/flags.h"
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double Seconds(Clock::time_point a) {
-  return std::chrono::duration<double>(Clock::now() - a).count();
-}
 
 struct Options {
   std::string shape = "sphere:512", keep, store;
@@ -130,7 +128,7 @@ int WriteShapeStore(Options& o, std::string* dir_out, std::string* tmp_out) {
     }
   }
   // Write: AddBrick from all threads, then Finish (fsync, rename).
-  auto t0 = Clock::now();
+  const vox::Stopwatch t0;
   {
     vox::WriteOptions wo;
     wo.zstd_level = o.zstd_level;
@@ -150,7 +148,7 @@ int WriteShapeStore(Options& o, std::string* dir_out, std::string* tmp_out) {
     vox::Status s = (*w)->Finish();
     if (!s.ok()) return Fail(s.ToString());
   }
-  double write_s = Seconds(t0);
+  double write_s = t0.Seconds();
   auto info = vox::InspectStore(dir, false);
   if (!info.ok()) return Fail(info.status().ToString());
   std::printf("%s", vox::FormatStoreInfo(*info).c_str());
@@ -164,27 +162,32 @@ int WriteShapeStore(Options& o, std::string* dir_out, std::string* tmp_out) {
 
 int main(int argc, char** argv) {
   Options o;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "vox-storage-bench: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--shape") o.shape = next();
-    else if (a == "--brick-level") o.brick_level = std::atoi(next().c_str());
-    else if (a == "--zstd-level") o.zstd_level = std::atoi(next().c_str());
-    else if (a == "--threads") o.threads = std::atoi(next().c_str());
-    else if (a == "--keep") o.keep = next();
-    else if (a == "--store") o.store = next();
-    else if (a == "--cache-mb") o.cache_mb = std::atof(next().c_str());
-    else if (a == "--normal-bits") o.normal_bits = std::atoi(next().c_str());
-    else {
+  vox::FlagReader flags(argc, argv);
+  while (flags.Next()) {
+    const std::string a = flags.arg();
+    if (a != "--shape" && a != "--brick-level" && a != "--zstd-level" && a != "--threads" &&
+        a != "--keep" && a != "--store" && a != "--cache-mb" && a != "--normal-bits") {
       std::fprintf(stderr, "usage: vox-storage-bench [--shape S] [--brick-level L] "
                            "[--zstd-level Z] [--normal-bits B] [--threads N] [--keep DIR]\n"
                            "       vox-storage-bench --store DIR [--threads N] [--cache-mb M]\n");
+      return 2;
+    }
+    const std::optional<std::string> v = flags.Value();
+    if (!v) {
+      std::fprintf(stderr, "vox-storage-bench: %s needs a value\n", a.c_str());
+      return 2;
+    }
+    bool ok = true;
+    if (a == "--shape") o.shape = *v;
+    else if (a == "--brick-level") ok = vox::ParseInt(*v, -1000000, 1000000, &o.brick_level);
+    else if (a == "--zstd-level") ok = vox::ParseInt(*v, -1000000, 1000000, &o.zstd_level);
+    else if (a == "--threads") ok = vox::ParseInt(*v, -1000000, 1000000, &o.threads);
+    else if (a == "--keep") o.keep = *v;
+    else if (a == "--store") o.store = *v;
+    else if (a == "--cache-mb") ok = vox::ParseDouble(*v, &o.cache_mb);
+    else ok = vox::ParseInt(*v, -1000000, 1000000, &o.normal_bits);
+    if (!ok) {
+      std::fprintf(stderr, "vox-storage-bench: %s '%s': not a number\n", a.c_str(), v->c_str());
       return 2;
     }
   }
@@ -211,14 +214,14 @@ int main(int argc, char** argv) {
     const uint32_t bricks = uint32_t((*store)->meta().brick_count);
     const int rounds = std::max<int>(1, int(20000 / std::max<uint32_t>(1, bricks)));
     std::atomic<bool> failed{false};
-    auto t1 = Clock::now();
+    const vox::Stopwatch t1;
     tbb::task_arena arena(threads);
     arena.execute([&] {
       tbb::parallel_for(0, int(bricks) * rounds, [&](int k) {
         if (!(*store)->FetchBrick(uint32_t(k % int(bricks))).ok()) failed = true;
       });
     });
-    double s = Seconds(t1);
+    double s = t1.Seconds();
     if (failed) return Fail("a brick fetch failed");
     vox::CacheStats cs = (*store)->cache_stats();
     std::printf("decompress (%d thread%s): %.0f bricks/s, %.0f MB/s decompressed, %.1f M voxels/s\n",
@@ -242,7 +245,7 @@ int main(int argc, char** argv) {
     std::atomic<bool> failed{false};
     const uint64_t rss_before = RssAnon();
     RssSampler sampler;
-    auto t1 = Clock::now();
+    const vox::Stopwatch t1;
     const glm::dvec3 eye(c * 0.8, c * 1.1, -1.2 * n);
     tbb::parallel_for(0, H, [&](int y) {
       for (int x = 0; x < W; ++x) {
@@ -255,7 +258,7 @@ int main(int argc, char** argv) {
         }
       }
     });
-    double s = Seconds(t1);
+    double s = t1.Seconds();
     if (failed) return Fail("tracing failed");
     vox::CacheStats cs = (*store)->cache_stats();
     std::printf("trace 512^2 (cache %.1f%% of bricks = %s): %.2f M rays/s, %llu hits, cache hit "

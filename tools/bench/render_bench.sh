@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # vox-render vs OpenVDB's vdb_render, side by side on the same level set,
-# camera, image size and thread count (issue 4's benchmark).
+# camera, image size and thread count.
 #
-#   tools/render/render_bench.sh [BUILD_DIR] [WORK_DIR]
+#   tools/bench/render_bench.sh [BUILD_DIR] [WORK_DIR]
 #
 # Makes `vdb_tool -sphere d=2048 r=1 c=0,0,0 v=0.001 w=3` (if WORK_DIR lacks
 # it), ingests it with vox-ingest, then times RUNS (default 5) frames of each
@@ -36,7 +36,7 @@ JSON
 cat >"$work/scene.json" <<JSON
 {"lights":[{"type":"directional","direction":[-0.3,-0.5,-1],"shadows":false}], "material":{"specular":0}}
 JSON
-"$build/tools/render/vox-render-bench" "$store" --cam "$work/cam.json" --scene "$work/scene.json" \
+"$build/tools/bench/vox-render-bench" "$store" --cam "$work/cam.json" --scene "$work/scene.json" \
   --runs "$((runs + 1))" --threads "$threads" ${BENCH_EXR:+--exr "$work/vox.exr"} >"$work/vox.json"
 cpu() { /usr/bin/time -f "%U %S" "$@" 2>&1 >/dev/null | tail -1 | awk '{print $1 + $2}'; }
 base_cpu=$(cpu vdb_render "$vdb" "$work/vdb_small.exr" -translate 0,0,3 -lookat 0,0,0 -fov 40 -res 8x8 -cpus "$threads")

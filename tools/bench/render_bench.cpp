@@ -1,6 +1,6 @@
 // vox-render-bench: times vox's renderer on a store in one process: the first
 // frame with an empty brick cache (cold), then warm frames; prints JSON with
-// the times, their median, rays/s and DDA moves/s. tools/render/render_bench.sh
+// the times, their median, rays/s and DDA moves/s. tools/bench/render_bench.sh
 // runs it side by side with vdb_render.
 //   vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N]
 //                    [--threads N] [--split N1+N2|N1] [--exr out.exr] [--cache-mb M]
@@ -9,8 +9,9 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <cstdlib>
+#include <cstdint>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,45 +21,59 @@
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "render/store_volume.h"
+#include "tools/common/flags.h"
 
 int main(int argc, char** argv) {
   std::string store, cam_path, scene_path, split, exr;
   int runs = 5, threads = 2, tile_size = 64;
   size_t cache_mb = 2048;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        fprintf(stderr, "vox-render-bench: %s needs a value\n", a.c_str());
-        exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--cam")
-      cam_path = next();
-    else if (a == "--scene")
-      scene_path = next();
-    else if (a == "--split")
-      split = next();
-    else if (a == "--exr")
-      exr = next();
-    else if (a == "--runs")
-      runs = std::max(2, atoi(next().c_str()));
-    else if (a == "--threads")
-      threads = atoi(next().c_str());
-    else if (a == "--tile-size")
-      tile_size = std::max(1, atoi(next().c_str()));
-    else if (a == "--cache-mb")
-      cache_mb = size_t(atol(next().c_str()));
-    else if (!a.empty() && a[0] != '-' && store.empty())
+  vox::FlagReader flags(argc, argv);
+  auto usage = [] {
+    fprintf(stderr,
+            "usage: vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N] "
+            "[--threads N] [--split S] [--exr out.exr] [--cache-mb M] [--tile-size T]\n");
+    return 2;
+  };
+  while (flags.Next()) {
+    const std::string a = flags.arg();
+    if (!flags.IsFlag()) {
+      if (!store.empty()) return usage();
       store = a;
-    else {
-      fprintf(stderr,
-              "usage: vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N] "
-              "[--threads N] [--split S] [--exr out.exr] [--cache-mb M] [--tile-size T]\n");
+      continue;
+    }
+    if (a != "--cam" && a != "--scene" && a != "--split" && a != "--exr" && a != "--runs" &&
+        a != "--threads" && a != "--tile-size" && a != "--cache-mb")
+      return usage();
+    const std::optional<std::string> v = flags.Value();
+    if (!v) {
+      fprintf(stderr, "vox-render-bench: %s needs a value\n", a.c_str());
+      return 2;
+    }
+    bool ok = true;
+    int64_t mb = 0;
+    if (a == "--cam")
+      cam_path = *v;
+    else if (a == "--scene")
+      scene_path = *v;
+    else if (a == "--split")
+      split = *v;
+    else if (a == "--exr")
+      exr = *v;
+    else if (a == "--runs")
+      ok = vox::ParseInt(*v, -1000000, 1000000, &runs);
+    else if (a == "--threads")
+      ok = vox::ParseInt(*v, -1000000, 1000000, &threads);
+    else if (a == "--tile-size")
+      ok = vox::ParseInt(*v, -1000000, 1000000, &tile_size);
+    else if ((ok = vox::ParseInt(*v, 0, INT64_MAX >> 20, &mb)))
+      cache_mb = size_t(mb);
+    if (!ok) {
+      fprintf(stderr, "vox-render-bench: %s '%s': not a number\n", a.c_str(), v->c_str());
       return 2;
     }
   }
+  runs = std::max(2, runs);
+  tile_size = std::max(1, tile_size);
   if (store.empty() || cam_path.empty()) {
     fprintf(stderr, "vox-render-bench: need STORE and --cam\n");
     return 2;
