@@ -1,6 +1,7 @@
 // vox-render: renders a vox store to a tiled OpenEXR by discrete ray tracing.
 // Parses flags into RenderJobOptions and calls vox::RunRenderJob.
 #include <cerrno>
+#include <climits>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -91,8 +92,8 @@ int main(int argc, char** argv) {
         if (!ParseInt(v, 0, 4096, &o.threads))
           return Usage(std::string("--threads '") + v + "': expected 0..4096");
       } else if (a == "--tile-size") {
-        if (!ParseInt(v, 8, 4096, &o.tile_size))
-          return Usage(std::string("--tile-size '") + v + "': expected 8..4096");
+        if (!ParseInt(v, INT_MIN, INT_MAX, &o.tile_size))
+          return Usage(std::string("--tile-size '") + v + "': expected an integer");
       } else if (a == "--tiles") {
         auto part = vox::ParsePartSpec(v);
         if (!part.ok()) return Usage(part.status().message());
