@@ -1,13 +1,12 @@
 #include "render/camera.h"
 
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "render/internal/json_fields.h"
+#include "render/internal/text_file.h"
 
 namespace vox {
 namespace {
@@ -19,6 +18,7 @@ bool Finite(const glm::dvec3& v) {
 }  // namespace
 
 Status Camera::Finalize(std::string_view source) {
+  finalized_ = false;
   auto err = [&](const std::string& field, const std::string& what) {
     return json_fields::FieldError(source, field, what);
   };
@@ -64,6 +64,7 @@ Status Camera::Finalize(std::string_view source) {
       if (!Finite(ray.origin) || !Finite(ray.dir))
         return err(field, "is too large: the image's corner rays are not finite");
     }
+  finalized_ = true;
   return OkStatus();
 }
 
@@ -131,15 +132,6 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) 
   }
   VOX_RETURN_IF_ERROR(cam.Finalize(file));
   return cam;
-}
-
-StatusOr<std::string> ReadTextFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return NotFoundError(path + ": cannot open for reading");
-  std::ostringstream s;
-  s << in.rdbuf();
-  if (in.bad()) return IoError(path + ": read failed");
-  return s.str();
 }
 
 StatusOr<Camera> LoadCamera(const std::string& path) {

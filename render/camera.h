@@ -47,8 +47,11 @@ class Camera {
 
   // Checks the fields (finite, positive size, fov in (0, 180), up not
   // parallel to the view direction) and computes the camera frame. `source`
-  // names where the camera came from, for the messages.
+  // names where the camera came from, for the messages. Call it again after
+  // changing a field.
   Status Finalize(std::string_view source = "camera");
+  // Whether Finalize() has succeeded (the renderer refuses a camera without it).
+  bool finalized() const { return finalized_; }
 
   // The ray through image position (x, y), in pixels from the top-left
   // corner: pixel (i, j)'s centre is (i + 0.5, j + 0.5). REQUIRES: Finalize().
@@ -64,6 +67,7 @@ class Camera {
  private:
   glm::dvec3 forward_{0.0, 0.0, -1.0}, right_{1.0, 0.0, 0.0}, true_up_{0.0, 1.0, 0.0};
   double scale_x_ = 1.0, scale_y_ = 1.0;  // screen half-extent (tan(fov/2) or ortho_width / 2)
+  bool finalized_ = false;
 };
 
 // Parses cam.json text; `file` names it in every error ("cam.json: field
@@ -75,9 +79,6 @@ StatusOr<Camera> LoadCamera(const std::string& path);
 // A perspective camera that frames the world box [lo, hi] from a three-quarter
 // view above it, with the whole box in the image.
 Camera DefaultCamera(const glm::dvec3& lo, const glm::dvec3& hi, int width, int height);
-
-// Reads a whole file into a string; NotFound / IoError name the file.
-StatusOr<std::string> ReadTextFile(const std::string& path);
 
 }  // namespace vox
 

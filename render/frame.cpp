@@ -43,12 +43,16 @@ std::string ProgressLine(const ProgressSnapshot& s, double elapsed) {
   return buf;
 }
 
-Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOptions& options,
-                   FrameStats* stats) {
+Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameStats* stats) {
   const Camera& cam = renderer.camera();
-  if (options.tile_size < 8 || options.tile_size > 4096)
-    return InvalidArgumentError("--tile-size " + std::to_string(options.tile_size) +
-                                ": must be in 8..4096");
+  Volume* volume = renderer.volume();
+  if (options.tile_size < kMinTileSize || options.tile_size > kMaxTileSize)
+    return InvalidArgumentError("tile size " + std::to_string(options.tile_size) + ": must be in " +
+                                std::to_string(kMinTileSize) + ".." +
+                                std::to_string(kMaxTileSize));
+  if (options.threads < 0)
+    return InvalidArgumentError("threads " + std::to_string(options.threads) +
+                                ": must not be negative (0: all cores)");
   const TileLayout layout(cam.width, cam.height, options.tile_size);
   int64_t begin = 0, end = 0;
   layout.PartRange(options.part, &begin, &end);

@@ -20,7 +20,6 @@
 #include "render/exr.h"
 #include "render/renderer.h"
 #include "render/tiles.h"
-#include "render/volume.h"
 
 namespace vox {
 
@@ -35,6 +34,8 @@ struct ProgressSnapshot {
 // The text of one progress report (without the bar), for the display, tests
 // and logs.
 std::string ProgressLine(const ProgressSnapshot& s, double elapsed_seconds);
+
+inline constexpr int kMinTileSize = 8, kMaxTileSize = 4096;
 
 struct FrameOptions {
   std::string exr_path;  // empty: render without writing (benchmarks)
@@ -56,8 +57,9 @@ struct FrameStats {
   double close_seconds = 0;   // closing the EXR and recording timings
 };
 
-Status RenderFrame(const Renderer& renderer, RenderVolume* volume, const FrameOptions& options,
-                   FrameStats* stats);
+// Renders the renderer's camera image (of its volume) as `options` say.
+// options.tile_size must be in kMinTileSize..kMaxTileSize.
+Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameStats* stats);
 
 // The --stats document: rays by kind, DDA moves, transitions, bricks paged
 // in, cache hits and misses, timings. `extra_timings` adds named seconds

@@ -9,22 +9,18 @@
 #include "render/frame.h"
 #include "render/renderer.h"
 #include "render/scene.h"
-#include "render/store_volume.h"
+#include "storage/store.h"
 
 namespace vox {
 Status RunRenderJob(const RenderJobOptions& o) {
   const Stopwatch total;
   Stopwatch phase;
-  if (o.tile_size < 8 || o.tile_size > 4096)
-    return InvalidArgumentError("--tile-size " + std::to_string(o.tile_size) +
-                                ": must be in 8..4096");
-  if (o.threads < 0) return InvalidArgumentError("--threads must not be negative");
   if (!o.preview_path.empty() && !o.part.whole())
     return InvalidArgumentError(
         "--preview needs the whole image; with --tiles, preview the vox-merge output");
   OpenOptions open;
   open.cache_bytes = o.cache_mb << 20;
-  VOX_ASSIGN_OR_RETURN(auto volume, StoreVolume::Open(o.store_dir, open));
+  VOX_ASSIGN_OR_RETURN(auto volume, Store::Open(o.store_dir, open));
   const double open_seconds = phase.Lap();
   const StoreMeta& meta = volume->meta();
 
@@ -64,7 +60,7 @@ Status RunRenderJob(const RenderJobOptions& o) {
   fo.attrs["vox:grid"] = meta.grid_name;
   fo.attrs["vox:source"] = meta.source_file;
   FrameStats stats;
-  VOX_RETURN_IF_ERROR(RenderFrame(*renderer, volume.get(), fo, &stats));
+  VOX_RETURN_IF_ERROR(RenderFrame(*renderer, fo, &stats));
   const double frame_seconds = phase.Lap();
   if (!o.preview_path.empty()) VOX_RETURN_IF_ERROR(WritePngPreview(o.exr_path, o.preview_path));
   const double preview_seconds = phase.Lap();

@@ -1,6 +1,6 @@
 // vox::Renderer: shades the pixels of one tile by discrete ray tracing of a
-// RenderVolume (core/tracer.h), simulating only the effects the scene calls
-// for. The passes are decided once, at Create:
+// Volume (storage/store.h; core/tracer.h traces it), simulating only the
+// effects the scene calls for. The passes are decided once, at Create:
 //   - shadows:     a light with "shadows": true (and intensity > 0), surfaces only;
 //   - reflection:  a material with reflect > 0 and max_depth > 0;
 //   - refraction:  a material with transmit > 0 and max_depth > 0;
@@ -10,20 +10,26 @@
 // world space by the inverse transpose of index_to_world); a voxel without a
 // normal uses the face its ray entered through.
 //
-// Secondary rays (shadow, reflection, refraction) leave the hit voxel's face
-// 2.5 voxels out along the normal (clear of the surface's own staircase at
-// grazing angles) and skip any run of occupied voxels contiguous with their
-// start, so a surface never shadows or reflects itself, while anything after
-// an empty voxel occludes. Refracted rays enter at the face itself. Refracted rays cross the
-// object to the end of the first occupied run whose stored normal faces
-// along the ray (the back surface; a level set's interior is hollow).
+// Every secondary ray (shadow, reflection, refraction, transmittance) is made
+// by SpawnRay. Rays leaving a surface (shadow, reflection, a refracted ray's
+// exit) start 2.5 voxels out along the normal (clear of the surface's own
+// staircase at grazing angles) and skip any run of occupied voxels contiguous
+// with their start, so a surface never shadows or reflects itself, while
+// anything after an empty voxel occludes. Refracted rays enter at the face
+// itself and cross the object to the end of the first occupied run whose
+// stored normal faces along the ray (the back surface; a level set's interior
+// is hollow).
 //
 // Fog: absorption on the exact DDA segments (each occupied voxel's entry and
 // exit t), extinction = (absorption + scattering) * density per world unit;
 // single scattering with isotropic phase, the light attenuated by a
 // transmittance ray to the light, traced from the middle of an occupied
-// segment at most every 3 voxels along the ray. A = 1 - transmittance. Integration stops
-// once transmittance falls below 1e-6.
+// segment at most every 3 voxels along the ray. A = 1 - transmittance.
+// Integration stops once transmittance falls below 1e-6.
+//
+// The code: renderer.cpp (set-up, the pixel and tile loop), surface.cpp
+// (hits, surface shading, reflection, refraction), fog.cpp (fog and
+// transmittance); render/internal/tracing.h holds what they share.
 //
 // Thread safety: a Renderer is immutable after Create; RenderTile is const
 // and runs concurrently (one TileBuffer and RenderCounters per thread).
@@ -42,6 +48,7 @@
 #include "render/scene.h"
 #include "render/tiles.h"
 #include "render/volume.h"
+#include "storage/store.h"
 
 namespace vox {
 
@@ -80,14 +87,15 @@ using RenderTracer = AutoTracer<double>;
 
 class Renderer {
  public:
-  // `volume` must outlive the renderer.
-  static StatusOr<std::unique_ptr<Renderer>> Create(RenderVolume* volume, const Camera& camera,
+  // `volume` must outlive the renderer; `camera` must be Finalize()d
+  // (ParseCamera, LoadCamera and DefaultCamera return finalised cameras).
+  static StatusOr<std::unique_ptr<Renderer>> Create(Volume* volume, const Camera& camera,
                                                     const Scene& scene,
                                                     const RenderOptions& options);
 
   // Per-thread state (a small pinned-brick table in front of the volume's
-  // cache); optional, for speed. Use one per thread; release it before the
-  // volume, after the frame (it pins up to 64 bricks).
+  // cache: storage/brick_table.h); optional, for speed. Use one per thread;
+  // release it before the volume, after the frame (it pins up to 256 bricks).
   struct ThreadState;
   struct ThreadStateDeleter {
     void operator()(ThreadState* ts) const;
@@ -98,6 +106,7 @@ class Renderer {
   Status RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
                     ThreadState* ts = nullptr) const;
 
+  Volume* volume() const { return volume_; }
   const RenderPasses& passes() const { return passes_; }
   const Scene& scene() const { return scene_; }  // with the default lights filled in
   const Camera& camera() const { return camera_; }
@@ -107,33 +116,22 @@ class Renderer {
   std::string SplitString() const;
 
  private:
-  class LocalBricks;
   struct Ctx;
   struct Sample;
-  Renderer(RenderVolume* volume, const Camera& camera, const Scene& scene, const RenderOptions& o,
+  Renderer(Volume* volume, const Camera& camera, const Scene& scene, const RenderOptions& o,
            RenderTracer tracer, GridTransform xf)
       : volume_(volume), camera_(camera), scene_(scene), options_(o), tracer_(tracer), xf_(xf) {}
 
-  Ray ToGrid(const glm::dvec3& origin_w, const glm::dvec3& dir_w) const;
-  // Grid point p_g moved kSurfaceOffsetVoxels voxels along world normal n.
-  glm::dvec3 OffsetAlong(const glm::dvec3& p_g, const glm::dvec3& n_world) const;
+  // renderer.cpp: primary rays and the pixel loop.
   glm::dvec3 Background(const glm::dvec3& dir) const;
   void ShadePixel(double x, double y, Ctx& cx, Sample* s) const;
-  glm::dvec3 Radiance(const glm::dvec3& origin_g, const glm::dvec3& origin_w, const glm::dvec3& dir,
-                      int depth, int kind, Ctx& cx) const;
-  // `attrs`: the hit voxel's attributes (default ones when the scene needs
-  // none: unlit, no stored colour, no normal layer).
-  glm::dvec3 ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
-                          const VoxelAttributes& attrs, int depth, Ctx& cx,
-                          glm::dvec3* normal_out) const;
-  glm::dvec3 Refract(const glm::dvec3& origin_g, const glm::dvec3& origin_w, const glm::dvec3& dir,
-                     int depth, Ctx& cx) const;
-  glm::dvec3 Fog(const Ray& gr, const glm::dvec3& dir_w, Ctx& cx, double* transmittance,
-                 double* first_t) const;
-  bool Density(const Hit& h, Ctx& cx, double* rho) const;
-  double Transmittance(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max,
-                       Ctx& cx) const;
-  bool Occluded(const glm::dvec3& origin_g, const glm::dvec3& dir_w, double t_max, Ctx& cx) const;
+
+  // surface.cpp: hits and surfaces.
+  // The grid-space ray of every secondary ray: from grid point p_g along
+  // world direction dir_w; with `lift_normal` (a world unit normal), the
+  // origin moves kSurfaceOffsetVoxels voxels along it first.
+  Ray SpawnRay(const glm::dvec3& p_g, const glm::dvec3& dir_w,
+               const glm::dvec3* lift_normal = nullptr) const;
   // The first hit along gr (after the run of voxels the ray starts in, if
   // skip_start_run); with `attrs`, also its attributes, read while the
   // traversal pins the brick. False on a miss or an error (cx.failed()).
@@ -143,8 +141,26 @@ class Renderer {
   // the scene needs none.
   VoxelAttributes* SurfaceAttrs(VoxelAttributes* a) const { return needs_attributes_ ? a : nullptr; }
   glm::dvec3 WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a) const;
+  // `attrs`: the hit voxel's attributes (default ones when the scene needs
+  // none: unlit, no stored colour, no normal layer).
+  glm::dvec3 ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
+                          const VoxelAttributes& attrs, int depth, Ctx& cx,
+                          glm::dvec3* normal_out) const;
+  // The colour seen along secondary ray gr (world direction dir_w).
+  glm::dvec3 Radiance(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
+                      Ctx& cx) const;
+  // The colour seen through the object that refracted ray gr enters at
+  // world point origin_w (the start of gr).
+  glm::dvec3 Refract(const Ray& gr, const glm::dvec3& origin_w, const glm::dvec3& dir_w,
+                     int depth, Ctx& cx) const;
+  bool Occluded(const Ray& gr, double t_max, Ctx& cx) const;
 
-  RenderVolume* volume_;
+  // fog.cpp: volumes.
+  glm::dvec3 Fog(const Ray& gr, Ctx& cx, double* transmittance, double* first_t) const;
+  bool Density(const Hit& h, Ctx& cx, double* rho) const;
+  double Transmittance(const Ray& gr, double t_max, Ctx& cx) const;
+
+  Volume* volume_;
   Camera camera_;
   Scene scene_;
   RenderOptions options_;

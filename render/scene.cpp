@@ -3,8 +3,8 @@
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
-#include "render/camera.h"
 #include "render/internal/json_fields.h"
+#include "render/internal/text_file.h"
 
 namespace vox {
 namespace {

@@ -1,10 +1,10 @@
-// vox::RenderVolume: what the renderer needs of a volume (the octree to
-// trace, each voxel's attributes, the placement in world space), so it can
-// render a Store or an in-memory octree alike. MemoryVolume is the in-memory
-// one (tests, demos); StoreVolume (store_volume.h) adapts a Store.
+// The renderer's view of a Volume (storage/store.h): GridTransform, the
+// affine maps between world space and the tracer's grid space, and
+// WorldBounds, for the default camera. MemoryVolume, the in-memory Volume of
+// the tests and demos.
 //
-// Thread safety: implementations are thread-safe (Attributes and the
-// BrickSource behind view() are called from many render threads).
+// Thread safety: GridTransform is an immutable value; a MemoryVolume is
+// thread-safe (Attributes and the MemoryOctree behind view() are read-only).
 #ifndef VOX_RENDER_VOLUME_H_
 #define VOX_RENDER_VOLUME_H_
 
@@ -20,25 +20,6 @@
 #include "storage/store.h"
 
 namespace vox {
-
-class RenderVolume {
- public:
-  virtual ~RenderVolume() = default;
-  virtual const StoreMeta& meta() const = 0;
-  // The octree to trace; valid as long as the volume.
-  virtual OctreeView view() = 0;
-  // Attributes of the voxel hit in brick `brick` (kNoBrick: the top) at `payload`.
-  virtual StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) = 0;
-  // The same for a hit of a traversal of view(), called from the traversal's
-  // visitor (the hit's brick is pinned): volumes may read it from the brick.
-  virtual StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) {
-    return Attributes(hit.brick, hit.payload);
-  }
-  // Brick cache counters (zero for volumes without a cache).
-  virtual CacheStats cache_stats() const { return {}; }
-  // Where the volume comes from, for EXR headers ("memory", a store path).
-  virtual std::string description() const = 0;
-};
 
 // The affine maps between world space and the tracer's grid space: grid
 // point g = inverse(M) * W + 0.5 - origin, where M is meta.index_to_world.
@@ -67,7 +48,7 @@ struct MemoryVoxel {
   VoxelAttributes attr;
 };
 
-class MemoryVolume : public RenderVolume {
+class MemoryVolume : public Volume {
  public:
   // `meta` gives levels, brick_level, grid class, origin and placement; its
   // counts and bbox are filled in. Duplicate voxels keep the first.

@@ -76,6 +76,8 @@ class StoreImpl : public Store {
     return s;
   }
 
+  std::string description() const override { return dir_; }
+
   uint64_t resident_bytes() const override {
     return top_.size() * sizeof(Cell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
   }

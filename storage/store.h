@@ -1,5 +1,8 @@
-// vox::Store and vox::StoreWriter: the disk-backed octree that vox-ingest
-// writes and every reader opens. The resident top (levels above the brick
+// vox::Volume, vox::Store and vox::StoreWriter. A Volume is what every
+// reader of a voxel volume sees: the octree to trace, each voxel's attributes,
+// the placement in world space and the brick cache's counters. Store is the
+// disk-backed Volume that vox-ingest writes and every reader opens (an
+// in-memory one for tests and demos is render/volume.h's MemoryVolume). The resident top (levels above the brick
 // level) is loaded at open; each brick (the subtree under one occupied octant
 // of the brick level, with its voxels' attributes) is a zstd frame in a
 // memory-mapped file, decompressed on demand into a byte-budgeted cache.
@@ -11,7 +14,9 @@
 // ijk + 0.5)^3). The probe's index space is VDB's shifted by one half (voxel
 // ijk is [ijk, ijk + 1)^3), so a probe point P is the grid point P - origin.
 //
-// Thread safety: a Store is thread-safe (FetchBrick, Attributes, stats).
+// Thread safety: Volume implementations are thread-safe (Attributes and the
+// BrickSource behind view() are called from many render threads); a Store is
+// thread-safe (FetchBrick, Attributes, stats).
 // StoreWriter::AddBrick may be called from several threads at once (bricks
 // are encoded and compressed in parallel, appended in turn); Finish must not
 // race with AddBrick.
@@ -111,21 +116,32 @@ struct CacheStats {
   uint64_t capacity = 0;
 };
 
-class Store : public BrickSource {
+class Volume {
+ public:
+  virtual ~Volume() = default;
+  virtual const StoreMeta& meta() const = 0;
+  // The octree to trace; valid as long as the volume.
+  virtual OctreeView view() = 0;
+  // Attributes of a voxel hit in brick `brick` (kNoBrick: the top) at `payload`.
+  virtual StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) = 0;
+  // The same for a hit a traversal of this volume's view() reports. Call it
+  // while the hit's brick is pinned (from the traversal's visitor): a volume
+  // may read it from the brick (Hit::brick_data: no cache look-up).
+  virtual StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) {
+    return Attributes(hit.brick, hit.payload);
+  }
+  // Brick cache counters (zero for volumes without a cache).
+  virtual CacheStats cache_stats() const { return {}; }
+  // Where the volume comes from, for EXR headers ("memory", a store path).
+  virtual std::string description() const = 0;
+};
+
+// A Volume read from a store directory; its own bricks' BrickSource.
+class Store : public Volume, public BrickSource {
  public:
   static StatusOr<std::unique_ptr<Store>> Open(const std::string& dir, const OpenOptions& options);
   ~Store() override = default;
 
-  virtual const StoreMeta& meta() const = 0;
-  // The octree to trace; valid as long as the Store.
-  virtual OctreeView view() = 0;
-  // Attributes of a voxel hit in brick `brick` (kNoBrick: the top) at `payload`.
-  virtual StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) = 0;
-  // The same for a hit a traversal of this store's view() reports, read from
-  // the brick it pins (Hit::brick_data: no cache look-up). Call it while the
-  // hit's brick is pinned: from the traversal's visitor.
-  virtual StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) = 0;
-  virtual CacheStats cache_stats() const = 0;
   // Bytes held in memory for the life of the Store: top cells, top payloads
   // and the brick table (not the cache).
   virtual uint64_t resident_bytes() const = 0;

@@ -243,7 +243,10 @@ TEST_F(CliTest, FogStoreTransmittanceIsExponential) {
 
 TEST_F(CliTest, BadFlagsAndMissingStore) {
   EXPECT_EQ(Exec(Render("--tiles 4/3")).code, 2);
-  EXPECT_EQ(Exec(Render("--tile-size 0")).code, 2);
+  EXPECT_EQ(Exec(Render("--tile-size x")).code, 2);
+  RunResult tile = Exec(Render("--tile-size 0 --quiet -o " + Path("t.exr")));
+  EXPECT_EQ(tile.code, 1);
+  EXPECT_NE(tile.output.find("tile size 0"), std::string::npos) << tile.output;
   EXPECT_EQ(Exec(Render("--bogus")).code, 2);
   RunResult split = Exec(Render("--split 4+4 --quiet -o " + Path("s.exr")));
   EXPECT_EQ(split.code, 1);

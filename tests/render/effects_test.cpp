@@ -64,7 +64,7 @@ struct Rendered {
   RenderPasses passes;
 };
 
-Rendered Render(RenderVolume* vol, const Camera& cam, const Scene& scene, int n1 = 0,
+Rendered Render(Volume* vol, const Camera& cam, const Scene& scene, int n1 = 0,
                 ImageLayers layers = {}) {
   RenderOptions o;
   o.n1 = n1;

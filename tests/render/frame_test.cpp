@@ -13,7 +13,7 @@
 
 #include "render/exr.h"
 #include "render/merge.h"
-#include "render/store_volume.h"
+#include "storage/store.h"
 #include "tests/render/render_util.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
@@ -61,7 +61,7 @@ class FrameTest : public ::testing::Test {
     fo.tile_size = tile;
     fo.part = part;
     FrameStats stats;
-    Status s = RenderFrame(r, vol_.get(), fo, &stats);
+    Status s = RenderFrame(r, fo, &stats);
     if (stats_out) *stats_out = stats;
     return s;
   }
@@ -241,7 +241,7 @@ TEST_F(FrameTest, PngPreview) {
 }
 
 // A volume whose bricks or attributes fail to load, as a corrupt store's would.
-class FailingVolume : public RenderVolume, public BrickSource {
+class FailingVolume : public Volume, public BrickSource {
  public:
   FailingVolume(MemoryVolume* base, bool fail_bricks) : base_(base), fail_bricks_(fail_bricks) {}
   const StoreMeta& meta() const override { return base_->meta(); }
@@ -266,6 +266,42 @@ class FailingVolume : public RenderVolume, public BrickSource {
   bool fail_bricks_;
 };
 
+// The library checks the frame's options and the camera, once: the tools
+// only parse flags.
+TEST_F(FrameTest, BadOptionsAndUnfinalisedCamerasAreRefused) {
+  auto r = MakeRenderer(cam_);
+  ASSERT_TRUE(r);
+  for (int tile : {0, 7, 4097, -16}) {
+    Status s = Frame(*r, Path("bad_tile.exr"), {}, tile);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << tile;
+    EXPECT_NE(s.message().find("tile size " + std::to_string(tile)), std::string::npos)
+        << s.ToString();
+    EXPECT_FALSE(fs::exists(Path("bad_tile.exr")));
+  }
+  for (int tile : {8, 4096}) EXPECT_TRUE(Frame(*r, "", {}, tile).ok()) << tile;
+  FrameOptions fo;
+  fo.threads = -1;
+  FrameStats stats;
+  Status s = RenderFrame(*r, fo, &stats);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("threads -1"), std::string::npos) << s.ToString();
+
+  Camera raw;  // fields set, Finalize() never called
+  raw.position = cam_.position;
+  raw.look_at = cam_.look_at;
+  raw.width = 8;
+  raw.height = 8;
+  EXPECT_FALSE(raw.finalized());
+  auto refused = Renderer::Create(vol_.get(), raw, scene_, {});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("camera"), std::string::npos);
+  ASSERT_TRUE(raw.Finalize().ok());
+  EXPECT_TRUE(Renderer::Create(vol_.get(), raw, scene_, {}).ok());
+  raw.fov_deg = 0;  // a failed Finalize() leaves it unfinalised
+  EXPECT_FALSE(raw.Finalize().ok());
+  EXPECT_FALSE(Renderer::Create(vol_.get(), raw, scene_, {}).ok());
+}
+
 TEST_F(FrameTest, BrickAndAttributeErrorsStopTheRenderWithAMessage) {
   for (bool fail_bricks : {true, false}) {
     FailingVolume bad(vol_.get(), fail_bricks);
@@ -276,7 +312,7 @@ TEST_F(FrameTest, BrickAndAttributeErrorsStopTheRenderWithAMessage) {
     fo.threads = 2;
     fo.tile_size = 16;
     FrameStats stats;
-    Status s = RenderFrame(**r, &bad, fo, &stats);
+    Status s = RenderFrame(**r, fo, &stats);
     ASSERT_FALSE(s.ok());
     EXPECT_EQ(s.code(), fail_bricks ? StatusCode::kCorruption : StatusCode::kIoError);
     EXPECT_NE(s.message().find("store/bricks.vxb"), std::string::npos) << s.ToString();
@@ -303,7 +339,7 @@ TEST_F(FrameTest, TinyCacheRendersTheSameImage) {
   for (int tiny : {0, 1}) {
     OpenOptions oo;
     oo.cache_bytes = tiny ? (16u << 10) : (64u << 20);
-    auto vol = StoreVolume::Open(Path("store"), oo);
+    auto vol = Store::Open(Path("store"), oo);
     ASSERT_TRUE(vol.ok()) << vol.status().ToString();
     RenderOptions ro;
     ro.layers.normal = true;
@@ -314,7 +350,7 @@ TEST_F(FrameTest, TinyCacheRendersTheSameImage) {
     fo.threads = 2;
     fo.tile_size = 8;
     FrameStats stats;
-    Status s = RenderFrame(**r, vol->get(), fo, &stats);
+    Status s = RenderFrame(**r, fo, &stats);
     ASSERT_TRUE(s.ok()) << s.ToString();
     EXPECT_GT(stats.counters.rays[kRayShadow], 0u);
     const CacheStats& c = stats.cache_end;

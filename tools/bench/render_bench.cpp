@@ -20,7 +20,7 @@
 #include "render/frame.h"
 #include "render/renderer.h"
 #include "render/scene.h"
-#include "render/store_volume.h"
+#include "storage/store.h"
 #include "tools/common/flags.h"
 
 int main(int argc, char** argv) {
@@ -84,7 +84,7 @@ int main(int argc, char** argv) {
   };
   vox::OpenOptions oo;
   oo.cache_bytes = cache_mb << 20;
-  auto vol = vox::StoreVolume::Open(store, oo);
+  auto vol = vox::Store::Open(store, oo);
   if (!vol.ok()) return fail(vol.status());
   auto cam = vox::LoadCamera(cam_path);
   if (!cam.ok()) return fail(cam.status());
@@ -117,7 +117,7 @@ int main(int argc, char** argv) {
     fo.tile_size = tile_size;
     vox::FrameStats st;
     const double c0 = cpu_now();
-    vox::Status s = vox::RenderFrame(**renderer, vol->get(), fo, &st);
+    vox::Status s = vox::RenderFrame(**renderer, fo, &st);
     if (!s.ok()) return fail(s);
     secs.push_back(st.render_seconds);
     cpu.push_back(cpu_now() - c0);

@@ -65,17 +65,17 @@ Scene DiffuseScene() {
   return s.ok() ? *s : Scene{};
 }
 
-StatusOr<std::unique_ptr<StoreVolume>> OpenStore(const std::string& dir) {
+StatusOr<std::unique_ptr<Store>> OpenStore(const std::string& dir) {
   OpenOptions oo;
   oo.cache_bytes = size_t(3) << 30;
-  return StoreVolume::Open(dir, oo);
+  return Store::Open(dir, oo);
 }
 
-StatusOr<FrameStats> TimeFrame(const Renderer& r, RenderVolume* vol, int threads) {
+StatusOr<FrameStats> TimeFrame(const Renderer& r, int threads) {
   FrameOptions fo;
   fo.threads = threads;
   FrameStats st;
-  VOX_RETURN_IF_ERROR(RenderFrame(r, vol, fo, &st));
+  VOX_RETURN_IF_ERROR(RenderFrame(r, fo, &st));
   return st;
 }
 
@@ -220,11 +220,11 @@ Status RunPaperPart(const RunContext& ctx, std::string* report) {
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       };
       // Warm-up: pages in every brick the camera sees.
-      for (size_t c = 0; c < rs.size(); ++c) VOX_RETURN_IF_ERROR(TimeFrame(*rs[c], vol.get(), ctx.threads).status());
+      for (size_t c = 0; c < rs.size(); ++c) VOX_RETURN_IF_ERROR(TimeFrame(*rs[c], ctx.threads).status());
       for (int round = 0; round < ctx.rounds; ++round)
         for (size_t k = 0; k < rs.size(); ++k) {
           size_t c = (k + size_t(round)) % rs.size();  // rotate the order per round
-          VOX_ASSIGN_OR_RETURN(FrameStats st, TimeFrame(*rs[c], vol.get(), ctx.threads));
+          VOX_ASSIGN_OR_RETURN(FrameStats st, TimeFrame(*rs[c], ctx.threads));
           t[c].push_back(st.render_seconds);
           last[c] = st;
         }
@@ -363,7 +363,7 @@ Status RunResolutionPart(const RunContext& ctx, std::string* report) {
   struct Level {
     int across;
     std::string vdb, store;
-    std::unique_ptr<StoreVolume> vol;
+    std::unique_ptr<Store> vol;
     std::unique_ptr<Renderer> r;
     std::vector<double> t;
     Image vox, vdb_mask;
@@ -390,7 +390,7 @@ Status RunResolutionPart(const RunContext& ctx, std::string* report) {
   for (int round = 0; round < ctx.rounds; ++round)
     for (size_t k = 0; k < L.size(); ++k) {
       Level& l = L[(k + size_t(round)) % L.size()];
-      VOX_ASSIGN_OR_RETURN(FrameStats st, TimeFrame(*l.r, l.vol.get(), ctx.threads));
+      VOX_ASSIGN_OR_RETURN(FrameStats st, TimeFrame(*l.r, ctx.threads));
       l.t.push_back(st.render_seconds);
     }
   const Level& fine = L.back();
@@ -462,7 +462,7 @@ Status RunEffectsPart(const RunContext& ctx, std::string* report) {
   for (const Row& row : rows) {
     VOX_ASSIGN_OR_RETURN(Scene s, ParseScene(row.json, row.name));
     VOX_ASSIGN_OR_RETURN(auto r, Renderer::Create(vol.get(), cam, s, RenderOptions{}));
-    VOX_RETURN_IF_ERROR(TimeFrame(*r, vol.get(), ctx.threads).status());  // warm-up
+    VOX_RETURN_IF_ERROR(TimeFrame(*r, ctx.threads).status());  // warm-up
     rs.push_back(std::move(r));
   }
   std::vector<std::vector<double>> t(rows.size());
@@ -470,7 +470,7 @@ Status RunEffectsPart(const RunContext& ctx, std::string* report) {
   for (int round = 0; round < ctx.rounds; ++round)
     for (size_t k = 0; k < rows.size(); ++k) {
       size_t c = (k + size_t(round)) % rows.size();
-      VOX_ASSIGN_OR_RETURN(FrameStats st, TimeFrame(*rs[c], vol.get(), ctx.threads));
+      VOX_ASSIGN_OR_RETURN(FrameStats st, TimeFrame(*rs[c], ctx.threads));
       t[c].push_back(st.render_seconds);
       last[c] = st;
     }
@@ -503,7 +503,7 @@ Status RunPeerPart(const RunContext& ctx, std::string* report) {
   const int image = ctx.quick ? 512 : 1024;
   struct Case {
     std::string name, vdb, store;
-    std::unique_ptr<StoreVolume> vol;
+    std::unique_ptr<Store> vol;
     std::unique_ptr<Renderer> r;
     std::vector<double> vox_t, vdb_t;
     double iou = 0;
@@ -536,11 +536,11 @@ Status RunPeerPart(const RunContext& ctx, std::string* report) {
     VOX_ASSIGN_OR_RETURN(Image vdbm, ReadPpm(ppm));
     c.iou = MaskIoU(vox, vdbm);
     c.differ = MaskDifferences(vox, vdbm);
-    VOX_RETURN_IF_ERROR(TimeFrame(*c.r, c.vol.get(), ctx.threads).status());  // warm-up
+    VOX_RETURN_IF_ERROR(TimeFrame(*c.r, ctx.threads).status());  // warm-up
   }
   for (int round = 0; round < ctx.rounds; ++round)
     for (Case& c : cases) {
-      VOX_ASSIGN_OR_RETURN(FrameStats st, TimeFrame(*c.r, c.vol.get(), ctx.threads));
+      VOX_ASSIGN_OR_RETURN(FrameStats st, TimeFrame(*c.r, ctx.threads));
       c.vox_t.push_back(st.render_seconds);
       VOX_ASSIGN_OR_RETURN(std::string out,
                            RunCommand("vdb_render " + Quote(c.vdb) + " " + Quote(ctx.work_dir + "/peer.ppm") +

@@ -14,7 +14,7 @@
 #include "render/frame.h"
 #include "render/renderer.h"
 #include "render/scene.h"
-#include "render/store_volume.h"
+#include "storage/store.h"
 #include "tools/bench/vox_bench_util.h"
 
 namespace vox::bench {
@@ -27,10 +27,10 @@ std::string VdbCameraArgs(int width, int height);
 // One directional light without shadows and no specular (vdb_render's diffuse).
 Scene DiffuseScene();
 
-StatusOr<std::unique_ptr<StoreVolume>> OpenStore(const std::string& dir);
+StatusOr<std::unique_ptr<Store>> OpenStore(const std::string& dir);
 
 // Renders a whole frame with `threads` threads, without writing it.
-StatusOr<FrameStats> TimeFrame(const Renderer& r, RenderVolume* vol, int threads);
+StatusOr<FrameStats> TimeFrame(const Renderer& r, int threads);
 // Renders the image into memory (mask: alpha > 0.5).
 StatusOr<Image> RenderImage(const Renderer& r);
 

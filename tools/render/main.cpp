@@ -1,5 +1,6 @@
 // vox-render: renders a vox store to a tiled OpenEXR by discrete ray tracing.
 // Parses flags into RenderJobOptions and calls vox::RunRenderJob.
+#include <climits>
 #include <cstdio>
 #include <optional>
 #include <string>
@@ -78,8 +79,8 @@ int main(int argc, char** argv) {
         if (!vox::ParseInt(v, 0, 4096, &o.threads))
           return Usage("--threads '" + v + "': expected 0..4096");
       } else if (a == "--tile-size") {
-        if (!vox::ParseInt(v, 8, 4096, &o.tile_size))
-          return Usage("--tile-size '" + v + "': expected 8..4096");
+        if (!vox::ParseInt(v, INT_MIN, INT_MAX, &o.tile_size))
+          return Usage("--tile-size '" + v + "': expected an integer");
       } else if (a == "--tiles") {
         auto part = vox::ParsePartSpec(v);
         if (!part.ok()) return Usage(part.status().message());

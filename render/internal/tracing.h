@@ -1,0 +1,101 @@
+// What the Renderer's files (renderer.cpp, surface.cpp, fog.cpp) share: the
+// per-call context, the constants of the secondary rays, the loop over the
+// lights that reach a point, and the state machine of a contiguous run of
+// occupied voxels along a ray. Private to render/.
+//
+// Thread safety: OccupiedRun and Renderer::Ctx belong to one call of one
+// thread; the rest is stateless.
+#ifndef VOX_RENDER_INTERNAL_TRACING_H_
+#define VOX_RENDER_INTERNAL_TRACING_H_
+
+#include <glm/geometric.hpp>
+#include <glm/vec3.hpp>
+#include <limits>
+#include <vector>
+
+#include "core/ray.h"
+#include "core/status.h"
+#include "render/renderer.h"
+#include "render/scene.h"
+
+namespace vox {
+
+// Per-call state: the thread's tracer and counters, and the first error.
+struct Renderer::Ctx {
+  const RenderTracer* tracer;
+  RenderCounters* c;
+  Status error;
+  bool failed() const { return !error.ok(); }
+  void Fail(const Status& s) {
+    if (error.ok()) error = s;
+  }
+};
+
+namespace render_internal {
+
+inline constexpr double kInf = std::numeric_limits<double>::infinity();
+// Fog integration stops below this transmittance.
+inline constexpr double kMinTransmittance = 1e-6;
+// Fog re-evaluates the light reaching the ray at most every this many voxels.
+inline constexpr double kScatterStepVoxels = 3.0;
+// Secondary rays leaving a surface start this many voxels out along its
+// normal: a hit point lies within 1.9 voxels below and 0.9 above the true
+// surface, and the voxels of the surface within 0.9 above it, so a ray
+// lifted by 2.5 voxels clears the surface's own staircase even at grazing
+// angles (no shadow or reflection acne). Occluders closer than that to the
+// surface cast no shadow.
+inline constexpr double kSurfaceOffsetVoxels = 2.5;
+
+// Calls f(light, to_light, dist) for each light of positive intensity that
+// has a direction at world point p: to_light is the unit direction to it and
+// dist its distance (infinite for a directional light). A point light at p
+// itself is skipped.
+template <typename F>
+void ForEachLight(const std::vector<Light>& lights, const glm::dvec3& p, F&& f) {
+  for (const Light& l : lights) {
+    if (l.intensity <= 0) continue;
+    glm::dvec3 to_light;
+    double dist = kInf;
+    if (l.type == Light::Type::kDirectional) {
+      to_light = -l.direction;
+    } else {
+      to_light = l.position - p;
+      dist = glm::length(to_light);
+      if (!(dist > 0)) continue;
+      to_light /= dist;
+    }
+    f(l, to_light, dist);
+  }
+}
+
+// A run of occupied voxels along a ray: voxels each entered within eps of
+// where the previous one was left (t tolerance eps * (1 + t)). Hits arrive
+// in order; Extend adds one to the run, and Continues / EndedBefore tell
+// whether the next hit touches the run or lies past an empty gap.
+class OccupiedRun {
+ public:
+  // `started`: the ray starts inside a run (ending at t = 0 so far).
+  OccupiedRun(double eps, bool started) : eps_(eps), active_(started) {}
+
+  bool active() const { return active_; }
+  // Where the run ends (the last voxel's exit t).
+  double end() const { return end_; }
+  // Hit h touches the run: it extends it.
+  bool Continues(const Hit& h) const { return active_ && h.t <= end_ + eps_ * (1.0 + end_); }
+  // Hit h lies past a gap after the run: the run ended before it.
+  bool EndedBefore(const Hit& h) const { return active_ && h.t > end_ + eps_ * (1.0 + end_); }
+  void Extend(const Ray& gr, const Hit& h) {
+    active_ = true;
+    end_ = VoxelExitT(gr, h.voxel);
+  }
+
+ private:
+  double eps_;
+  bool active_;
+  double end_ = 0.0;
+};
+
+}  // namespace render_internal
+}  // namespace vox
+
+#endif  // VOX_RENDER_INTERNAL_TRACING_H_
