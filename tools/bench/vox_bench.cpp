@@ -1,4 +1,4 @@
-// vox-bench: what accuracy costs in time (issue 5). Runs, in one process,
+// vox-bench: what accuracy costs in time (docs/accuracy.md). Runs, in one process,
 //   1. paper:      the paper's figures 7 and 8: single step against two steps
 //                  with 4..7 first-step levels, one store per grid, one camera;
 //   2. precision:  every traversal variant (core/variants.h): time per ray and

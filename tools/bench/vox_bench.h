@@ -1,4 +1,4 @@
-// The parts of vox-bench (issue 5) and the rendering helpers they share.
+// The parts of vox-bench (the accuracy/time study, docs/accuracy.md) and the rendering helpers they share.
 // Each part measures, writes its tables (Markdown + CSV) and plots (SVG) into
 // ctx.out_dir, and appends its Markdown section to `report`.
 //

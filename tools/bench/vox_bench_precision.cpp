@@ -69,7 +69,7 @@ struct Scenario {
 
 glm::dvec3 Center(const Voxel& v) { return {v[0] + 0.5, v[1] + 0.5, v[2] + 0.5}; }
 
-// The ray families of issue 2's hard cases, aimed at the scenario's voxels.
+// The ray families of the tracer's hard-case tests (tests/core/tracer_hard_cases_test.cpp), aimed at the scenario's voxels.
 void MakeFamilies(Scenario* s, int per_family, uint64_t seed) {
   Rng rng(seed);
   auto pick = [&]() -> const Voxel& { return s->voxels[size_t(rng.Int(0, int64_t(s->voxels.size()) - 1))]; };

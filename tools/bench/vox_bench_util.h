@@ -1,4 +1,4 @@
-// Helpers of vox-bench (issue 5): the run's context (command, machine, date),
+// Helpers of vox-bench (docs/accuracy.md): the run's context (command, machine, date),
 // medians, Markdown/CSV tables, hand-written SVG plots, shelling out, and the
 // cached test volumes (OpenVDB level sets made by vdb_tool, ingested into
 // stores by the ingest library).
