@@ -61,9 +61,10 @@ struct BudgetInputs {
   // in what the fixed costs leave.
   uint64_t cache_override = 0;
   // Code, libraries, stacks, allocator and decoder state of the process that
-  // do not scale with the image or the store: vox-render measured 16-18 MiB
-  // of cgroup charge before its first brick (2 threads, 1024^2 image), so 24
-  // leaves some margin.
+  // do not scale with the image or the store. Measured: vox-render (2
+  // threads, 1024^2 image) held about 16 MiB besides its brick cache and
+  // the page cache, and finished with --cache-mb 1 in a 20 MiB cgroup; 24
+  // leaves a margin for more threads and other allocators.
   uint64_t process_base = kDefaultProcessBase;
   static constexpr uint64_t kDefaultProcessBase = 24 * kMiB;
 };

@@ -7,9 +7,13 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
+
+#include "tests/common/cgroup_util.h"
 
 namespace vox {
 namespace {
@@ -224,6 +228,36 @@ TEST(DetectMemoryLimit, ThisProcess) {
   if (m->cgroup_bytes != 0) {
     EXPECT_LE(m->bytes, m->cgroup_bytes);
   }
+}
+
+// Run by RealCgroupLimitIsDetected in a child process inside a cgroup:
+// prints what this process detects.
+TEST(DetectMemoryLimit, ChildReportsLimit) {
+  if (std::getenv("VOX_MEMORY_BUDGET_CHILD") == nullptr) GTEST_SKIP() << "run as a child only";
+  auto m = DetectMemoryLimit();
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  printf("cgroup_bytes=%llu bytes=%llu\n", (unsigned long long)m->cgroup_bytes, (unsigned long long)m->bytes);
+}
+
+// The real kernel: this test program, re-run in a fresh 96 MiB cgroup,
+// finds 96 MiB (a fake tree cannot show that the paths are the kernel's).
+TEST(DetectMemoryLimit, RealCgroupLimitIsDetected) {
+  VOX_REQUIRE_MEMORY_CGROUP();
+  char self[4096] = {0};
+  ASSERT_GT(::readlink("/proc/self/exe", self, sizeof self - 1), 0);
+  ::setenv("VOX_MEMORY_BUDGET_CHILD", "1", 1);
+  testing::CgroupRunOptions o;
+  o.limit_bytes = 96 * kMiB;
+  o.stdout_path = ::testing::TempDir() + "memory_budget_child_" + std::to_string(getpid()) + ".txt";
+  auto r = testing::RunInMemoryCgroup({self, "--gtest_filter=DetectMemoryLimit.ChildReportsLimit"}, o);
+  ::unsetenv("VOX_MEMORY_BUDGET_CHILD");
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(r->exit_code, 0) << r->Describe();
+  std::ifstream in(o.stdout_path);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  fs::remove(o.stdout_path);
+  const std::string want = "cgroup_bytes=" + std::to_string(96 * kMiB) + " bytes=" + std::to_string(96 * kMiB);
+  EXPECT_NE(text.find(want), std::string::npos) << text;
 }
 
 TEST(ParseMemorySize, Forms) {
