@@ -125,16 +125,17 @@ TEST_F(CgroupRenderTest, QuarterOfTheStoreAtDefaultFlags) {
   RecordProperty("store_mib", std::to_string(store_bytes / kMiB));
   RecordProperty("limit_mib", std::to_string(limit / kMiB));
 
-  auto render = [&](const std::string& name, uint64_t limit_bytes) {
+  auto render = [&](const std::string& name, uint64_t limit_bytes, std::vector<std::string> flags) {
     CgroupRunOptions o;
     o.limit_bytes = limit_bytes;
     o.drop_page_cache = true;  // cold: the store's pages are read (and charged) by the render
     o.stderr_path = dir_ + "/" + name + ".log";
-    return RunInMemoryCgroup({VOX_RENDER_BIN, store, "-o", dir_ + "/" + name + ".exr", "--size", "256x256",
-                              "--quiet"},
-                             o);
+    std::vector<std::string> argv = {VOX_RENDER_BIN, store, "-o", dir_ + "/" + name + ".exr",
+                                     "--size", "256x256", "--quiet"};
+    argv.insert(argv.end(), flags.begin(), flags.end());
+    return RunInMemoryCgroup(argv, o);
   };
-  auto free_run = render("unlimited", 0);
+  auto free_run = render("unlimited", 0, {});
   ASSERT_TRUE(free_run.ok()) << free_run.status().ToString();
   ASSERT_EQ(free_run->exit_code, 0) << free_run->Describe() << "\n" << ReadAll(dir_ + "/unlimited.log");
   RecordProperty("unlimited_peak_mib", std::to_string(free_run->peak_bytes / kMiB));
@@ -144,35 +145,44 @@ TEST_F(CgroupRenderTest, QuarterOfTheStoreAtDefaultFlags) {
   // otherwise the limited run below proves nothing.
   ASSERT_GT(free_run->peak_bytes, limit)
       << "store " << store_bytes / kMiB << " MiB too small for the test: " << free_run->Describe();
-
-  auto limited = render("limited", limit);
-  ASSERT_TRUE(limited.ok()) << limited.status().ToString();
-  RecordProperty("limited_peak_mib", std::to_string(limited->peak_bytes / kMiB));
-  printf("limited to %llu MiB: %s\n", (unsigned long long)(limit / kMiB), limited->Describe().c_str());
-  EXPECT_FALSE(limited->oom_killed) << "vox-render was OOM-killed in a " << limit / kMiB
-                                    << " MiB cgroup (store " << store_bytes / kMiB << " MiB): "
-                                    << limited->Describe();
-  ASSERT_EQ(limited->exit_code, 0) << limited->Describe() << "\n" << ReadAll(dir_ + "/limited.log");
-  EXPECT_LE(limited->peak_bytes, limit);
-
   auto a = ReadExr(dir_ + "/unlimited.exr");
-  auto b = ReadExr(dir_ + "/limited.exr");
   ASSERT_TRUE(a.ok()) << a.status().ToString();
-  ASSERT_TRUE(b.ok()) << b.status().ToString();
-  ASSERT_TRUE(a->info.complete && b->info.complete);
-  ASSERT_EQ(a->pixels.size(), b->pixels.size());
-  for (const auto& [channel, pa] : a->pixels) {
-    ASSERT_EQ(b->pixels.count(channel), 1u) << channel;
-    const std::vector<float>& pb = b->pixels.at(channel);
-    ASSERT_EQ(pa.size(), pb.size()) << channel;
-    size_t differ = 0;
-    for (size_t i = 0; i < pa.size(); ++i) differ += std::memcmp(&pa[i], &pb[i], sizeof(float)) != 0;
-    EXPECT_EQ(differ, 0u) << "channel " << channel << ": " << differ << " pixels differ";
-  }
-  // The image is not empty: the shell covers much of the frame.
+  ASSERT_TRUE(a->info.complete);
+  // The image is not empty: the shell covers about a fifth of the default
+  // camera's frame (measured 15124 of 65536 pixels).
   size_t hits = 0;
   for (float alpha : a->pixels.at("A")) hits += alpha > 0.0f;
-  EXPECT_GT(hits, a->pixels.at("A").size() / 4);
+  EXPECT_GT(hits, a->pixels.at("A").size() / 8);
+
+  // A limited run: not killed, within the limit, the unlimited run's pixels bit for bit.
+  auto check_limited = [&](const std::string& name, std::vector<std::string> flags) {
+    SCOPED_TRACE(name);
+    auto run = render(name, limit, flags);
+    ASSERT_TRUE(run.ok()) << run.status().ToString();
+    RecordProperty(name + "_peak_mib", std::to_string(run->peak_bytes / kMiB));
+    printf("%s, limited to %llu MiB: %s\n", name.c_str(), (unsigned long long)(limit / kMiB),
+           run->Describe().c_str());
+    EXPECT_FALSE(run->oom_killed) << "vox-render was OOM-killed in a " << limit / kMiB << " MiB cgroup (store "
+                                  << store_bytes / kMiB << " MiB): " << run->Describe();
+    ASSERT_EQ(run->exit_code, 0) << run->Describe() << "\n" << ReadAll(dir_ + "/" + name + ".log");
+    EXPECT_LE(run->peak_bytes, limit);
+    auto b = ReadExr(dir_ + "/" + name + ".exr");
+    ASSERT_TRUE(b.ok()) << b.status().ToString();
+    ASSERT_TRUE(b->info.complete);
+    ASSERT_EQ(a->pixels.size(), b->pixels.size());
+    for (const auto& [channel, pa] : a->pixels) {
+      ASSERT_EQ(b->pixels.count(channel), 1u) << channel;
+      const std::vector<float>& pb = b->pixels.at(channel);
+      ASSERT_EQ(pa.size(), pb.size()) << channel;
+      size_t differ = 0;
+      for (size_t i = 0; i < pa.size(); ++i) differ += std::memcmp(&pa[i], &pb[i], sizeof(float)) != 0;
+      EXPECT_EQ(differ, 0u) << "channel " << channel << ": " << differ << " pixels differ";
+    }
+  };
+  // Default flags: what a user runs. A small explicit cache must fit too
+  // (and shows the comparison itself passes where the render survives).
+  check_limited("default_flags", {});
+  check_limited("cache_8mb", {"--cache-mb", "8"});
 }
 
 }  // namespace
