@@ -140,7 +140,7 @@ int main(int argc, char** argv) {
     const vox::gen::GenerateStats& s = *stats;
     std::fprintf(stderr,
                  "wrote %s: %s %llu^3, %llu occupied voxels in %llu bricks (levels %d+%d; %llu "
-                 "candidate bricks) in %.2f s (%.1f M voxels/s, %d threads; bricks %.2f s, "
+                 "candidate bricks) in %.2f s (%.2f M voxels/s, %d threads; bricks %.2f s, "
                  "finish %.2f s)\n",
                  o.output.c_str(), o.shape.c_str(), (unsigned long long)o.size,
                  (unsigned long long)s.voxels, (unsigned long long)s.bricks, s.meta.brick_level,
