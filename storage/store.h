@@ -83,6 +83,9 @@ struct WriteOptions {
   // not know: values stay 16-bit, multiples of 2^(16 - bits). 12 bits (max
   // error 0.06 degrees; 16 bits: 0.004) makes level-set stores about a third smaller.
   int normal_bits = 16;
+  // The id both files carry (FORMAT.md); 0: random. A fixed id (with bricks
+  // added in a fixed order, one at a time) makes the store byte-reproducible.
+  uint64_t store_id = 0;
 };
 
 class StoreWriter {

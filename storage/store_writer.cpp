@@ -392,7 +392,8 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
   std::string temp = (parent / ("." + tp.filename().string() + suffix)).string();
   if (mkdir(temp.c_str(), 0755) != 0)
     return ErrnoError("cannot create temporary directory for store", temp, errno);
-  auto w = std::make_unique<StoreWriterImpl>(target, temp, replace, meta, options, id);
+  auto w = std::make_unique<StoreWriterImpl>(target, temp, replace, meta, options,
+                                             options.store_id != 0 ? options.store_id : id);
   VOX_RETURN_IF_ERROR(w->Init());
   return std::unique_ptr<StoreWriter>(std::move(w));
 }

@@ -1,0 +1,306 @@
+// Generate(): procedural shape -> vox store, brick by brick (gen/generate.h).
+#include "tools/gen/generate.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <new>
+#include <thread>
+#include <vector>
+
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+
+#include "tools/gen/shapes.h"
+
+namespace vox::gen {
+namespace {
+
+double Now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+std::string FormatDouble(double v) {
+  char buf[64];
+  snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+int Log2Exact(uint64_t v) {
+  int n = 0;
+  while ((uint64_t(1) << n) < v) ++n;
+  return n;
+}
+
+// FNV-1a: the store id from the canonical options (never 0: 0 asks for a
+// random id).
+uint64_t HashId(const std::string& s) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  for (unsigned char ch : s) {
+    h ^= ch;
+    h *= 0x100000001b3ull;
+  }
+  return h == 0 ? 1 : h;
+}
+
+// Depth-first enumeration of the brick-level octants the shape may occupy,
+// in Morton order (children in digit order x | y << 1 | z << 2). The stack
+// holds at most 8 nodes per level.
+class BrickEnumerator {
+ public:
+  BrickEnumerator(const Shape& shape, int levels, int brick_level, double band)
+      : shape_(shape), levels_(levels), brick_level_(brick_level), band_(band),
+        half_(double(uint64_t(1) << (levels - 1))) {
+    stack_.push_back({glm::u64vec3(0), 0});
+  }
+
+  // The next candidate brick, or false when there are no more.
+  bool Next(glm::u64vec3* brick) {
+    while (!stack_.empty()) {
+      Node n = stack_.back();
+      stack_.pop_back();
+      const uint64_t s = uint64_t(1) << (levels_ - n.level);
+      glm::dvec3 lo = glm::dvec3(n.c * s) - half_;
+      if (!shape_.MayOccupy(lo, lo + double(s - 1), band_)) continue;
+      if (n.level == brick_level_) {
+        *brick = n.c;
+        return true;
+      }
+      for (int d = 7; d >= 0; --d)  // popped in digit order
+        stack_.push_back({n.c * uint64_t(2) + glm::u64vec3(d & 1, (d >> 1) & 1, (d >> 2) & 1),
+                          n.level + 1});
+    }
+    return false;
+  }
+
+ private:
+  struct Node {
+    glm::u64vec3 c;
+    int level;
+  };
+  const Shape& shape_;
+  const int levels_, brick_level_;
+  const double band_, half_;
+  std::vector<Node> stack_;
+};
+
+// Fills one brick's occupied voxels in Morton order: descends through the
+// octants the shape may occupy and tests every voxel of blocks of 4^3.
+class BrickFiller {
+ public:
+  BrickFiller(const Shape& shape, int levels, int depth, double band)
+      : shape_(shape), depth_(depth), band_(band),
+        half_(double(uint64_t(1) << (levels - 1))) {}
+
+  std::vector<BrickVoxel> Fill(const glm::u64vec3& brick) const {
+    std::vector<BrickVoxel> out;
+    Descend(glm::dvec3(brick << uint64_t(depth_)) - half_, glm::u64vec3(0), depth_, &out);
+    return out;
+  }
+
+ private:
+  // `base`: the index point of the brick's voxel (0,0,0); `o`, `k`: the
+  // block of 2^k voxels at brick-local `o`.
+  void Descend(const glm::dvec3& base, const glm::u64vec3& o, int k,
+               std::vector<BrickVoxel>* out) const {
+    const uint64_t s = uint64_t(1) << k;
+    glm::dvec3 lo = base + glm::dvec3(o);
+    if (!shape_.MayOccupy(lo, lo + double(s - 1), band_)) return;
+    if (k <= 2) {
+      for (uint64_t m = 0; m < s * s * s; ++m) {
+        glm::u64vec3 l(0);
+        for (int j = 0; j < k; ++j) {
+          uint64_t digit = (m >> (3 * j)) & 7;
+          l.x |= (digit & 1) << j;
+          l.y |= ((digit >> 1) & 1) << j;
+          l.z |= ((digit >> 2) & 1) << j;
+        }
+        glm::u64vec3 v = o + l;
+        glm::dvec3 p = base + glm::dvec3(v);
+        double d = shape_.Distance(p);
+        if (d > -band_ && d <= 0) {
+          BrickVoxel bv;
+          bv.x = uint32_t(v.x);
+          bv.y = uint32_t(v.y);
+          bv.z = uint32_t(v.z);
+          bv.attr.normal = glm::vec3(shape_.Normal(p));
+          out->push_back(bv);
+        }
+      }
+      return;
+    }
+    const uint64_t h = s / 2;
+    for (int d = 0; d < 8; ++d)
+      Descend(base, o + glm::u64vec3(d & 1, (d >> 1) & 1, (d >> 2) & 1) * h, k - 1, out);
+  }
+
+  const Shape& shape_;
+  const int depth_;
+  const double band_, half_;
+};
+
+}  // namespace
+
+StatusOr<Levels> ChooseLevels(std::string_view text, int n) {
+  Levels l;
+  if (text == "auto") {
+    l.brick_depth = std::min(5, n - 1);
+    l.brick_level = n - l.brick_depth;
+    return l;
+  }
+  auto bad = [&](const std::string& why) {
+    return InvalidArgumentError("--levels " + std::string(text) + ": " + why);
+  };
+  size_t plus = text.find('+');
+  if (plus == std::string_view::npos)
+    return bad("expected auto or N1+N2 (resident levels + brick levels), e.g. 8+5");
+  auto num = [](std::string_view s, int* out) {
+    if (s.empty() || s.size() > 2) return false;
+    int v = 0;
+    for (char ch : s) {
+      if (ch < '0' || ch > '9') return false;
+      v = v * 10 + (ch - '0');
+    }
+    *out = v;
+    return true;
+  };
+  if (!num(text.substr(0, plus), &l.brick_level) || !num(text.substr(plus + 1), &l.brick_depth))
+    return bad("expected auto or N1+N2 with whole numbers, e.g. 8+5");
+  if (l.brick_level < 1) return bad("N1 must be at least 1");
+  if (l.brick_depth > kMaxBrickDepth)
+    return bad("bricks of more than " + std::to_string(kMaxBrickDepth) +
+               " levels would not keep memory bounded");
+  if (l.brick_level + l.brick_depth != n)
+    return bad("N1 + N2 must equal log2(--size) = " + std::to_string(n));
+  return l;
+}
+
+Status ValidateOptions(const GenerateOptions& o) {
+  if (o.shape.empty()) return InvalidArgumentError("no shape given");
+  VOX_RETURN_IF_ERROR(MakeShape(o.shape, 2).status());
+  if (o.size < 2 || o.size > (uint64_t(1) << kMaxSizeLog2) || (o.size & (o.size - 1)) != 0)
+    return InvalidArgumentError("--size " + std::to_string(o.size) +
+                                ": must be a power of two from 2 to 2^" +
+                                std::to_string(kMaxSizeLog2) + " (1048576)");
+  VOX_RETURN_IF_ERROR(ChooseLevels(o.levels, Log2Exact(o.size)).status());
+  if (!(o.band > 0) || !(o.band <= double(o.size)))
+    return InvalidArgumentError("--band " + FormatDouble(o.band) +
+                                ": must be greater than 0 and at most --size voxels");
+  if (o.threads < 0) return InvalidArgumentError("--threads must be >= 1 (or 0 for all cores)");
+  if (o.zstd_level < 1 || o.zstd_level > 22)
+    return InvalidArgumentError("--zstd-level " + std::to_string(o.zstd_level) +
+                                ": must be in 1..22");
+  if (o.normal_bits < 8 || o.normal_bits > 16)
+    return InvalidArgumentError("--normal-bits " + std::to_string(o.normal_bits) +
+                                ": must be in 8..16");
+  if (o.output.empty()) return InvalidArgumentError("no output store directory given");
+  return OkStatus();
+}
+
+std::string CanonicalOptions(const GenerateOptions& o) {
+  std::string levels = o.levels;
+  if (auto l = ChooseLevels(o.levels, Log2Exact(o.size)); l.ok())
+    levels = std::to_string(l->brick_level) + "+" + std::to_string(l->brick_depth);
+  return "vox-gen " + o.shape + " --size " + std::to_string(o.size) + " --levels " + levels +
+         " --band " + FormatDouble(o.band) + " --zstd-level " + std::to_string(o.zstd_level) +
+         " --normal-bits " + std::to_string(o.normal_bits);
+}
+
+StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgress& progress) {
+  const double t0 = Now();
+  VOX_RETURN_IF_ERROR(ValidateOptions(o));
+  const int n = Log2Exact(o.size);
+  VOX_ASSIGN_OR_RETURN(Levels lv, ChooseLevels(o.levels, n));
+  VOX_ASSIGN_OR_RETURN(std::unique_ptr<Shape> shape, MakeShape(o.shape, o.size));
+
+  GenerateStats stats;
+  StoreMeta& meta = stats.meta;
+  meta.source_file = "vox-gen:" + o.shape;
+  meta.grid_name = o.shape;
+  meta.grid_class = GridClass::kLevelSet;
+  meta.levels = n;
+  meta.brick_level = lv.brick_level;
+  meta.origin = glm::i64vec3(-int64_t(o.size / 2));
+  const double vs = VoxelSize(o.size);
+  meta.index_to_world = glm::dmat4(vs);
+  meta.index_to_world[3][3] = 1.0;
+  meta.voxel_size = vs;
+  meta.has_normal = true;
+  meta.isovalue = 0.0;
+  meta.build_options = CanonicalOptions(o);
+
+  WriteOptions wo;
+  wo.zstd_level = o.zstd_level;
+  wo.normal_bits = o.normal_bits;
+  wo.force = o.force;
+  wo.store_id = HashId(meta.build_options);
+  VOX_ASSIGN_OR_RETURN(std::unique_ptr<StoreWriter> writer,
+                       StoreWriter::Create(o.output, meta, wo));
+
+  stats.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+  BrickEnumerator bricks(*shape, n, lv.brick_level, o.band);
+  const BrickFiller filler(*shape, n, lv.brick_depth, o.band);
+  std::atomic<bool> failed{false};
+  Status first_error;
+  std::mutex error_mu;
+  auto fail = [&](Status s) {
+    std::lock_guard<std::mutex> lock(error_mu);
+    if (first_error.ok()) first_error = std::move(s);
+    failed.store(true);
+  };
+  struct Item {
+    glm::u64vec3 brick{0};
+    std::vector<BrickVoxel> voxels;
+  };
+  const double t1 = Now();
+  tbb::task_arena arena(stats.threads);
+  arena.execute([&] {
+    tbb::parallel_pipeline(
+        size_t(2 * stats.threads),
+        tbb::make_filter<void, Item>(
+            tbb::filter_mode::serial_in_order,
+            [&](tbb::flow_control& fc) -> Item {
+              Item it;
+              if (o.cancel != nullptr && o.cancel->load())
+                fail(IoError("interrupted; no store written at '" + o.output + "'"));
+              if (failed.load() || !bricks.Next(&it.brick)) fc.stop();
+              else ++stats.candidate_bricks;
+              return it;
+            }) &
+            tbb::make_filter<Item, Item>(tbb::filter_mode::parallel,
+                                         [&](Item it) -> Item {
+                                           if (failed.load()) return it;
+                                           try {
+                                             it.voxels = filler.Fill(it.brick);
+                                           } catch (const std::bad_alloc&) {
+                                             fail(ResourceExhaustedError(
+                                                 "out of memory while filling a brick"));
+                                           }
+                                           return it;
+                                         }) &
+            // One brick at a time, in enumeration order: the brick file's
+            // layout does not depend on thread timing.
+            tbb::make_filter<Item, void>(tbb::filter_mode::serial_in_order, [&](Item it) {
+              if (failed.load() || it.voxels.empty()) return;
+              const size_t count = it.voxels.size();
+              Status s = writer->AddBrick(it.brick, std::move(it.voxels));
+              if (!s.ok()) return fail(s);
+              ++stats.bricks;
+              stats.voxels += count;
+              if (progress) progress(stats.bricks, stats.voxels);
+            }));
+  });
+  if (!first_error.ok()) return first_error;  // the writer's destructor removes its temp dir
+  const double t2 = Now();
+  VOX_RETURN_IF_ERROR(writer->Finish());
+  const double t3 = Now();
+  meta.voxel_count = stats.voxels;
+  meta.brick_count = stats.bricks;
+  stats.seconds_bricks = t2 - t1;
+  stats.seconds_finish = t3 - t2;
+  stats.seconds_total = t3 - t0;
+  return stats;
+}
+
+}  // namespace vox::gen

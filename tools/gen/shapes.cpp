@@ -1,0 +1,148 @@
+// The procedural shapes of gen/shapes.h.
+#include "tools/gen/shapes.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+
+#include <glm/geometric.hpp>
+
+namespace vox::gen {
+namespace {
+
+// Radius of the unit sphere in voxels: 15/16 of the grid across.
+double RadiusVoxels(uint64_t size) { return double(size) * 15.0 / 32.0; }
+
+class Sphere : public Shape {
+ public:
+  explicit Sphere(double r) : r_(r) {}
+  double Distance(const glm::dvec3& p) const override {
+    return std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z) - r_;
+  }
+  glm::dvec3 Normal(const glm::dvec3& p) const override {
+    double l = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z);
+    return l > 0 ? p / l : glm::dvec3(0);
+  }
+  // Exact: the nearest and farthest points of the box from the centre. Each
+  // clamped coordinate is no larger in magnitude than any point's of the box
+  // (and the far corner's no smaller), and sqrt of a sum of squares rounds
+  // monotonically, so no occupied voxel centre is ever refused.
+  bool MayOccupy(const glm::dvec3& lo, const glm::dvec3& hi, double band) const override {
+    glm::dvec3 near = glm::clamp(glm::dvec3(0), lo, hi);
+    glm::dvec3 far = glm::max(glm::abs(lo), glm::abs(hi));
+    double dmin = std::sqrt(near.x * near.x + near.y * near.y + near.z * near.z) - r_;
+    double dmax = std::sqrt(far.x * far.x + far.y * far.y + far.z * far.z) - r_;
+    return dmin <= 0 && dmax > -band;
+  }
+
+ private:
+  double r_;
+};
+
+// splitmix64: a fixed stream, so every run builds the same waves.
+uint64_t SplitMix(uint64_t* s) {
+  uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+double Uniform(uint64_t* s) { return double(SplitMix(s) >> 11) * 0x1.0p-53; }
+
+// f(p) = |p| - r - sum_i a_i sin(k_i . p + phi_i) in voxel units. Each wave's
+// slope a_i |k_i| is kWaveSlope, so f is (1 + S)-Lipschitz with S = waves *
+// kWaveSlope < 1, and 1 - S <= |grad f| <= 1 + S.
+class Bumpy : public Shape {
+ public:
+  static constexpr int kOctaves = 7, kWavesPerOctave = 3;
+  static constexpr double kWaveSlope = 0.04, kLongestWavelength = 0.4;  // world units
+
+  Bumpy(double r, double voxel_size) : r_(r) {
+    uint64_t seed = 0x766f782d67656e31ull;  // "vox-gen1"
+    for (int o = 0; o < kOctaves; ++o) {
+      for (int w = 0; w < kWavesPerOctave; ++w) {
+        // A uniform direction on the unit sphere, a wavelength, a phase.
+        double z = 2 * Uniform(&seed) - 1, t = 2 * std::numbers::pi * Uniform(&seed);
+        double s = std::sqrt(std::max(0.0, 1 - z * z));
+        glm::dvec3 dir(s * std::cos(t), s * std::sin(t), z);
+        double kw = 2 * std::numbers::pi / (kLongestWavelength / double(1 << o));  // world
+        Wave v;
+        v.k = dir * (kw * voxel_size);            // per voxel
+        v.a = kWaveSlope / (kw * voxel_size);     // voxels: a |k| = kWaveSlope
+        v.phase = 2 * std::numbers::pi * Uniform(&seed);
+        waves_.push_back(v);
+      }
+    }
+    slope_ = kWaveSlope * double(waves_.size());
+  }
+
+  double Distance(const glm::dvec3& p) const override {
+    glm::dvec3 g;
+    double f = Eval(p, &g);
+    double gl = glm::length(g);
+    return gl > 1e-9 ? f / gl : f;
+  }
+  glm::dvec3 Normal(const glm::dvec3& p) const override {
+    glm::dvec3 g;
+    Eval(p, &g);
+    double gl = glm::length(g);
+    return gl > 0 ? g / gl : glm::dvec3(0);
+  }
+  // Lipschitz bound: f varies by at most (1 + S) h over the box's half
+  // diagonal h from its centre, and an occupied point has f in
+  // (-band |grad f|, 0], inside (-band (1 + S), 0].
+  bool MayOccupy(const glm::dvec3& lo, const glm::dvec3& hi, double band) const override {
+    glm::dvec3 c = (lo + hi) * 0.5;
+    double h = glm::length(hi - lo) * 0.5;
+    double fc = Value(c);
+    double spread = (1 + slope_) * h + 1e-9 * (1 + std::abs(fc) + r_);
+    return fc - spread <= 0 && fc + spread > -band * (1 + slope_);
+  }
+
+ private:
+  struct Wave {
+    glm::dvec3 k;
+    double a = 0, phase = 0;
+  };
+  double Value(const glm::dvec3& p) const {
+    double d = 0;
+    for (const Wave& w : waves_) d += w.a * std::sin(glm::dot(w.k, p) + w.phase);
+    return glm::length(p) - r_ - d;
+  }
+  double Eval(const glm::dvec3& p, glm::dvec3* grad) const {
+    double d = 0;
+    glm::dvec3 gd(0);
+    for (const Wave& w : waves_) {
+      double arg = glm::dot(w.k, p) + w.phase;
+      d += w.a * std::sin(arg);
+      gd += w.k * (w.a * std::cos(arg));
+    }
+    double l = glm::length(p);
+    *grad = (l > 0 ? p / l : glm::dvec3(0)) - gd;
+    return l - r_ - d;
+  }
+
+  double r_;
+  double slope_ = 0;
+  std::vector<Wave> waves_;
+};
+
+}  // namespace
+
+const std::vector<std::string>& ShapeNames() {
+  static const std::vector<std::string> names = {"sphere", "bumpy"};
+  return names;
+}
+
+double VoxelSize(uint64_t size) { return 32.0 / (15.0 * double(size)); }
+
+StatusOr<std::unique_ptr<Shape>> MakeShape(const std::string& name, uint64_t size) {
+  if (name == "sphere") return std::unique_ptr<Shape>(new Sphere(RadiusVoxels(size)));
+  if (name == "bumpy")
+    return std::unique_ptr<Shape>(new Bumpy(RadiusVoxels(size), VoxelSize(size)));
+  std::string known;
+  for (const std::string& n : ShapeNames()) known += (known.empty() ? "" : ", ") + n;
+  return InvalidArgumentError("unknown shape '" + name + "' (known: " + known + ")");
+}
+
+}  // namespace vox::gen

@@ -1,0 +1,58 @@
+// vox::gen shapes: procedural level-set shells described by a signed distance
+// in index space, for vox-gen (gen/generate.h).
+//
+// Placement, shared by every shape of grid size N (voxels per axis): grid
+// voxel g (0 <= g < N) is OpenVDB index coordinate ijk = g - N/2; a voxel's
+// centre is the point ijk itself (OpenVDB's convention), and world = ijk *
+// voxel_size with voxel_size = 32 / (15 N): the unit sphere is 15/16 of the
+// grid across, so the shapes span about [-1, 1]^3 in world space, centred on
+// index (0,0,0), like `vdb_tool -sphere radius=1 voxel=2/(15N/16)`.
+//
+// Occupancy: a voxel is occupied when its centre's signed distance d (in
+// voxels, negative inside) satisfies -band < d <= 0: the inner half of a
+// narrow band of half-width `band`, which is what vox-ingest keeps of a
+// `vdb_tool -sphere width=band` level set (active and value <= 0).
+//
+// Thread safety: a Shape is immutable; all methods are thread-safe.
+#ifndef VOX_GEN_SHAPES_H_
+#define VOX_GEN_SHAPES_H_
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "core/status.h"
+
+namespace vox::gen {
+
+class Shape {
+ public:
+  virtual ~Shape() = default;
+  // Signed distance (or a first-order estimate of it) at index point p, in
+  // voxels, negative inside.
+  virtual double Distance(const glm::dvec3& p) const = 0;
+  // Outward unit normal (the distance field's gradient direction) at p; zero
+  // where it is undefined.
+  virtual glm::dvec3 Normal(const glm::dvec3& p) const = 0;
+  // False only when no point of the box [lo, hi] has -band < Distance <= 0
+  // (conservative: true is allowed for a box that holds none).
+  virtual bool MayOccupy(const glm::dvec3& lo, const glm::dvec3& hi, double band) const = 0;
+};
+
+// The shapes vox-gen knows, in the order `--help` lists them.
+const std::vector<std::string>& ShapeNames();
+
+// The world size of one voxel for grid size `size` (see Placement above).
+double VoxelSize(uint64_t size);
+
+// "sphere": the sphere of world radius 1 (15 size / 32 voxels), exact distance.
+// "bumpy": that sphere displaced by deterministic multi-octave noise (21
+//   plane waves, wavelengths 0.4 down to 0.4 / 64 world units, fixed seed):
+//   f = |p| - r - D(p), distance estimate f / |grad f|, analytic normals.
+StatusOr<std::unique_ptr<Shape>> MakeShape(const std::string& name, uint64_t size);
+
+}  // namespace vox::gen
+
+#endif  // VOX_GEN_SHAPES_H_
