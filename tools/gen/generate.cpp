@@ -1,4 +1,4 @@
-// Generate(): procedural shape -> vox store, brick by brick (gen/generate.h).
+// Generate(): procedural shape -> vox store, brick by brick (tools/gen/generate.h).
 #include "tools/gen/generate.h"
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// vox::gen::Generate: writes a procedural shape (gen/shapes.h) as a
+// vox::gen::Generate: writes a procedural shape (tools/gen/shapes.h) as a
 // level-set vox store, brick by brick, in memory independent of the grid's
 // size and of the store's voxel count.
 //

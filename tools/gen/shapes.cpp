@@ -1,4 +1,4 @@
-// The procedural shapes of gen/shapes.h.
+// The procedural shapes of tools/gen/shapes.h.
 #include "tools/gen/shapes.h"
 
 #include <algorithm>

@@ -1,5 +1,5 @@
 // vox::gen shapes: procedural level-set shells described by a signed distance
-// in index space, for vox-gen (gen/generate.h).
+// in index space, for vox-gen (tools/gen/generate.h).
 //
 // Placement, shared by every shape of grid size N (voxels per axis): grid
 // voxel g (0 <= g < N) is OpenVDB index coordinate ijk = g - N/2; a voxel's
