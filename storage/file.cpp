@@ -121,7 +121,8 @@ class MmapFile : public RandomAccessFile {
 
 class PreadFile : public RandomAccessFile {
  public:
-  PreadFile(std::string path, int fd, uint64_t size) : path_(std::move(path)), fd_(fd), size_(size) {}
+  PreadFile(std::string path, int fd, uint64_t size)
+      : path_(std::move(path)), fd_(fd), size_(size) {}
   ~PreadFile() override { close(fd_); }
   const std::string& path() const override { return path_; }
   uint64_t size() const override { return size_; }
@@ -183,7 +184,8 @@ class MemoryFile : public RandomAccessFile {
 
 StatusOr<uint64_t> ProcessIoBytes() {
   FILE* f = std::fopen("/proc/self/io", "re");
-  if (f == nullptr) return UnsupportedError("cannot open '/proc/self/io': " + std::string(std::strerror(errno)));
+  if (f == nullptr)
+    return UnsupportedError("cannot open '/proc/self/io': " + std::string(std::strerror(errno)));
   char line[256];
   unsigned long long v = 0;
   bool found = false;

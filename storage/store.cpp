@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <atomic>
 #include <condition_variable>
-#include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <exception>
@@ -218,8 +217,7 @@ void StoreImpl::PrefetchLoop() {
 void StoreImpl::PrefetchBatch(std::vector<uint32_t> ids) {
   std::sort(ids.begin(), ids.end());
   ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
-  ids.erase(std::remove_if(ids.begin(), ids.end(), [&](uint32_t id) { return cache_.Contains(id); }),
-            ids.end());
+  std::erase_if(ids, [&](uint32_t id) { return cache_.Contains(id); });
   // File order (records lie in the order the ingest wrote them: spatial
   // neighbours close together), so neighbours merge into runs.
   std::sort(ids.begin(), ids.end(),
@@ -508,20 +506,20 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir, const OpenO
     return InvalidArgumentError("'" + dir + "' is not a store directory");
   std::string base = dir;
   while (base.size() > 1 && base.back() == '/') base.pop_back();
-  auto open = [&](const char* name) {
-    const char* io = std::getenv("VOX_BRICK_IO");
-    std::string mode = io ? io : "pread";
-    auto f = mode == "mmap" ? OpenMmapFile(base + "/" + name)
-             : mode == "mmap-random" ? OpenMmapFile(base + "/" + name, true, true)
-             : mode == "pread-random" ? OpenPreadFile(base + "/" + name, true)
-                                       : OpenPreadFile(base + "/" + name);
+  // Both files are read with pread: the index once, sequentially, at open;
+  // bricks as random reads of their own bytes (no read-ahead: a fault's
+  // read-around on a mapping, or the kernel's read-ahead, would read
+  // megabytes per brick on disks with a large read_ahead_kb, thrashing under
+  // a memory limit). Prefetch merges neighbouring bricks into larger reads.
+  auto open = [&](const char* name, bool random_access) {
+    auto f = OpenPreadFile(base + "/" + name, random_access);
     if (!f.ok() && f.status().code() == StatusCode::kNotFound)
       return StatusOr<std::unique_ptr<RandomAccessFile>>(
           f.status().WithContext("'" + base + "' is not a complete vox store"));
     return f;
   };
-  VOX_ASSIGN_OR_RETURN(auto index, open(storage_internal::kIndexFileName));
-  VOX_ASSIGN_OR_RETURN(auto bricks, open(storage_internal::kBrickFileName));
+  VOX_ASSIGN_OR_RETURN(auto index, open(storage_internal::kIndexFileName, false));
+  VOX_ASSIGN_OR_RETURN(auto bricks, open(storage_internal::kBrickFileName, true));
   return storage_internal::OpenStoreFromFiles(base, std::move(index), std::move(bricks), options);
 }
 
