@@ -2,10 +2,12 @@
 // reader of a voxel volume sees: the octree to trace, each voxel's attributes,
 // the placement in world space and the brick cache's counters. Store is the
 // disk-backed Volume that vox-ingest writes and every reader opens (an
-// in-memory one for tests and demos is render/volume.h's MemoryVolume). The resident top (levels above the brick
-// level) is loaded at open; each brick (the subtree under one occupied octant
-// of the brick level, with its voxels' attributes) is a zstd frame in a
-// memory-mapped file, decompressed on demand into a byte-budgeted cache.
+// in-memory one for tests and demos is render/volume.h's MemoryVolume). The
+// resident top (levels above the brick level) is loaded at open; each brick
+// (the subtree under one occupied octant of the brick level, with its voxels'
+// attributes) is a zstd frame in bricks.vxb, read with pread (its own bytes,
+// read-ahead off) and decompressed on demand into a byte-budgeted cache, or
+// ahead of need by Prefetch on an I/O thread.
 // The format is specified in storage/FORMAT.md.
 //
 // Coordinates: grid coordinates g in [0, 2^levels)^3 are what the octree and
@@ -25,6 +27,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -117,6 +120,12 @@ struct CacheStats {
   uint64_t bytes_decompressed = 0;  // total decompressed since open
   uint64_t bytes_resident = 0;      // decompressed bytes held now
   uint64_t capacity = 0;
+  // Prefetch (Store::Prefetch): bricks decoded ahead and cached, those later
+  // fetched from the cache, requests dropped (queue full, cancelled, budget
+  // tight) and failed (the brick's own fetch reads it again and reports).
+  uint64_t prefetched = 0, prefetch_hits = 0, prefetch_dropped = 0, prefetch_failed = 0;
+  uint64_t bytes_read = 0;          // brick file bytes vox's reads asked for since open
+  uint64_t process_read_bytes = 0;  // the process's bytes read from storage (ProcessIoBytes)
 };
 
 class Volume {
@@ -145,6 +154,18 @@ class Store : public Volume, public BrickSource {
   static StatusOr<std::unique_ptr<Store>> Open(const std::string& dir, const OpenOptions& options);
   ~Store() override = default;
 
+  // Asks for bricks to be read and decoded ahead of their FetchBrick, in the
+  // background: returns at once. An I/O thread reads the compressed bytes of
+  // the requested bricks not yet cached in runs of neighbours (bricks lie in
+  // Morton order), decodes them and caches them, so later fetches hit. It
+  // never makes a fetch wait for another brick; it stays within the cache
+  // budget: prefetched bricks not yet fetched use at most half of it, and
+  // requests past that (or past a bounded queue, oldest first) are dropped. A brick
+  // whose prefetch fails is not cached: its fetch reads it again and reports
+  // the error. Unknown ids are ignored.
+  virtual void Prefetch(std::span<const uint32_t> brick_ids) = 0;
+  // Drops the requests not yet started (one in progress finishes).
+  virtual void CancelPrefetch() = 0;
   // Bytes held in memory for the life of the Store: top cells, top payloads
   // and the brick table (not the cache).
   virtual uint64_t resident_bytes() const = 0;
