@@ -32,6 +32,9 @@ class AwTracer {
     if (tree.levels < 1 || tree.levels > kMaxLevels || tree.top == nullptr)
       return InvalidArgumentError("octree has " + std::to_string(tree.levels) +
                                   " levels; vox traces 1 to 40");
+    if (tree.brick_level < 1 || tree.brick_level > tree.levels)
+      return InvalidArgumentError("octree brick level " + std::to_string(tree.brick_level) +
+                                  " outside 1.." + std::to_string(tree.levels));
     int n2 = tree.levels - n1;
     if (n1 < 1 || n1 > kMaxStepLevels || n2 < 0 || n2 > kMaxStepLevels)
       return InvalidArgumentError("split " + std::to_string(n1) + "+" + std::to_string(n2) +
@@ -71,21 +74,20 @@ class AwTracer {
     const int64_t base0[3] = {0, 0, 0};
     Dda dda = MakeDda(cx, l1, v, base0, s1);
 
-    internal::BrickPinner pinner(tree_.bricks);
+    internal::BrickPinner pinner(tree_.bricks, tree_.top);
+    const int top1 = internal::TopBit(tree_, n2_), top2 = internal::TopBit(tree_, 0);
     internal::WalkStats stats;
     const internal::StepLayout l2(n2_);
-    auto leaf = [&](const int64_t base[3], const internal::StepLayout& lay, NodeRef child,
-                    const Cell* pool, uint64_t xyz) {
-      Hit h = internal::LeafHit(ray, lay, base, xyz, child,
-                                pool != tree_.top, pinner);
+    auto leaf = [&](const int64_t base[3], const internal::StepLayout& lay, uint32_t child,
+                    bool in_brick, uint64_t xyz) {
+      Hit h = internal::LeafHit(ray, lay, base, xyz, child, in_brick, pinner);
       return visit(h) ? internal::Flow::kLeft : internal::Flow::kStop;
     };
-    auto occupied1 = [&](NodeRef child, const Cell* pool, uint64_t xyz, uint64_t prev,
+    auto occupied1 = [&](uint32_t child, uint64_t xyz, uint64_t prev,
                          const Dda&) -> internal::Flow {
-      if (n2_ == 0) return leaf(base0, l1, child, pool, xyz);
-      const Cell* c2 = nullptr;
-      const Cell* p2 = pool;
-      if (!pinner.Resolve(child, c2, p2)) return internal::Flow::kError;
+      if (n2_ == 0) return leaf(base0, l1, child, top1 > 0, xyz);
+      CompactCell c2;
+      if (!pinner.Resolve(child, 0, top1, c2)) return internal::Flow::kError;
       ++c.transitions;
       int64_t C[3] = {l1.Coord(xyz, 0), l1.Coord(xyz, 1), l1.Coord(xyz, 2)};
       int64_t base2[3] = {C[0] << n2_, C[1] << n2_, C[2] << n2_};
@@ -112,15 +114,15 @@ class AwTracer {
                           : internal::StartVoxel(pa, cx.s[a], size2);
       }
       Dda dda2 = MakeDda(cx, l2, w, base2, Real(1));
-      auto occupied2 = [&](NodeRef ch, const Cell* pl, uint64_t x2, uint64_t, const Dda&) {
-        return leaf(base2, l2, ch, pl, x2);
+      auto occupied2 = [&](uint32_t ch, uint64_t x2, uint64_t, const Dda&) {
+        return leaf(base2, l2, ch, top2 > 0, x2);
       };
-      internal::Flow f = internal::WalkStep(l2, l2.Pack(w), dda2, c2, p2, pinner, occupied2, &stats);
+      internal::Flow f = internal::WalkStep(l2, l2.Pack(w), dda2, c2, top2, pinner, occupied2, &stats);
       AddMoves(dda2, &c);
       return f;
     };
     internal::Flow f =
-        internal::WalkStep(l1, l1.Pack(v), dda, tree_.top, tree_.top, pinner, occupied1, &stats);
+        internal::WalkStep(l1, l1.Pack(v), dda, tree_.top[0], top1, pinner, occupied1, &stats);
     AddMoves(dda, &c);
     return internal::FinishWalk(f, stats, pinner, &c);
   }

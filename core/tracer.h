@@ -44,6 +44,9 @@ class Tracer {
     if (tree.levels < 1 || tree.levels > kMaxLevels || tree.top == nullptr)
       return InvalidArgumentError("octree has " + std::to_string(tree.levels) +
                                   " levels; vox traces 1 to 40");
+    if (tree.brick_level < 1 || tree.brick_level > tree.levels)
+      return InvalidArgumentError("octree brick level " + std::to_string(tree.brick_level) +
+                                  " outside 1.." + std::to_string(tree.levels));
     if (n1 < 1 || n1 > tree.levels)
       return InvalidArgumentError("first-step levels " + std::to_string(n1) + " outside 1.." +
                                   std::to_string(tree.levels));
@@ -90,37 +93,36 @@ class Tracer {
     for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * down2_;
     const internal::StepLayout l1(n1_), l2(n2_);
     Dda dda = InitStep(cx, l1, p1);
-    internal::BrickPinner pinner(tree_.bricks);
+    internal::BrickPinner pinner(tree_.bricks, tree_.top);
+    const int top1 = internal::TopBit(tree_, n2_), top2 = internal::TopBit(tree_, 0);
     internal::WalkStats stats;
     const int64_t base0[3] = {0, 0, 0};
     // An occupied voxel of the last level: a hit.
-    auto leaf = [&](const internal::StepLayout& lay, const int64_t base[3], NodeRef child,
-                    const Cell* pool, uint64_t xyz) {
-      Hit h = internal::LeafHit(ray, lay, base, xyz, child,
-                                pool != tree_.top, pinner);
+    auto leaf = [&](const internal::StepLayout& lay, const int64_t base[3], uint32_t child,
+                    bool in_brick, uint64_t xyz) {
+      Hit h = internal::LeafHit(ray, lay, base, xyz, child, in_brick, pinner);
       return visit(h) ? internal::Flow::kLeft : internal::Flow::kStop;
     };
-    auto occupied1 = [&](NodeRef child, const Cell* pool, uint64_t xyz, uint64_t prev,
+    auto occupied1 = [&](uint32_t child, uint64_t xyz, uint64_t prev,
                          const Dda& d1) -> internal::Flow {
-      if (n2_ == 0) return leaf(l1, base0, child, pool, xyz);
+      if (n2_ == 0) return leaf(l1, base0, child, top1 > 0, xyz);
       // An occupied first-step voxel: trace the second step in it; a miss
       // there skips it and the first step goes on with its state untouched.
-      const Cell* c2 = nullptr;
-      const Cell* p2 = pool;
-      if (!pinner.Resolve(child, c2, p2)) return internal::Flow::kError;
+      CompactCell c2;
+      if (!pinner.Resolve(child, 0, top1, c2)) return internal::Flow::kError;
       ++c.transitions;
       Dda d2 = Transition(cx, l1, l2, xyz, prev, d1);
       const int64_t base2[3] = {l1.Coord(xyz, 0) << n2_, l1.Coord(xyz, 1) << n2_,
                                 l1.Coord(xyz, 2) << n2_};
-      auto occupied2 = [&](NodeRef ch, const Cell* pl, uint64_t x2, uint64_t, const Dda&) {
-        return leaf(l2, base2, ch, pl, x2);
+      auto occupied2 = [&](uint32_t ch, uint64_t x2, uint64_t, const Dda&) {
+        return leaf(l2, base2, ch, top2 > 0, x2);
       };
-      internal::Flow f = internal::WalkStep(l2, d2.xyz, d2, c2, p2, pinner, occupied2, &stats);
+      internal::Flow f = internal::WalkStep(l2, d2.xyz, d2, c2, top2, pinner, occupied2, &stats);
       d2.AddTo(cx, &c);
       return f;
     };
     internal::Flow f =
-        internal::WalkStep(l1, dda.xyz, dda, tree_.top, tree_.top, pinner, occupied1, &stats);
+        internal::WalkStep(l1, dda.xyz, dda, tree_.top[0], top1, pinner, occupied1, &stats);
     dda.AddTo(cx, &c);
     return internal::FinishWalk(f, stats, pinner, &c);
   }
