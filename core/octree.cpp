@@ -90,6 +90,73 @@ std::vector<Cell> BuildCells(std::span<const LeafPoint> points, int levels) {
   return cells;
 }
 
+StatusOr<std::vector<CompactCell>> LevelOrderPool(std::span<const Cell> cells, int levels,
+                                                  bool bricks_at_last_level) {
+  if (cells.empty()) return CorruptionError("octree pool has no root cell");
+  if (cells.size() > size_t(kMaxCompactIndex) + 1)
+    return CorruptionError("octree pool has " + std::to_string(cells.size()) +
+                           " cells; a traversal pool holds at most 2^24");
+  std::vector<CompactCell> out;
+  out.reserve(cells.size());
+  // Breadth first: `level` holds the build-form indices of one level's cells
+  // in level order; their children, in digit order, make the next level.
+  std::vector<uint32_t> level{0}, next;
+  for (int l = 0; l < levels && !level.empty(); ++l) {
+    const bool last = l == levels - 1;
+    next.clear();
+    const size_t done = out.size();  // cells of the levels above
+    uint64_t count = 0;  // children of this level so far
+    for (uint32_t index : level) {
+      const Cell& c = cells[index];
+      uint32_t mask = 0;
+      const uint64_t first = count;
+      for (unsigned d = 0; d < 8; ++d) {
+        const NodeRef r = c.child[d];
+        if (r == kEmptyRef) continue;
+        mask |= 1u << d;
+        if (!last) {
+          if (IsBrickRef(r) || r >= cells.size() ||
+              done + level.size() + next.size() >= cells.size())
+            return CorruptionError("octree cell " + std::to_string(index) + " refers to cell " +
+                                   std::to_string(r) + " (of " + std::to_string(cells.size()) +
+                                   ") that is not a new cell");
+          next.push_back(r);
+        } else {
+          const bool brick = IsBrickRef(r);
+          const uint64_t v = brick ? (r & kBrickIdMask) : uint64_t(LeafPayload(r));
+          if (brick != bricks_at_last_level || v != count)
+            return CorruptionError(
+                "octree cell " + std::to_string(index) + " child " + std::to_string(d) + " is " +
+                (brick ? "brick " : "payload ") + std::to_string(v) + " where " +
+                (bricks_at_last_level ? "brick " : "payload ") + std::to_string(count) +
+                " belongs (last-level refs must number 0, 1, ... in Morton order)");
+        }
+        ++count;
+      }
+      if (first > kMaxCompactIndex)
+        return CorruptionError("octree level " + std::to_string(l + 1) + " has more than 2^24 " +
+                               (last ? (bricks_at_last_level ? "bricks" : "voxels") : "cells") +
+                               "; a traversal pool indexes at most 2^24");
+      out.push_back(MakeCompactCell(mask == 0 ? 0 : uint32_t(first), mask));
+    }
+    if (!last) {  // firsts so far count from the next level's start
+      const uint64_t start = out.size();
+      for (size_t i = out.size() - level.size(); i < out.size(); ++i) {
+        if (ChildMask(out[i]) == 0) continue;
+        const uint64_t f = start + FirstChild(out[i]);
+        if (f > kMaxCompactIndex) return CorruptionError("octree pool has more than 2^24 cells");
+        out[i] = MakeCompactCell(uint32_t(f), ChildMask(out[i]));
+      }
+    }
+    level.swap(next);
+  }
+  if (out.size() != cells.size())
+    return CorruptionError("octree pool has " + std::to_string(cells.size()) + " cells but " +
+                           std::to_string(out.size()) + " are reachable in " +
+                           std::to_string(levels) + " levels");
+  return out;
+}
+
 StatusOr<std::unique_ptr<MemoryOctree>> MemoryOctree::Build(std::vector<LeafPoint> voxels,
                                                             int levels, int brick_level) {
   if (levels < 1 || levels > kMaxLevels)
@@ -114,7 +181,7 @@ StatusOr<std::unique_ptr<MemoryOctree>> MemoryOctree::Build(std::vector<LeafPoin
   tree->brick_level_ = brick_level;
   if (brick_level == levels) {
     for (size_t i = 0; i < voxels.size(); ++i) voxels[i].ref = MakeLeafRef(uint32_t(i));
-    tree->top_ = BuildCells(voxels, levels);
+    VOX_ASSIGN_OR_RETURN(tree->top_, LevelOrderPool(BuildCells(voxels, levels), levels, false));
     tree->voxels_ = std::move(voxels);
     return tree;
   }
@@ -138,12 +205,15 @@ StatusOr<std::unique_ptr<MemoryOctree>> MemoryOctree::Build(std::vector<LeafPoin
       local[k].ref = MakeLeafRef(uint32_t(k));
     }
     uint32_t id = uint32_t(tree->bricks_.size());
-    tree->bricks_.push_back(std::make_shared<std::vector<Cell>>(BuildCells(local, sub)));
+    VOX_ASSIGN_OR_RETURN(std::vector<CompactCell> pool,
+                         LevelOrderPool(BuildCells(local, sub), sub, false));
+    tree->bricks_.push_back(std::make_shared<std::vector<CompactCell>>(std::move(pool)));
     tree->brick_first_voxel_.push_back(uint32_t(i));
     top_points.push_back({head.x >> sub, head.y >> sub, head.z >> sub, MakeBrickRef(id)});
     i = j;
   }
-  tree->top_ = BuildCells(top_points, brick_level);
+  VOX_ASSIGN_OR_RETURN(tree->top_, LevelOrderPool(BuildCells(top_points, brick_level),
+                                                  brick_level, true));
   tree->voxels_ = std::move(voxels);
   return tree;
 }

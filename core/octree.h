@@ -1,21 +1,37 @@
-// The octree every vox traversal walks: cells of 8 child references, split
-// into a resident top and bricks that are fetched on demand.
+// The octree every vox traversal walks, split into a resident top and bricks
+// that are fetched on demand; and the pre-order pools it is built from.
 //
-// Layout. A cell is an octant: 8 NodeRefs indexed by the octal digit
+// Two forms of a pool. Both index a cell's children by the octal digit
 // `x_bit | y_bit << 1 | z_bit << 2` of the level's bit of the voxel
-// coordinates. Cells live in pools (arrays of Cell); a pool's root cell is
-// index 0. A NodeRef means, by where it stands:
+// coordinates, and both have their root cell at index 0.
+//
+// Build form (`Cell`, 32 bytes: 8 NodeRefs), in pre-order, as BuildCells
+// makes it and as the store's files hold the top (storage/FORMAT.md). A
+// NodeRef means, by where it stands:
 //   - 0 (kEmptyRef): the octant is empty, at any level;
 //   - at the last level of the tree (children of level-1 cells): an occupied
 //     voxel, whose payload index in its pool is `ref - 1`;
 //   - elsewhere, with kBrickBit set: brick `ref & kBrickIdMask`, whose pool's
 //     root cell is the child octant (fetch it through a BrickSource);
 //   - elsewhere, without kBrickBit: index of the child cell in the same pool.
+//
+// Traversal form (`CompactCell`, 4 bytes), in level order (breadth first,
+// children in digit order), which is what OctreeView and BrickView hand out.
+// Level order keeps each cell's non-empty children contiguous, so a cell is
+// its 8-bit child mask plus the index of its first non-empty child; child d
+// is `first + popcount(mask & ((1 << d) - 1))` (ChildIndex), and an empty
+// octant is a clear mask bit. What the index names depends on the level, as
+// above: a cell of the same pool, a payload (last level: leaves are numbered
+// in level order, which at the last level is Morton order), or, at the
+// brick level of the top, a brick id (ids are Morton order of the bricks, so
+// level order too). Indices fit 24 bits: a pool may hold at most 2^24 cells,
+// children and payloads (bricks of depth <= 7 always do).
+//
 // So the top pool (resident) holds the levels above the brick level and
 // refers to bricks; a brick's pool holds the subtree under one octant of the
 // brick level, down to the voxels, and never refers to another brick.
 //
-// Thread safety: Cell pools are immutable once built and shared freely.
+// Thread safety: pools are immutable once built and shared freely.
 // BrickSource implementations must be thread-safe.
 #ifndef VOX_CORE_OCTREE_H_
 #define VOX_CORE_OCTREE_H_
@@ -46,16 +62,45 @@ struct Cell {
 };
 static_assert(sizeof(Cell) == 32, "Cell is 8 x uint32");
 
+// A traversal-form cell: child mask in bits 0..7, index of the first
+// non-empty child in bits 8..31 (0 when the mask is 0).
+struct CompactCell {
+  uint32_t bits = 0;
+};
+static_assert(sizeof(CompactCell) == 4, "CompactCell is one uint32");
+// Largest index a CompactCell holds.
+inline constexpr uint32_t kMaxCompactIndex = (uint32_t(1) << 24) - 1;
+
+inline constexpr CompactCell MakeCompactCell(uint32_t first, uint32_t mask) {
+  return CompactCell{first << 8 | (mask & 0xffu)};
+}
+inline constexpr uint32_t ChildMask(CompactCell c) { return c.bits & 0xffu; }
+inline constexpr uint32_t FirstChild(CompactCell c) { return c.bits >> 8; }
+inline constexpr bool HasChild(CompactCell c, unsigned digit) { return (c.bits >> digit) & 1u; }
+// The index of child `digit`. REQUIRES: HasChild(c, digit).
+inline uint32_t ChildIndex(CompactCell c, unsigned digit) {
+  // Popcount of the mask bits below `digit`, by table: the build targets
+  // x86-64 without POPCNT, where std::popcount would be a bit-trick sequence.
+  static constexpr auto kPop8 = [] {
+    struct T { uint8_t v[256]; } t{};
+    for (int i = 0; i < 256; ++i) t.v[i] = uint8_t((i & 1) + ((i >> 1) & 1) + ((i >> 2) & 1) +
+                                                   ((i >> 3) & 1) + ((i >> 4) & 1) +
+                                                   ((i >> 5) & 1) + ((i >> 6) & 1) + (i >> 7));
+    return t;
+  }();
+  return (c.bits >> 8) + kPop8.v[c.bits & ((1u << digit) - 1u)];
+}
+
 inline constexpr bool IsBrickRef(NodeRef r) { return (r & kBrickBit) != 0; }
 inline constexpr NodeRef MakeBrickRef(uint32_t id) { return kBrickBit | id; }
 inline constexpr NodeRef MakeLeafRef(uint32_t payload) { return payload + 1; }
 inline constexpr uint32_t LeafPayload(NodeRef r) { return r - 1; }
 
-// A fetched brick: its cell pool, kept alive (pinned) as long as `pin` is held.
+// A fetched brick: its cell pool (traversal form), kept alive (pinned) as long as `pin` is held.
 // `data` is the source's own record of the brick (storage: the decoded brick
 // with its attribute planes), opaque to core, alive as long as the cells.
 struct BrickView {
-  const Cell* cells = nullptr;
+  const CompactCell* cells = nullptr;
   uint32_t num_cells = 0;
   std::shared_ptr<const void> pin;
   const void* data = nullptr;
@@ -85,10 +130,26 @@ class BrickSource {
 // What a traversal needs to walk a tree: non-owning.
 struct OctreeView {
   int levels = 0;               // N: the grid is [0, 2^N)^3 voxels
-  const Cell* top = nullptr;    // resident pool; its cell 0 is the root
+  int brick_level = 0;          // 1..N: the top's levels; N when there are no bricks
+  const CompactCell* top = nullptr;  // resident pool (traversal form); cell 0 is the root
   uint32_t top_cells = 0;
   BrickSource* bricks = nullptr;  // may be null when the top refers to no brick
 };
+
+// Child `digit` of a traversal-form cell at tree level `level` (0: the root)
+// of `tree`, for walkers outside the tracers (tests, tools): empty, a cell of
+// the same pool, a brick (its pool's cell 0 is the child), or a payload.
+struct ChildRef {
+  enum Kind { kEmpty, kCell, kBrick, kPayload } kind = kEmpty;
+  uint32_t index = 0;
+};
+inline ChildRef ChildOf(CompactCell c, unsigned digit, int level, const OctreeView& tree) {
+  if (!HasChild(c, digit)) return {};
+  const uint32_t i = ChildIndex(c, digit);
+  if (level + 1 == tree.levels) return {ChildRef::kPayload, i};
+  if (level + 1 == tree.brick_level) return {ChildRef::kBrick, i};
+  return {ChildRef::kCell, i};
+}
 
 // A voxel with the leaf (or brick) reference to place at the last level of a
 // pool being built. Coordinates are local to the pool's subtree.
@@ -128,6 +189,15 @@ void SortMorton(std::vector<LeafPoint>* points);
 // REQUIRES: 1 <= levels <= kMaxLevels.
 std::vector<Cell> BuildCells(std::span<const LeafPoint> points, int levels);
 
+// The traversal form of a `levels`-level build-form pool whose cell refs each
+// name a cell of the pool (as ValidatePool-checked or BuildCells pools do).
+// Its last-level refs (leaf refs, or brick refs when `bricks_at_last_level`)
+// must number 0, 1, 2, ... in level order (payloads or brick ids in Morton
+// order, as BuildCells and the store's writer make them): Corruption naming
+// the first that does not, or an index beyond kMaxCompactIndex.
+StatusOr<std::vector<CompactCell>> LevelOrderPool(std::span<const Cell> cells, int levels,
+                                                  bool bricks_at_last_level);
+
 // An octree held in memory, split at `brick_level` like a store: for tests,
 // the demo and tools. Payload indices are the positions of the voxels in
 // `voxels()` (sorted in Morton order, global coordinates).
@@ -138,7 +208,9 @@ class MemoryOctree : public BrickSource {
   static StatusOr<std::unique_ptr<MemoryOctree>> Build(std::vector<LeafPoint> voxels, int levels,
                                                        int brick_level);
 
-  OctreeView view() { return {levels_, top_.data(), uint32_t(top_.size()), this}; }
+  OctreeView view() {
+    return {levels_, brick_level_, top_.data(), uint32_t(top_.size()), this};
+  }
   int levels() const { return levels_; }
   int brick_level() const { return brick_level_; }
   const std::vector<LeafPoint>& voxels() const { return voxels_; }
@@ -151,8 +223,8 @@ class MemoryOctree : public BrickSource {
  private:
   int levels_ = 0, brick_level_ = 0;
   std::vector<LeafPoint> voxels_;
-  std::vector<Cell> top_;
-  std::vector<std::shared_ptr<std::vector<Cell>>> bricks_;
+  std::vector<CompactCell> top_;
+  std::vector<std::shared_ptr<std::vector<CompactCell>>> bricks_;
   std::vector<uint32_t> brick_first_voxel_;
 };
 

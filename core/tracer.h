@@ -47,6 +47,9 @@ class Tracer {
     if (tree.levels < 1 || tree.levels > kMaxLevels || tree.top == nullptr)
       return InvalidArgumentError("octree has " + std::to_string(tree.levels) +
                                   " levels; vox traces 1 to 40");
+    if (tree.brick_level < 1 || tree.brick_level > tree.levels)
+      return InvalidArgumentError("octree brick level " + std::to_string(tree.brick_level) +
+                                  " outside 1.." + std::to_string(tree.levels));
     if (n1 < 1 || n1 > tree.levels)
       return InvalidArgumentError("first-step levels " + std::to_string(n1) + " outside 1.." +
                                   std::to_string(tree.levels));

@@ -52,7 +52,7 @@ class StoreImpl : public Store {
 
   const StoreMeta& meta() const override { return meta_; }
   OctreeView view() override {
-    return {meta_.levels, top_.data(), uint32_t(top_.size()), this};
+    return {meta_.levels, meta_.brick_level, top_.data(), uint32_t(top_.size()), this};
   }
 
   StatusOr<BrickView> FetchBrick(uint32_t id) override {
@@ -108,7 +108,7 @@ class StoreImpl : public Store {
   }
 
   uint64_t resident_bytes() const override {
-    return top_.size() * sizeof(Cell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
+    return top_.size() * sizeof(CompactCell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
   }
 
   const std::vector<BrickEntry>& table() const { return table_; }
@@ -156,7 +156,7 @@ class StoreImpl : public Store {
   StoreMeta meta_;
   int depth_ = 0;
   uint8_t flags_ = 0;
-  std::vector<Cell> top_;
+  std::vector<CompactCell> top_;  // traversal form (the file holds the build form)
   std::vector<uint8_t> top_attr_;
   std::vector<BrickEntry> table_;
   std::unique_ptr<RandomAccessFile> bricks_;
@@ -411,8 +411,8 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   if (top_b.size() != meta_.top_cells * sizeof(Cell))
     return bad("top octree block is " + std::to_string(top_b.size()) + " bytes for " +
                std::to_string(meta_.top_cells) + " cells");
-  top_.resize(meta_.top_cells);
-  std::memcpy(top_.data(), top_b.data(), top_b.size());
+  std::vector<Cell> top_cells(meta_.top_cells);
+  std::memcpy(top_cells.data(), top_b.data(), top_b.size());
   const bool top_only = depth_ == 0;
   if (top_only) {
     if (meta_.brick_count != 0 || !table_b.empty()) return bad("a top-only store has bricks");
@@ -424,9 +424,14 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   } else if (!attr_b.empty()) {
     return bad("a store with bricks has top attributes");
   }
-  Status vs = ValidatePool(top_.data(), top_.size(), meta_.brick_level, !top_only,
+  Status vs = ValidatePool(top_cells.data(), top_cells.size(), meta_.brick_level, !top_only,
                            top_only ? meta_.voxel_count : meta_.brick_count);
   if (!vs.ok()) return vs.WithContext("'" + ipath + "': top");
+  // In memory the top is level order; brick ids (payloads when top-only) must
+  // be consecutive in it, i.e. assigned in Morton order as FORMAT.md says.
+  auto compact = LevelOrderPool(top_cells, meta_.brick_level, !top_only);
+  if (!compact.ok()) return compact.status().WithContext("'" + ipath + "': top");
+  top_ = std::move(*compact);
 
   // The bricks file: header, size, same store.
   const std::string& bpath = bricks->path();

@@ -33,7 +33,7 @@ StatusOr<StoreInfo> InspectStore(const std::string& dir, bool verify_bricks, siz
   struct stat st;
   if (stat(brick_path.c_str(), &st) != 0) return ErrnoError("cannot stat", brick_path, errno);
   info.brick_file_bytes = uint64_t(st.st_size);
-  info.top_bytes = uint64_t(store->view().top_cells) * sizeof(Cell);
+  info.top_bytes = uint64_t(store->view().top_cells) * sizeof(CompactCell);
   info.resident_bytes = store->resident_bytes();
   const auto& table = BrickTable(*store);
   const size_t attr = AttrBytesPerVoxel(AttrFlags(info.meta));
@@ -42,7 +42,7 @@ StatusOr<StoreInfo> InspectStore(const std::string& dir, bool verify_bricks, siz
     info.brick_cells += e.num_cells;
     info.stored_bytes += uint64_t(e.stored_size) + kTrailerSize;
     info.raw_bytes += e.raw_size;
-    info.decoded_bytes += uint64_t(e.num_cells) * sizeof(Cell) + uint64_t(e.voxel_count) * attr;
+    info.decoded_bytes += uint64_t(e.num_cells) * sizeof(CompactCell) + uint64_t(e.voxel_count) * attr;
     info.min_brick_voxels = std::min<uint64_t>(info.min_brick_voxels, e.voxel_count);
     info.max_brick_voxels = std::max<uint64_t>(info.max_brick_voxels, e.voxel_count);
     size_t k = size_t(std::bit_width(uint64_t(e.stored_size) + kTrailerSize)) - 1;

@@ -54,31 +54,45 @@ struct StepLayout {
   }
 };
 
+// Where a step's top pool ends: cells at step bits >= the returned bit are
+// top cells (those at exactly that bit have bricks as children), cells below
+// it are brick cells. `levels_below` is the tree levels below the step's last
+// level (n2 for the first step of two, else 0). -1 when there are no bricks:
+// every cell is a top cell.
+inline int TopBit(const OctreeView& tree, int levels_below) {
+  return tree.brick_level < tree.levels ? (tree.levels - tree.brick_level) - levels_below : -1;
+}
+
 // Pins the brick a ray is in (at most one at a time: the stack never holds
-// cells of two bricks) and resolves child references to cells. A lending
+// cells of two bricks) and resolves child indices to cells. A lending
 // source (BrickSource::lends) keeps the brick pinned for it.
 struct BrickPinner {
-  explicit BrickPinner(BrickSource* s) : source(s), lending(s != nullptr && s->lends()) {}
+  BrickPinner(BrickSource* s, const CompactCell* top_pool)
+      : source(s), lending(s != nullptr && s->lends()), top(top_pool) {}
 
   BrickSource* source = nullptr;
   bool lending = false;
+  const CompactCell* top = nullptr;    // the tree's top pool
   uint32_t id = kNoBrick;
-  const Cell* cells = nullptr;     // the pinned brick's pool
-  const void* data = nullptr;      // and its BrickView::data
-  std::shared_ptr<const void> pin;  // when the source does not lend
+  const CompactCell* cells = nullptr;  // the pinned brick's pool
+  const void* data = nullptr;          // and its BrickView::data
+  std::shared_ptr<const void> pin;     // when the source does not lend
   Status error{};
   uint64_t fetches = 0;
 
-  // Sets cell (and pool, when the child is a brick) for `child` of a cell in
-  // `pool`. False on a fetch error (kept in `error`).
-  bool Resolve(NodeRef child, const Cell*& cell, const Cell*& pool) {
-    if (!IsBrickRef(child)) [[likely]] {
-      cell = pool + child;
+  // Sets `cell` to child `index` (ChildIndex) of a cell at step bit `bit`,
+  // with `top_bit` the step's TopBit. False on a fetch error (kept in `error`).
+  bool Resolve(uint32_t index, int bit, int top_bit, CompactCell& cell) {
+    if (bit < top_bit) [[likely]] {
+      cell = cells[index];
       return true;
     }
-    if ((child & kBrickIdMask) != id && !Fetch(child & kBrickIdMask)) return false;
-    pool = cells;
-    cell = pool;
+    if (bit > top_bit) {
+      cell = top[index];
+      return true;
+    }
+    if (index != id && !Fetch(index)) return false;
+    cell = cells[0];
     return true;
   }
 
@@ -115,52 +129,50 @@ struct WalkStats {
 };
 
 // The paper's figure 1 over one step's grid, starting in voxel `xyz` (packed per
-// `layout`) with `root` the step's root cell in `root_pool`.
+// `layout`) with `root` the step's root cell and `top_bit` its TopBit.
 //
 // Dda must provide `void Move(uint64_t& xyz)`: one 6-connected move (adds
-// +-1 to one field of xyz). `occupied(child, pool, xyz, prev, dda) -> Flow`
-// is called for a non-empty child at the step's last level, with `prev` the
-// register before the last move (== xyz before any move); kLeft goes on
+// +-1 to one field of xyz). `occupied(child, xyz, prev, dda) -> Flow` is
+// called for a non-empty child at the step's last level, `child` its index
+// (ChildIndex of the last-level cell: a payload at the tree's last level,
+// else the next step's root for BrickPinner::Resolve at bit 0), with `prev`
+// the register before the last move (== xyz before any move); kLeft goes on
 // (the voxel is skipped), kStop and kError end the walk.
 template <class Dda, class Occupied>
-Flow WalkStep(const StepLayout& layout, uint64_t xyz, Dda& dda, const Cell* root,
-              const Cell* root_pool, BrickPinner& pinner, Occupied&& occupied, WalkStats* stats) {
+Flow WalkStep(const StepLayout& layout, uint64_t xyz, Dda& dda, CompactCell root, int top_bit,
+              BrickPinner& pinner, Occupied&& occupied, WalkStats* stats) {
   const int w = layout.w;
   const uint64_t unit = layout.unit, carry = layout.carry;
   uint64_t prev = xyz;
   uint64_t skips = 0, cells = 0;
   Flow flow = Flow::kLeft;
 
-  const Cell* cell_stack[kMaxStepLevels + 1];
-  const Cell* pool_stack[kMaxStepLevels + 1];
+  CompactCell cell_stack[kMaxStepLevels + 1];
   int depth = 0;
   cell_stack[0] = root;
-  pool_stack[0] = root_pool;
   int bit = layout.n - 1;
   uint64_t mask = unit << bit;
 
   while (!(xyz & carry)) {
     // Loop 3: descend until an empty octant or the step's last level.
-    const Cell* cell = cell_stack[depth];
-    const Cell* pool = pool_stack[depth];
+    CompactCell cell = cell_stack[depth];
     for (;;) {
       unsigned digit = unsigned((xyz >> bit) & 1) | unsigned(((xyz >> (w + bit)) & 1) << 1) |
                        unsigned(((xyz >> (2 * w + bit)) & 1) << 2);
-      NodeRef child = cell->child[digit];
       ++cells;
-      if (child == kEmptyRef) break;
+      if (!HasChild(cell, digit)) break;
+      const uint32_t child = ChildIndex(cell, digit);
       if (bit == 0) {
-        flow = occupied(child, pool, xyz, prev, dda);
+        flow = occupied(child, xyz, prev, dda);
         if (flow != Flow::kLeft) goto done;
         break;
       }
-      if (!pinner.Resolve(child, cell, pool)) {
+      if (!pinner.Resolve(child, bit, top_bit, cell)) {
         flow = Flow::kError;
         goto done;
       }
       ++depth;
       cell_stack[depth] = cell;
-      pool_stack[depth] = pool;
       --bit;
       mask >>= 1;
     }
@@ -194,13 +206,13 @@ done:
 // `base`, in finest voxels): coordinates, entry parameter, payload.
 // `in_brick`: the voxel's pool is the pinner's brick (else the top pool).
 inline Hit LeafHit(const Ray& ray, const StepLayout& lay, const int64_t base[3], uint64_t xyz,
-                   NodeRef child, bool in_brick, const BrickPinner& pinner) {
+                   uint32_t payload, bool in_brick, const BrickPinner& pinner) {
   Hit h;
   h.voxel = {base[0] + lay.Coord(xyz, 0), base[1] + lay.Coord(xyz, 1),
              base[2] + lay.Coord(xyz, 2)};
   h.t = VoxelEntryT(ray, h.voxel);
   h.brick = in_brick ? pinner.id : kNoBrick;
-  h.payload = LeafPayload(child);
+  h.payload = payload;
   h.brick_data = in_brick ? pinner.data : nullptr;
   return h;
 }

@@ -56,36 +56,35 @@ Status TraceTwoSteps(const OctreeView& tree, int n1, int n2, const Ray& ray, Per
   const StepLayout l1(n1), l2(n2);
   uint64_t xyz1 = 0;
   Dda dda = per_ray.FirstStep(l1, &xyz1);
-  BrickPinner pinner(tree.bricks);
+  BrickPinner pinner(tree.bricks, tree.top);
+  const int top1 = TopBit(tree, n2), top2 = TopBit(tree, 0);
   WalkStats stats;
   const int64_t base0[3] = {0, 0, 0};
   // An occupied voxel of the last level: a hit.
-  auto leaf = [&](const StepLayout& lay, const int64_t base[3], NodeRef child, const Cell* pool,
+  auto leaf = [&](const StepLayout& lay, const int64_t base[3], uint32_t child, bool in_brick,
                   uint64_t xyz) {
-    Hit h = LeafHit(ray, lay, base, xyz, child, pool != tree.top, pinner);
+    Hit h = LeafHit(ray, lay, base, xyz, child, in_brick, pinner);
     return visit(h) ? Flow::kLeft : Flow::kStop;
   };
-  auto occupied1 = [&](NodeRef child, const Cell* pool, uint64_t xyz, uint64_t prev,
-                       const Dda& d1) -> Flow {
-    if (n2 == 0) return leaf(l1, base0, child, pool, xyz);
+  auto occupied1 = [&](uint32_t child, uint64_t xyz, uint64_t prev, const Dda& d1) -> Flow {
+    if (n2 == 0) return leaf(l1, base0, child, top1 > 0, xyz);
     // An occupied first-step voxel: trace the second step in it; a miss
     // there skips it and the first step goes on with its state untouched.
-    const Cell* c2 = nullptr;
-    const Cell* p2 = pool;
-    if (!pinner.Resolve(child, c2, p2)) return Flow::kError;
+    CompactCell c2;
+    if (!pinner.Resolve(child, 0, top1, c2)) return Flow::kError;
     ++c.transitions;
     uint64_t xyz2 = 0;
     Dda d2 = per_ray.SecondStep(l1, l2, xyz, prev, d1, &xyz2);
     const int64_t base2[3] = {l1.Coord(xyz, 0) << n2, l1.Coord(xyz, 1) << n2,
                               l1.Coord(xyz, 2) << n2};
-    auto occupied2 = [&](NodeRef ch, const Cell* pl, uint64_t x2, uint64_t, const Dda&) {
-      return leaf(l2, base2, ch, pl, x2);
+    auto occupied2 = [&](uint32_t ch, uint64_t x2, uint64_t, const Dda&) {
+      return leaf(l2, base2, ch, top2 > 0, x2);
     };
-    Flow f = WalkStep(l2, xyz2, d2, c2, p2, pinner, occupied2, &stats);
+    Flow f = WalkStep(l2, xyz2, d2, c2, top2, pinner, occupied2, &stats);
     per_ray.AddMoves(d2, &c);
     return f;
   };
-  Flow f = WalkStep(l1, xyz1, dda, tree.top, tree.top, pinner, occupied1, &stats);
+  Flow f = WalkStep(l1, xyz1, dda, tree.top[0], top1, pinner, occupied1, &stats);
   per_ray.AddMoves(dda, &c);
   return FinishWalk(f, stats, pinner, &c);
 }

@@ -383,40 +383,37 @@ std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAtt
 
 namespace {
 
-// Rebuilds a pre-order pool from child masks; refuses anything inconsistent.
-struct MaskDecoder {
+// Checks pre-order child masks and finds each cell's level: the structure
+// BuildCells would give (every cell has a child, leaves exactly at the last
+// level, as many cells and leaves as the header says). Refuses anything else.
+struct MaskChecker {
   const uint8_t* masks;
   uint32_t num_cells, voxel_count;
-  Cell* cells;
+  uint8_t* level;  // per cell, 0 for the root
   uint32_t next_cell = 1, next_payload = 0;
   const char* error = nullptr;
 
-  bool Decode(uint32_t index, int levels_left) {
-    uint8_t m = masks[index];
+  bool Check(uint32_t index, int l, int levels) {
+    const uint8_t m = masks[index];
+    level[index] = uint8_t(l);
     if (m == 0) {
       error = "a cell with no children";
       return false;
     }
-    if (levels_left == 1) {
+    if (l == levels - 1) {
       if (uint64_t(next_payload) + uint64_t(std::popcount(m)) > voxel_count) {
         error = "more voxels than its table row says";
         return false;
       }
-      for (unsigned bits = m; bits; bits &= bits - 1)
-        cells[index].child[std::countr_zero(bits)] = MakeLeafRef(next_payload++);
+      next_payload += uint32_t(std::popcount(m));
       return true;
     }
-    for (unsigned bits = m; bits; bits &= bits - 1) {
-      const int d = std::countr_zero(bits);
-      {
-        if (next_cell >= num_cells) {
-          error = "more cells than its table row says";
-          return false;
-        }
-        uint32_t c = next_cell++;
-        cells[index].child[d] = c;
-        if (!Decode(c, levels_left - 1)) return false;
+    for (int k = std::popcount(m); k > 0; --k) {
+      if (next_cell >= num_cells) {
+        error = "more cells than its table row says";
+        return false;
       }
+      if (!Check(next_cell++, l + 1, levels)) return false;
     }
     return true;
   }
@@ -448,14 +445,43 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
   if (num_cells == 0 || voxel_count == 0 || num_cells > MaxCells(depth, voxel_count))
     return CorruptionError("brick has " + std::to_string(num_cells) + " cells for " +
                            std::to_string(voxel_count) + " voxels");
+  if (num_cells > kMaxCompactIndex + 1 || voxel_count > kMaxCompactIndex + 1)
+    return CorruptionError("brick has " + std::to_string(num_cells) + " cells, " +
+                           std::to_string(voxel_count) +
+                           " voxels: more than the 2^24 a traversal pool indexes");
+  if (depth < 1 || depth > kMaxLevels)
+    return CorruptionError("brick depth " + std::to_string(depth) + " out of range");
+  const uint8_t* masks = raw + kBrickHeaderSize;
+  thread_local std::vector<uint8_t> level;
+  level.resize(num_cells);
+  MaskChecker check{masks, num_cells, voxel_count, level.data(), 1, 0, nullptr};
+  if (!check.Check(0, 0, depth))
+    return CorruptionError(std::string("brick topology has ") + check.error);
+  if (check.next_cell != num_cells || check.next_payload != voxel_count)
+    return CorruptionError("brick topology reaches " + std::to_string(check.next_cell) +
+                           " cells, " + std::to_string(check.next_payload) +
+                           " voxels; header says " + std::to_string(num_cells) + ", " +
+                           std::to_string(voxel_count));
+  // Level order from pre-order: a level's cells keep their pre-order order,
+  // and a cell's first child is the next cell in pre-order, so one pass in
+  // pre-order numbers each cell and knows its first child's number.
+  uint32_t start[kMaxLevels + 1] = {}, count[kMaxLevels + 1] = {};
+  for (uint32_t i = 0; i < num_cells; ++i) ++start[level[i] + 1];
+  for (int l = 1; l <= depth; ++l) start[l] += start[l - 1];
   auto b = std::make_shared<DecodedBrick>();
-  b->cells.assign(num_cells, Cell{});
-  MaskDecoder dec{raw + kBrickHeaderSize, num_cells, voxel_count, b->cells.data(), 1, 0, nullptr};
-  if (!dec.Decode(0, depth)) return CorruptionError(std::string("brick topology has ") + dec.error);
-  if (dec.next_cell != num_cells || dec.next_payload != voxel_count)
-    return CorruptionError("brick topology reaches " + std::to_string(dec.next_cell) + " cells, " +
-                           std::to_string(dec.next_payload) + " voxels; header says " +
-                           std::to_string(num_cells) + ", " + std::to_string(voxel_count));
+  b->cells.resize(num_cells);
+  uint32_t payload = 0;
+  for (uint32_t i = 0; i < num_cells; ++i) {
+    const int l = level[i];
+    uint32_t first;
+    if (l == depth - 1) {
+      first = payload;
+      payload += uint32_t(std::popcount(masks[i]));
+    } else {
+      first = start[l + 1] + count[l + 1];
+    }
+    b->cells[start[l] + count[l]++] = MakeCompactCell(first, masks[i]);
+  }
   const uint8_t* planes = raw + kBrickHeaderSize + num_cells;
   b->attr_planes.assign(planes, raw + n);
   DeltaPlanes(b->attr_planes.data(), voxel_count, flags, false);
@@ -516,6 +542,42 @@ Status ValidatePool(const Cell* cells, size_t n, int depth, bool bricks_at_last_
   if (v.next != n)
     return CorruptionError("octree has " + std::to_string(n) + " cells but only " +
                            std::to_string(v.next) + " are reachable");
+  return OkStatus();
+}
+
+Status ValidateLevelOrderPool(const CompactCell* cells, size_t n, int depth, uint64_t limit) {
+  if (n == 0) return CorruptionError("octree pool has no root cell");
+  if (depth < 1 || depth > kMaxLevels) return CorruptionError("octree pool depth out of range");
+  uint64_t begin = 0, end = 1;  // the current level's cells
+  for (int l = 0; l < depth; ++l) {
+    const bool last = l == depth - 1;
+    uint64_t children = 0;
+    for (uint64_t i = begin; i < end; ++i) {
+      const uint32_t mask = ChildMask(cells[i]);
+      if (mask == 0) return CorruptionError("octree cell " + std::to_string(i) + " has no child");
+      const uint64_t first = last ? children : end + children;
+      if (FirstChild(cells[i]) != first)
+        return CorruptionError("octree cell " + std::to_string(i) + " has first child " +
+                               std::to_string(FirstChild(cells[i])) + ", expected " +
+                               std::to_string(first));
+      children += uint64_t(std::popcount(mask));
+    }
+    if (last) {
+      if (children > limit)
+        return CorruptionError("octree pool has " + std::to_string(children) +
+                               " leaves, more than " + std::to_string(limit));
+      if (end != n)
+        return CorruptionError("octree has " + std::to_string(n) + " cells but only " +
+                               std::to_string(end) + " are reachable");
+      return OkStatus();
+    }
+    if (children > n - end)
+      return CorruptionError("octree level " + std::to_string(l + 1) + " needs " +
+                             std::to_string(children) + " cells past the pool's " +
+                             std::to_string(n));
+    begin = end;
+    end += children;
+  }
   return OkStatus();
 }
 

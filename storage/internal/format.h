@@ -109,20 +109,31 @@ void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std:
 std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
                            int depth, uint8_t flags, int normal_bits = 16);
 
-// A decoded brick as the cache holds it.
+// A decoded brick as the cache holds it: its pool in traversal form.
 struct DecodedBrick {
-  std::vector<Cell> cells;
+  std::vector<CompactCell> cells;
   std::vector<uint8_t> attr_planes;
   uint32_t voxel_count = 0;
   uint8_t flags = 0;
+  // What it costs in memory: this struct, its two heap blocks (capacity, as
+  // allocated), and the shared_ptr control block make_shared puts beside it.
+  // (The cache adds its own per-entry overhead; see ShardedPageCache.)
   size_t charge() const {
-    return sizeof(DecodedBrick) + cells.size() * sizeof(Cell) + attr_planes.size();
+    return sizeof(DecodedBrick) + cells.capacity() * sizeof(CompactCell) +
+           attr_planes.capacity() + kOverheadBytes;
   }
+  // Bookkeeping beside the data: the shared_ptr control block make_shared
+  // puts in front of this struct (16), a malloc header on each of the three
+  // allocations (3 x 16), and the cache's entry: a hash-map node holding the
+  // key, the shared_ptr, the charge and the LRU iterator (64 with the malloc
+  // header), its bucket pointer (8), and the LRU list node (32).
+  static constexpr size_t kOverheadBytes = 16 + 3 * 16 + 64 + 8 + 32;
 };
 
-// Rebuilds the cell pool from raw brick bytes, checking every field against
+// Rebuilds the cell pool (level order, as LevelOrderPool would make it from
+// the BuildCells pool) from raw brick bytes, checking every field against
 // the table row and the store's depth and flags. The pool is valid by
-// construction: refs in range, leaves exactly at depth, no brick refs.
+// construction: indices in range, leaves exactly at depth.
 // Errors are Corruption without a file name (the caller adds it).
 StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_t n,
                                                        const BrickEntry& entry, int depth,
@@ -134,6 +145,13 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
 // leaf refs with payload < limit. Linear time; never reads out of bounds.
 Status ValidatePool(const Cell* cells, size_t n, int depth, bool bricks_at_last_level,
                     uint64_t limit);
+
+// Checks a `depth`-level traversal-form (level-order) pool of `n` cells:
+// every cell has a child, each level's cells are the previous level's
+// children in order (each first index is where the cell's children begin),
+// every cell is reached once, and the last level's children number at most
+// `limit` payloads. Linear time; never reads out of bounds.
+Status ValidateLevelOrderPool(const CompactCell* cells, size_t n, int depth, uint64_t limit);
 
 }  // namespace vox::storage_internal
 

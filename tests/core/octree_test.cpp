@@ -99,6 +99,104 @@ TEST(Octree, BuildCellsHoldsExactlyThePoints) {
   for (NodeRef r : empty[0].child) EXPECT_EQ(r, kEmptyRef);
 }
 
+// Random pre-order pools: clustered, sparse and dense, leaves or bricks at
+// the last level.
+std::vector<Cell> RandomPool(Rng& rng, int levels, size_t want, bool bricks) {
+  std::set<std::tuple<uint64_t, uint64_t, uint64_t>> seen;
+  std::vector<LeafPoint> pts;
+  const uint64_t cap = uint64_t(1) << std::min(3 * levels, 20);
+  while (pts.size() < std::min<uint64_t>(want, cap / 2)) {
+    LeafPoint p = RandomPoint(rng, levels);
+    if (rng.Chance(0.6) && !pts.empty()) {
+      p = pts[size_t(rng.Int(0, int64_t(pts.size()) - 1))];
+      const uint64_t m = (uint64_t(1) << levels) - 1;
+      p.x = (p.x ^ uint64_t(rng.Int(0, 3))) & m;
+      p.z = (p.z ^ uint64_t(rng.Int(0, 1))) & m;
+    }
+    if (!seen.insert({p.x, p.y, p.z}).second) continue;
+    pts.push_back(p);
+  }
+  std::sort(pts.begin(), pts.end(), MortonLess);
+  for (size_t i = 0; i < pts.size(); ++i)
+    pts[i].ref = bricks ? MakeBrickRef(uint32_t(i)) : MakeLeafRef(uint32_t(i));
+  return BuildCells(pts, levels);
+}
+
+// Every child query of every cell, all 8 digits, answered by the level-order
+// pool as by the pre-order pool it came from: walked side by side.
+TEST(Octree, LevelOrderPoolAnswersLikeThePreOrderPool) {
+  Rng rng(8);
+  for (int trial = 0; trial < 60; ++trial) {
+    const int levels = int(rng.Int(1, 9));
+    const bool bricks = rng.Chance(0.5);
+    std::vector<Cell> pre = RandomPool(rng, levels, size_t(rng.Int(0, 4000)), bricks);
+    auto lo = LevelOrderPool(pre, levels, bricks);
+    ASSERT_TRUE(lo.ok()) << lo.status().ToString();
+    ASSERT_EQ(lo->size(), pre.size());
+    // Breadth first over both: level order is the order cells are reached.
+    std::vector<std::pair<uint32_t, uint32_t>> level{{0, 0}}, next;  // (pre, level-order)
+    uint32_t expect_index = 1, visited = 0;
+    for (int l = 0; l < levels; ++l) {
+      next.clear();
+      uint32_t expect_payload = 0;
+      for (auto [pi, li] : level) {
+        ++visited;
+        ASSERT_LT(li, lo->size());
+        const CompactCell c = (*lo)[li];
+        for (unsigned d = 0; d < 8; ++d) {
+          const NodeRef r = pre[pi].child[d];
+          ASSERT_EQ(HasChild(c, d), r != kEmptyRef) << trial << " cell " << pi << " digit " << d;
+          if (r == kEmptyRef) continue;
+          const uint32_t ci = ChildIndex(c, d);
+          if (l == levels - 1) {
+            ASSERT_EQ(ci, bricks ? (r & kBrickIdMask) : LeafPayload(r));
+            ASSERT_EQ(ci, expect_payload++);
+          } else {
+            ASSERT_EQ(ci, expect_index++);  // children contiguous, in level order
+            next.push_back({r, ci});
+          }
+        }
+      }
+      level.swap(next);
+    }
+    EXPECT_EQ(visited, pre.size());
+  }
+  // The empty pool: one root with no children.
+  auto empty = LevelOrderPool(BuildCells({}, 4), 4, false);
+  ASSERT_TRUE(empty.ok());
+  ASSERT_EQ(empty->size(), 1u);
+  EXPECT_EQ(ChildMask((*empty)[0]), 0u);
+}
+
+TEST(Octree, LevelOrderPoolRefusesNonConsecutiveLastLevelRefs) {
+  Rng rng(9);
+  std::vector<Cell> pre = RandomPool(rng, 5, 500, true);
+  ASSERT_TRUE(LevelOrderPool(pre, 5, true).ok());
+  // Swap two brick refs: each still in range, but no longer in Morton order.
+  std::vector<std::pair<size_t, int>> refs;
+  for (size_t i = 0; i < pre.size(); ++i)
+    for (int d = 0; d < 8; ++d)
+      if (IsBrickRef(pre[i].child[d])) refs.push_back({i, d});
+  ASSERT_GT(refs.size(), 2u);
+  auto swapped = pre;
+  std::swap(swapped[refs[0].first].child[refs[0].second],
+            swapped[refs.back().first].child[refs.back().second]);
+  auto r = LevelOrderPool(swapped, 5, true);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kCorruption);
+  EXPECT_NE(r.status().message().find("Morton"), std::string::npos) << r.status().message();
+  // Leaf refs where brick refs belong, and the reverse.
+  EXPECT_FALSE(LevelOrderPool(pre, 5, false).ok());
+  // A cell reached twice.
+  auto twice = pre;
+  for (int d = 0; d < 8; ++d)
+    if (twice[0].child[d] != kEmptyRef) {
+      for (int e = 0; e < 8; ++e) twice[0].child[e] = twice[0].child[d];
+      break;
+    }
+  EXPECT_FALSE(LevelOrderPool(twice, 5, true).ok());
+}
+
 TEST(Octree, MemoryOctreeRefusesBadInput) {
   std::vector<LeafPoint> v = {{1, 2, 3, kEmptyRef}};
   for (auto [levels, bl] : {std::pair{0, 1}, {41, 10}, {5, 0}, {5, 6}}) {
@@ -137,27 +235,31 @@ TEST(Octree, MemoryOctreeBricksHoldEveryVoxel) {
     // Walk top then brick to every voxel; its payload maps back to it.
     for (size_t i = 0; i < t.voxels().size(); ++i) {
       const LeafPoint& p = t.voxels()[i];
-      const Cell* pool = t.view().top;
+      const OctreeView v = t.view();
+      const CompactCell* pool = v.top;
       uint32_t cell = 0, brick = kNoBrick;
-      NodeRef r = kEmptyRef;
-      for (int bit = levels - 1; bit >= 0; --bit) {
+      ChildRef r;
+      for (int level = 0; level < levels; ++level) {
+        const int bit = levels - 1 - level;
         unsigned digit = unsigned((p.x >> bit) & 1) | unsigned(((p.y >> bit) & 1) << 1) |
                          unsigned(((p.z >> bit) & 1) << 2);
-        r = pool[cell].child[digit];
-        ASSERT_NE(r, kEmptyRef);
-        if (bit == 0) break;
-        if (IsBrickRef(r)) {
+        r = ChildOf(pool[cell], digit, level, v);
+        ASSERT_NE(r.kind, ChildRef::kEmpty);
+        if (r.kind == ChildRef::kPayload) break;
+        if (r.kind == ChildRef::kBrick) {
           ASSERT_EQ(bit, sub) << "brick reference away from the brick level";
-          brick = r & kBrickIdMask;
+          brick = r.index;
           auto b = t.FetchBrick(brick);
           ASSERT_TRUE(b.ok());
           pool = b->cells;
           cell = 0;
         } else {
-          cell = r;
+          ASSERT_LT(r.index, pool == v.top ? v.top_cells : t.FetchBrick(brick)->num_cells);
+          cell = r.index;
         }
       }
-      ASSERT_EQ(t.VoxelIndex(brick, LeafPayload(r)), i);
+      ASSERT_EQ(r.kind, ChildRef::kPayload);
+      ASSERT_EQ(t.VoxelIndex(brick, r.index), i);
     }
   }
 }

@@ -62,25 +62,26 @@ struct StoredVoxel {
 
 // Walks the octree under `cell` of `pool` (grid coordinates `base`, 2^size_log2 voxels
 // per axis), adding its occupied voxels to `out`.
-inline Status WalkCells(Store& store, const Cell* pool, uint32_t cell, int size_log2, Ijk base,
+inline Status WalkCells(Store& store, const CompactCell* pool, uint32_t cell, int size_log2, Ijk base,
                         uint32_t brick, std::map<Ijk, StoredVoxel>* out) {
+  const OctreeView v = store.view();
   const int child_log2 = size_log2 - 1;
   for (unsigned digit = 0; digit < 8; ++digit) {
-    NodeRef ref = pool[cell].child[digit];
-    if (ref == kEmptyRef) continue;
+    ChildRef ref = ChildOf(pool[cell], digit, v.levels - size_log2, v);
+    if (ref.kind == ChildRef::kEmpty) continue;
     Ijk c{base[0] + (int64_t(digit & 1) << child_log2),
           base[1] + (int64_t((digit >> 1) & 1) << child_log2),
           base[2] + (int64_t((digit >> 2) & 1) << child_log2)};
-    if (child_log2 == 0) {
-      if (!out->emplace(c, StoredVoxel{brick, LeafPayload(ref)}).second)
+    if (ref.kind == ChildRef::kPayload) {
+      if (!out->emplace(c, StoredVoxel{brick, ref.index}).second)
         return InternalError("voxel listed twice");
-    } else if (IsBrickRef(ref)) {
+    } else if (ref.kind == ChildRef::kBrick) {
       if (brick != kNoBrick) return CorruptionError("a brick refers to a brick");
-      uint32_t id = ref & kBrickIdMask;
+      uint32_t id = ref.index;
       VOX_ASSIGN_OR_RETURN(BrickView b, store.FetchBrick(id));
       VOX_RETURN_IF_ERROR(WalkCells(store, b.cells, 0, child_log2, c, id, out));
     } else {
-      VOX_RETURN_IF_ERROR(WalkCells(store, pool, ref, child_log2, c, brick, out));
+      VOX_RETURN_IF_ERROR(WalkCells(store, pool, ref.index, child_log2, c, brick, out));
     }
   }
   return OkStatus();

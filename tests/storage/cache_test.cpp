@@ -202,7 +202,7 @@ TEST_F(StoreCache, PinsSurviveEviction) {
   auto r0 = (*ref)->FetchBrick(0);
   ASSERT_TRUE(r0.ok());
   ASSERT_EQ(b0->num_cells, r0->num_cells);
-  EXPECT_EQ(0, std::memcmp(b0->cells, r0->cells, sizeof(Cell) * b0->num_cells));
+  EXPECT_EQ(0, std::memcmp(b0->cells, r0->cells, sizeof(CompactCell) * b0->num_cells));
 }
 
 TEST_F(StoreCache, SingleFlightUnderParallelFor) {

@@ -107,6 +107,16 @@ std::string WithTop(const std::string& index, const std::vector<Cell>& top) {
   return out;
 }
 
+// The build-form top block of a store's index.
+std::vector<Cell> TopOf(const std::string& index) {
+  auto f = DecodeFooter(reinterpret_cast<const uint8_t*>(index.data()) + index.size() - kFooterSize,
+                        "x");
+  EXPECT_TRUE(f.ok());
+  std::vector<Cell> top(f->top.size / sizeof(Cell));
+  std::memcpy(top.data(), index.data() + f->top.offset, top.size() * sizeof(Cell));
+  return top;
+}
+
 TEST(TopValidation, BadTopWithValidChecksumsIsRefusedAtOpen) {
   auto vol = GenerateShape("sphere:32");
   ASSERT_TRUE(vol.ok());
@@ -118,7 +128,7 @@ TEST(TopValidation, BadTopWithValidChecksumsIsRefusedAtOpen) {
   auto s = Store::Open(tmp / "s", {});
   ASSERT_TRUE(s.ok());
   OctreeView v = (*s)->view();
-  std::vector<Cell> top(v.top, v.top + v.top_cells);
+  std::vector<Cell> top = TopOf(index);
   const uint32_t bricks_n = uint32_t((*s)->meta().brick_count);
   auto open = [&](const std::vector<Cell>& t) {
     return OpenStoreFromFiles("mem", NewMemoryFile("mem/index.vxi", WithTop(index, t)),
@@ -151,6 +161,31 @@ TEST(TopValidation, BadTopWithValidChecksumsIsRefusedAtOpen) {
   }
 }
 
+// Brick ids must be consecutive in the top's level order (Morton order):
+// a top with two brick refs swapped is valid pre-order but refused.
+TEST(TopValidation, NonConsecutiveBrickRefsAreRefusedAtOpen) {
+  auto vol = GenerateShape("sphere:32");
+  ASSERT_TRUE(vol.ok());
+  StoreMeta meta = storage_test::MetaFor(vol->levels, 3, GridClass::kLevelSet, false);
+  storage_test::TempDir tmp;
+  ASSERT_TRUE(storage_test::WriteVoxels(tmp / "s", vol->voxels, meta).ok());
+  std::string index = storage_test::ReadFile(tmp / "s/index.vxi");
+  std::string bricks = storage_test::ReadFile(tmp / "s/bricks.vxb");
+  std::vector<Cell> top = TopOf(index);
+  std::vector<NodeRef*> refs;
+  for (Cell& c : top)
+    for (NodeRef& r : c.child)
+      if (IsBrickRef(r)) refs.push_back(&r);
+  ASSERT_GT(refs.size(), 2u);
+  std::swap(*refs[1], *refs[refs.size() - 2]);
+  auto r = OpenStoreFromFiles("mem", NewMemoryFile("mem/index.vxi", WithTop(index, top)),
+                              NewMemoryFile("mem/bricks.vxb", bricks), {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), StatusCode::kCorruption);
+  EXPECT_NE(r.status().message().find("mem/index.vxi"), std::string::npos) << r.status().message();
+  EXPECT_NE(r.status().message().find("Morton"), std::string::npos) << r.status().message();
+}
+
 TEST(BrickDecoder, MutatedBricksNeverYieldABadPool) {
   auto vol = GenerateShape("noise:32");
   ASSERT_TRUE(vol.ok());
@@ -173,7 +208,10 @@ TEST(BrickDecoder, MutatedBricksNeverYieldABadPool) {
   auto good = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, 4, flags);
   ASSERT_TRUE(good.ok()) << good.status().ToString();
   ASSERT_EQ((*good)->cells.size(), cells.size());
-  EXPECT_EQ(0, std::memcmp((*good)->cells.data(), cells.data(), cells.size() * sizeof(Cell)));
+  auto expect = LevelOrderPool(cells, 4, false);
+  ASSERT_TRUE(expect.ok());
+  EXPECT_EQ(0, std::memcmp((*good)->cells.data(), expect->data(), cells.size() * sizeof(CompactCell)));
+  EXPECT_TRUE(ValidateLevelOrderPool((*good)->cells.data(), cells.size(), 4, pts.size()).ok());
   // Wrong depth, flags or counts are refused.
   EXPECT_FALSE(DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, 5, flags).ok());
   EXPECT_FALSE(DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, 4, 0).ok());
@@ -194,7 +232,8 @@ TEST(BrickDecoder, MutatedBricksNeverYieldABadPool) {
       continue;
     }
     ++accepted;
-    ASSERT_TRUE(ValidatePool((*d)->cells.data(), (*d)->cells.size(), 4, false, (*d)->voxel_count).ok());
+    ASSERT_TRUE(ValidateLevelOrderPool((*d)->cells.data(), (*d)->cells.size(), 4,
+                                       (*d)->voxel_count).ok());
     ASSERT_EQ((*d)->attr_planes.size(), size_t((*d)->voxel_count) * AttrBytesPerVoxel(flags));
   }
   SUCCEED() << accepted << " mutated bricks decoded to valid pools";

@@ -53,8 +53,8 @@ class Corruption : public ::testing::Test {
       auto b = s.FetchBrick(id);
       if (!b.ok()) return b.status();
       // Whatever was decoded must be structurally sound.
-      VOX_RETURN_IF_ERROR(ValidatePool(b->cells, b->num_cells, s.meta().levels - s.meta().brick_level,
-                                       false, ~0u));
+      VOX_RETURN_IF_ERROR(ValidateLevelOrderPool(
+          b->cells, b->num_cells, s.meta().levels - s.meta().brick_level, ~0u));
     }
     auto t = Tracer<>::Create(s.view(), s.meta().brick_level);
     if (!t.ok()) return t.status();

@@ -56,11 +56,11 @@ TEST_F(Info, StatisticsMatchIndependentCounts) {
   EXPECT_EQ(info->meta.brick_count, (*mem)->num_bricks());
   EXPECT_EQ(info->brick_cells, cells);
   EXPECT_EQ(info->meta.top_cells, (*mem)->view().top_cells);
-  EXPECT_EQ(info->top_bytes, 32u * (*mem)->view().top_cells);
+  EXPECT_EQ(info->top_bytes, 4u * (*mem)->view().top_cells);
   EXPECT_EQ(info->index_file_bytes, FileSize(dir_ + "/index.vxi"));
   EXPECT_EQ(info->brick_file_bytes, FileSize(dir_ + "/bricks.vxb"));
-  // Density (4) + colour (6) bytes per voxel, and the cells at 32 bytes.
-  EXPECT_EQ(info->decoded_bytes, 32 * cells + 10 * voxels_.size());
+  // Density (4) + colour (6) bytes per voxel, and the cells at 4 bytes.
+  EXPECT_EQ(info->decoded_bytes, 4 * cells + 10 * voxels_.size());
   EXPECT_EQ(info->raw_bytes, 16 * info->meta.brick_count + cells + 10 * voxels_.size());
   EXPECT_LT(info->stored_bytes, info->brick_file_bytes);
   uint64_t hist = 0;

@@ -148,32 +148,33 @@ TEST_P(RoundTrip, EveryVoxelAndAttribute) {
   auto mem = MemoryOctree::Build(vol->voxels, m.levels, m.brick_level);
   ASSERT_TRUE(mem.ok());
   ASSERT_EQ(s.view().top_cells, (*mem)->view().top_cells);
-  EXPECT_EQ(0, std::memcmp(s.view().top, (*mem)->view().top, sizeof(Cell) * s.view().top_cells));
+  EXPECT_EQ(0, std::memcmp(s.view().top, (*mem)->view().top, sizeof(CompactCell) * s.view().top_cells));
   for (uint32_t id = 0; id < (*mem)->num_bricks(); ++id) {
     auto a = s.FetchBrick(id);
     auto b = (*mem)->FetchBrick(id);
     ASSERT_TRUE(a.ok() && b.ok());
     ASSERT_EQ(a->num_cells, b->num_cells);
-    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(Cell) * a->num_cells)) << "brick " << id;
+    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(CompactCell) * a->num_cells)) << "brick " << id;
   }
   // No voxel more than those written: count the leaves of the whole tree.
   uint64_t leaves = 0;
-  std::function<void(const Cell*, const Cell*, int)> count = [&](const Cell* pool, const Cell* cell,
-                                                                 int levels_left) {
-    for (NodeRef r : cell->child) {
-      if (r == kEmptyRef) continue;
-      if (levels_left == 1) {
-        ++leaves;
-      } else if (IsBrickRef(r)) {
-        auto b = s.FetchBrick(r & kBrickIdMask);
-        ASSERT_TRUE(b.ok());
-        count(b->cells, b->cells, levels_left - 1);
-      } else {
-        count(pool, pool + r, levels_left - 1);
-      }
-    }
-  };
-  count(s.view().top, s.view().top, m.levels);
+  const OctreeView v = s.view();
+  std::function<void(const CompactCell*, CompactCell, int)> count =
+      [&](const CompactCell* pool, CompactCell cell, int level) {
+        for (unsigned d = 0; d < 8; ++d) {
+          ChildRef r = ChildOf(cell, d, level, v);
+          if (r.kind == ChildRef::kPayload) {
+            ++leaves;
+          } else if (r.kind == ChildRef::kBrick) {
+            auto b = s.FetchBrick(r.index);
+            ASSERT_TRUE(b.ok());
+            count(b->cells, b->cells[0], level + 1);
+          } else if (r.kind == ChildRef::kCell) {
+            count(pool, pool[r.index], level + 1);
+          }
+        }
+      };
+  count(v.top, v.top[0], 0);
   EXPECT_EQ(leaves, vol->voxels.size());
 }
 
@@ -322,7 +323,7 @@ TEST(Writer, VoxelsAlreadyInMortonOrder) {
     auto b = (*mem)->FetchBrick(id);
     ASSERT_TRUE(a.ok() && b.ok());
     ASSERT_EQ(a->num_cells, b->num_cells);
-    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(Cell) * a->num_cells));
+    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(CompactCell) * a->num_cells));
   }
   for (size_t i = 0; i < v.size(); i += 13) {
     auto loc = storage_test::Locate(**s, v[i].x, v[i].y, v[i].z);
@@ -363,7 +364,7 @@ TEST(Writer, DeepBricksSortedWithoutKeys) {
     auto b = (*mem)->FetchBrick(id);
     ASSERT_TRUE(a.ok() && b.ok());
     ASSERT_EQ(a->num_cells, b->num_cells);
-    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(Cell) * a->num_cells));
+    EXPECT_EQ(0, std::memcmp(a->cells, b->cells, sizeof(CompactCell) * a->num_cells));
   }
   for (const LeafPoint& p : voxels) {
     auto loc = storage_test::Locate(**s, p.x, p.y, p.z);

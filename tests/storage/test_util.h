@@ -114,25 +114,26 @@ struct Located {
 // Finds voxel (x,y,z) by descending the store's octree cell by cell.
 inline StatusOr<std::optional<Located>> Locate(Store& store, uint64_t x, uint64_t y, uint64_t z) {
   OctreeView v = store.view();
-  const Cell* pool = v.top;
-  const Cell* cell = v.top;
+  const CompactCell* pool = v.top;
+  CompactCell cell = v.top[0];
   BrickView pin;
   uint32_t brick = kNoBrick;
-  for (int bit = v.levels - 1; bit >= 0; --bit) {
+  for (int level = 0; level < v.levels; ++level) {
+    const int bit = v.levels - 1 - level;
     unsigned d = unsigned((x >> bit) & 1) | unsigned(((y >> bit) & 1) << 1) |
                  unsigned(((z >> bit) & 1) << 2);
-    NodeRef r = cell->child[d];
-    if (r == kEmptyRef) return std::optional<Located>();
-    if (bit == 0) return std::optional<Located>(Located{brick, LeafPayload(r)});
-    if (IsBrickRef(r)) {
-      brick = r & kBrickIdMask;
+    ChildRef r = ChildOf(cell, d, level, v);
+    if (r.kind == ChildRef::kEmpty) return std::optional<Located>();
+    if (r.kind == ChildRef::kPayload) return std::optional<Located>(Located{brick, r.index});
+    if (r.kind == ChildRef::kBrick) {
+      brick = r.index;
       auto b = store.FetchBrick(brick);
       if (!b.ok()) return b.status();
       pin = *b;
       pool = pin.cells;
-      cell = pool;
+      cell = pool[0];
     } else {
-      cell = pool + r;
+      cell = pool[r.index];
     }
   }
   return std::optional<Located>();

@@ -29,23 +29,23 @@ using testing::Rng;
 using testing::Voxel;
 
 // Every occupied voxel of an octree (top and bricks), in grid coordinates.
-Status CollectVoxels(const OctreeView& view, const Cell* pool, const Cell& cell, int bits, uint64_t x,
-                     uint64_t y, uint64_t z, std::vector<Voxel>* out) {
+Status CollectVoxels(const OctreeView& view, const CompactCell* pool, CompactCell cell, int bits,
+                     uint64_t x, uint64_t y, uint64_t z, std::vector<Voxel>* out) {
   const uint64_t half = uint64_t(1) << (bits - 1);
   for (unsigned digit = 0; digit < 8; ++digit) {
-    NodeRef child = cell.child[digit];
-    if (child == kEmptyRef) continue;
+    ChildRef child = ChildOf(cell, digit, view.levels - bits, view);
+    if (child.kind == ChildRef::kEmpty) continue;
     uint64_t cx = x + (digit & 1 ? half : 0), cy = y + (digit & 2 ? half : 0), cz = z + (digit & 4 ? half : 0);
-    if (bits == 1) {
+    if (child.kind == ChildRef::kPayload) {
       out->push_back({int64_t(cx), int64_t(cy), int64_t(cz)});
       continue;
     }
-    if (IsBrickRef(child)) {
+    if (child.kind == ChildRef::kBrick) {
       if (view.bricks == nullptr) return CorruptionError("brick reference without a brick source");
-      VOX_ASSIGN_OR_RETURN(BrickView b, view.bricks->FetchBrick(child & kBrickIdMask));
+      VOX_ASSIGN_OR_RETURN(BrickView b, view.bricks->FetchBrick(child.index));
       VOX_RETURN_IF_ERROR(CollectVoxels(view, b.cells, b.cells[0], bits - 1, cx, cy, cz, out));
     } else {
-      VOX_RETURN_IF_ERROR(CollectVoxels(view, pool, pool[child], bits - 1, cx, cy, cz, out));
+      VOX_RETURN_IF_ERROR(CollectVoxels(view, pool, pool[child.index], bits - 1, cx, cy, cz, out));
     }
   }
   return OkStatus();

@@ -34,6 +34,9 @@ class AwTracer {
     if (tree.levels < 1 || tree.levels > kMaxLevels || tree.top == nullptr)
       return InvalidArgumentError("octree has " + std::to_string(tree.levels) +
                                   " levels; vox traces 1 to 40");
+    if (tree.brick_level < 1 || tree.brick_level > tree.levels)
+      return InvalidArgumentError("octree brick level " + std::to_string(tree.brick_level) +
+                                  " outside 1.." + std::to_string(tree.levels));
     int n2 = tree.levels - n1;
     if (n1 < 1 || n1 > kMaxStepLevels || n2 < 0 || n2 > kMaxStepLevels)
       return InvalidArgumentError("split " + std::to_string(n1) + "+" + std::to_string(n2) +
