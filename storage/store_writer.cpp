@@ -146,6 +146,13 @@ class StoreWriterImpl : public StoreWriter {
       pts[k].ref = MakeLeafRef(uint32_t(k));
     }
     std::vector<Cell> cells = BuildCells(pts, depth_);
+    // Readers hold pools of CompactCells, whose indices fit 24 bits.
+    if (cells.size() > size_t(kMaxCompactIndex) + 1 || pts.size() > size_t(kMaxCompactIndex) + 1)
+      return Unsee(c, InvalidArgumentError("brick " + CoordString(c) + " has " +
+                                           std::to_string(cells.size()) + " cells and " +
+                                           std::to_string(pts.size()) +
+                                           " voxels; a pool holds at most 2^24: choose fewer "
+                                           "levels per brick"));
     std::string raw = EncodeBrickRaw(cells, attrs, depth_, flags_, options_.normal_bits);
     if (raw.size() > kMaxBrickRawBytes)
       return Unsee(c, InvalidArgumentError("brick " + CoordString(c) + " is " +
@@ -258,9 +265,13 @@ class StoreWriterImpl : public StoreWriter {
       pts = std::move(order);
     }
     std::vector<Cell> top = BuildCells(pts, meta_.brick_level);
-    if (top.size() >= kBrickBit)
-      return InvalidArgumentError("the top has " + std::to_string(top.size()) +
-                                  " cells; choose a lower brick level");
+    // Readers hold the top as CompactCells, whose indices (cells, brick ids,
+    // top-only payloads) fit 24 bits.
+    if (top.size() > size_t(kMaxCompactIndex) + 1 || pts.size() > size_t(kMaxCompactIndex) + 1)
+      return InvalidArgumentError("the top has " + std::to_string(top.size()) + " cells and " +
+                                  std::to_string(pts.size()) + (depth_ == 0 ? " voxels" : " bricks") +
+                                  "; a pool holds at most 2^24: choose " +
+                                  (depth_ == 0 ? "a lower brick level" : "more brick levels"));
 
     meta_.voxel_count = voxel_count_;
     meta_.brick_count = entries_.size();
