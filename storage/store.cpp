@@ -77,6 +77,7 @@ class StoreImpl : public Store {
   }
 
   std::string description() const override { return dir_; }
+  uint64_t store_id() const override { return store_id_; }
 
   uint64_t resident_bytes() const override {
     return top_.size() * sizeof(Cell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
@@ -122,6 +123,7 @@ class StoreImpl : public Store {
   const OpenOptions options_;
   StoreMeta meta_;
   int depth_ = 0;
+  uint64_t store_id_ = 0;
   uint8_t flags_ = 0;
   std::vector<Cell> top_;
   std::vector<uint8_t> top_attr_;
@@ -212,6 +214,7 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   const Footer f = *footer_or;
   if (f.store_id != ih.store_id)
     return CorruptionError("'" + ipath + "': header and footer belong to different stores");
+  store_id_ = ih.store_id;
 
   // Each block: in bounds, checksum, raw codec.
   const uint64_t blocks_end = isize - kFooterSize;
