@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <utility>
 
 namespace vox {
@@ -57,6 +58,10 @@ bool SameFile(const std::string& a, const std::string& b) {
 
 StatusOr<AtomicFile> AtomicFile::Create(const std::string& path) {
   VOX_RETURN_IF_ERROR(CheckOutputPath(path));
+  struct stat st;
+  if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+    return InvalidArgumentError(path + ": not a regular file; this output is written to a " +
+                                "temporary beside it and renamed over it");
   std::string dir, name;
   SplitPath(path, &dir, &name);
   std::string templ =
@@ -126,8 +131,15 @@ Status AtomicFile::Commit() {
 }
 
 Status WriteFileAtomically(const std::string& path, const std::string& bytes) {
-  VOX_ASSIGN_OR_RETURN(AtomicFile f, AtomicFile::Create(path));
-  int fd = open(f.temp_path().c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+  struct stat st;
+  const bool special =
+      stat(path.c_str(), &st) == 0 && (S_ISCHR(st.st_mode) || S_ISFIFO(st.st_mode));
+  std::optional<AtomicFile> f;
+  if (!special) {  // a device or pipe (/dev/stdout) is written in place
+    VOX_ASSIGN_OR_RETURN(AtomicFile created, AtomicFile::Create(path));
+    f.emplace(std::move(created));
+  }
+  int fd = open(special ? path.c_str() : f->temp_path().c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
   if (fd < 0) return IoError(path + ": cannot open the temporary file: " + ErrnoText());
   size_t done = 0;
   while (done < bytes.size()) {
@@ -141,7 +153,7 @@ Status WriteFileAtomically(const std::string& path, const std::string& bytes) {
     done += size_t(n);
   }
   if (close(fd) != 0) return IoError(path + ": write failed: " + ErrnoText());
-  return f.Commit();
+  return special ? OkStatus() : f->Commit();
 }
 
 }  // namespace vox
