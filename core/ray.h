@@ -3,10 +3,10 @@
 #ifndef VOX_CORE_RAY_H_
 #define VOX_CORE_RAY_H_
 
+#include <cmath>
 #include <cstdint>
-#include <string>
-
 #include <glm/vec3.hpp>
+#include <string>
 
 #include "core/octree.h"
 
@@ -19,8 +19,31 @@ struct Ray {
   glm::dvec3 dir{0.0, 0.0, 1.0};
 };
 
-// Refuses NaN or infinite components and a zero direction.
+// Refuses NaN or infinite components, a zero direction and an origin
+// component beyond kMaxOriginMagnitude.
 Status ValidateRay(const Ray& ray);
+
+// The largest |origin component| a ray may have: 2^1000 (about 1.07e301),
+// so the far-origin clipping's exact products stay finite.
+inline constexpr double kMaxOriginMagnitude = 0x1p1000;
+
+// Origins farther than this many grid sizes from 0 on some axis are clipped
+// by ClipFarRay: the usual clipping, t = (plane - o) / D in long double,
+// loses the grid's extent next to |o| there.
+inline constexpr double kFarOriginGrids = 256.0;
+inline bool IsFarOrigin(const glm::dvec3& origin, double grid_size) {
+  const double far = kFarOriginGrids * (grid_size > 1 ? grid_size : 1.0);
+  return std::fabs(origin.x) > far || std::fabs(origin.y) > far || std::fabs(origin.z) > far;
+}
+
+// Clips a ray with a far origin (IsFarOrigin) to the grid [0, G]^3: sets the
+// start point p, exactly on the entry face (other axes from an exact
+// expansion of o_a D_d + (face - o_d) D_a, rounded once and divided by D_d),
+// and the entry parameter. `D` is the scaled direction (ScaleDirection), `s`
+// the travel signs. False when the ray does not meet the grid in a segment
+// of positive length, as the usual clipping.
+bool ClipFarRay(const glm::dvec3& origin, const double D[3], const int s[3], double G,
+                long double p[3], long double* t_start);
 
 struct Hit {
   glm::i64vec3 voxel{0};      // grid coordinates of the occupied voxel
@@ -37,10 +60,10 @@ struct TraceCounters {
   uint64_t moves[3] = {0, 0, 0};  // DDA moves along x, y, z
   uint64_t driving_moves = 0;     // moves along the ray's driving axis
   uint64_t passive_moves = 0;     // moves along the two other axes
-  uint64_t skips = 0;             // empty octants (or missed first-step voxels) left by the skip loop
-  uint64_t cells_visited = 0;     // child references read while descending
-  uint64_t transitions = 0;       // second steps started
-  uint64_t brick_fetches = 0;     // bricks asked of the BrickSource
+  uint64_t skips = 0;          // empty octants (or missed first-step voxels) left by the skip loop
+  uint64_t cells_visited = 0;  // child references read while descending
+  uint64_t transitions = 0;    // second steps started
+  uint64_t brick_fetches = 0;  // bricks asked of the BrickSource
   uint64_t hits = 0;
 
   uint64_t total_moves() const { return moves[0] + moves[1] + moves[2]; }

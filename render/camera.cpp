@@ -1,8 +1,10 @@
 #include "render/camera.h"
 
+#include <algorithm>
 #include <cmath>
-#include <limits>
+#include <cstdio>
 #include <glm/geometric.hpp>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 #include "render/internal/json_fields.h"
@@ -160,6 +162,26 @@ Camera DefaultCamera(const glm::dvec3& lo, const glm::dvec3& hi, int width, int 
   Status s = cam.Finalize("default camera");
   (void)s;  // cannot fail: finite box, up not parallel to view_dir
   return cam;
+}
+
+Status CheckCameraDistance(const Camera& cam, const glm::dvec3& lo, const glm::dvec3& hi) {
+  // Per-axis (Chebyshev) distances: no overflow for any finite position.
+  double size = 0, dist = 0;
+  for (int a = 0; a < 3; ++a) {
+    size = std::max(size, hi[a] - lo[a]);
+    const double p = cam.position[a];
+    dist = std::max(dist, p < lo[a] ? lo[a] - p : p > hi[a] ? p - hi[a] : 0.0);
+  }
+  size = std::max(size, 1e-300);
+  if (!(dist <= kMaxCameraDistanceInBoxes * size)) {
+    char m[256];
+    snprintf(m, sizeof m,
+             "camera position is %.6g away from the volume, %.3g times its size; vox-render "
+             "supports cameras within %.0f volume sizes (precision of hit points)",
+             dist, dist / size, kMaxCameraDistanceInBoxes);
+    return InvalidArgumentError(m);
+  }
+  return OkStatus();
 }
 
 }  // namespace vox

@@ -76,6 +76,17 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file);
 // Reads and parses a cam.json file.
 StatusOr<Camera> LoadCamera(const std::string& path);
 
+// How far a camera may be from the volume it renders, in sizes of the
+// volume's world box: hit points are computed from the camera position, and
+// farther away they lose their voxel in double precision.
+inline constexpr double kMaxCameraDistanceInBoxes = 65536.0;
+
+// OkStatus when `cam`'s position is within kMaxCameraDistanceInBoxes box
+// sizes of the world box [lo, hi] (per axis: the largest
+// distance over its largest side); else an error naming
+// the distance and the limit.
+Status CheckCameraDistance(const Camera& cam, const glm::dvec3& lo, const glm::dvec3& hi);
+
 // A perspective camera that frames the world box [lo, hi] from a three-quarter
 // view above it, with the whole box in the image.
 Camera DefaultCamera(const glm::dvec3& lo, const glm::dvec3& hi, int width, int height);

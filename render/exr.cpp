@@ -17,6 +17,8 @@
 #include <fstream>
 #include <limits>
 
+#include "render/internal/atomic_file.h"
+
 namespace vox {
 namespace {
 
@@ -45,9 +47,7 @@ void TileBuffer::Allocate(int tile_size, const ImageLayers& layers) {
   }
 }
 
-TiledExrWriter::~TiledExrWriter() {
-  if (file_) (void)Close();
-}
+TiledExrWriter::~TiledExrWriter() { Abandon(); }
 
 StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::string& path, int width,
                                                                  int height, int tile,
@@ -56,6 +56,8 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
   auto w = std::unique_ptr<TiledExrWriter>(new TiledExrWriter());
   w->path_ = path;
   w->layers_ = layers;
+  VOX_ASSIGN_OR_RETURN(AtomicFile out, AtomicFile::Create(path));
+  w->out_ = std::make_unique<AtomicFile>(std::move(out));
   try {
     Imf::Header header(width, height);
     header.setTileDescription(Imf::TileDescription(tile, tile, Imf::ONE_LEVEL));
@@ -69,7 +71,10 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
     for (const auto& [k, v] : attrs) header.insert(k, Imf::StringAttribute(v));
     header.insert("renderTimeSeconds", Imf::FloatAttribute(0.0f));
     header.insert("vox:timings", Imf::StringAttribute(std::string(kTimingsSlot, ' ')));
-    w->file_ = std::make_unique<Imf::TiledOutputFile>(path.c_str(), header);
+    w->file_ = std::make_unique<Imf::TiledOutputFile>(w->out_->temp_path().c_str(), header);
+  } catch (const std::bad_alloc&) {
+    return ResourceExhaustedError(path + ": out of memory creating the EXR (" +
+                                  std::to_string(width) + "x" + std::to_string(height) + ")");
   } catch (const std::exception& e) {
     return IoError(path + ": cannot create EXR: " + e.what());
   }
@@ -78,7 +83,7 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
 
 Status TiledExrWriter::WriteTile(const TileRect& rect, const TileBuffer& buf) {
   std::lock_guard<std::mutex> lock(mu_);
-  if (!file_) return InternalError(path_ + ": WriteTile after Close");
+  if (!file_) return InternalError(path_ + ": WriteTile after Finish");
   try {
     Imf::FrameBuffer fb;
     for (int c = 0; c < kNumChannels; ++c)
@@ -93,15 +98,78 @@ Status TiledExrWriter::WriteTile(const TileRect& rect, const TileBuffer& buf) {
   return OkStatus();
 }
 
-Status TiledExrWriter::Close() {
+Status TiledExrWriter::Finish(double render_seconds, const std::string& timings_json) {
   std::lock_guard<std::mutex> lock(mu_);
+  if (!file_ || !out_) return InternalError(path_ + ": EXR already finished");
+  Status s;
   try {
     file_.reset();
   } catch (const std::exception& e) {
-    return IoError(path_ + ": closing EXR failed: " + e.what());
+    s = IoError(path_ + ": closing EXR failed: " + e.what());
   }
+  if (s.ok()) {
+    s = PatchTimings(out_->temp_path(), render_seconds, timings_json);
+    if (!s.ok()) s = s.WithContext(path_);
+  }
+  if (s.ok()) s = out_->Commit();
+  out_.reset();  // removes the temporary unless committed
+  return s;
+}
+
+void TiledExrWriter::Abandon() {
+  std::lock_guard<std::mutex> lock(mu_);
+  try {
+    file_.reset();
+  } catch (const std::exception&) {
+  }
+  out_.reset();
+}
+
+namespace {
+
+// The header attributes of a single-part EXR: magic, version, then
+// (name NUL, type NUL, int32 size, value) until an empty name. Finds the
+// offset of the value of `name` with type `type` and `size` bytes.
+Status FindAttributeValue(std::istream& f, const std::string& path,
+                          const std::map<std::string, std::pair<std::string, uint32_t>>& wanted,
+                          std::map<std::string, uint64_t>* found) {
+  f.seekg(8);
+  auto read_cstr = [&](std::string* out) -> bool {
+    out->clear();
+    for (;;) {
+      int c = f.get();
+      if (c == EOF) return false;
+      if (c == 0) return true;
+      if (out->size() > 255) return false;  // EXR names are at most 255 bytes
+      out->push_back(char(c));
+    }
+  };
+  std::string name, type;
+  for (;;) {
+    if (!read_cstr(&name)) return CorruptionError(path + ": truncated EXR header");
+    if (name.empty()) break;
+    if (!read_cstr(&type)) return CorruptionError(path + ": truncated EXR header");
+    uint8_t sz[4];
+    if (!f.read(reinterpret_cast<char*>(sz), 4))
+      return CorruptionError(path + ": truncated EXR header");
+    const uint32_t size =
+        uint32_t(sz[0]) | uint32_t(sz[1]) << 8 | uint32_t(sz[2]) << 16 | uint32_t(sz[3]) << 24;
+    const uint64_t at = uint64_t(f.tellg());
+    auto it = wanted.find(name);
+    if (it != wanted.end() && it->second.first == type) {
+      if (it->second.second != size)
+        return CorruptionError(path + ": header slot " + name + " has the wrong size");
+      (*found)[name] = at;
+    }
+    f.seekg(std::streamoff(at + size));
+    if (!f) return CorruptionError(path + ": truncated EXR header");
+  }
+  for (const auto& [k, v] : wanted)
+    if (!found->count(k)) return CorruptionError(path + ": header slot " + k + " not found");
   return OkStatus();
 }
+
+}  // namespace
 
 Status PatchTimings(const std::string& path, double render_seconds,
                     const std::string& timings_json) {
@@ -109,27 +177,18 @@ Status PatchTimings(const std::string& path, double render_seconds,
     return InternalError("timings JSON longer than its header slot");
   std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
   if (!f) return IoError(path + ": cannot reopen to record timings");
-  std::string head(size_t(1) << 20, '\0');
-  f.read(head.data(), std::streamsize(head.size()));
-  head.resize(size_t(f.gcount()));
+  std::map<std::string, uint64_t> at;
+  VOX_RETURN_IF_ERROR(FindAttributeValue(
+      f, path,
+      {{"renderTimeSeconds", {"float", 4}}, {"vox:timings", {"string", uint32_t(kTimingsSlot)}}},
+      &at));
   f.clear();
-  auto patch = [&](const std::string& key, const char* bytes, size_t n) -> Status {
-    size_t pos = head.find(key);
-    if (pos == std::string::npos)
-      return CorruptionError(path + ": header slot for timings not found");
-    uint32_t size = 0;
-    std::memcpy(&size, head.data() + pos + key.size(), 4);  // little-endian (x86, EXR)
-    if (size != n) return CorruptionError(path + ": header slot for timings has the wrong size");
-    f.seekp(std::streamoff(pos + key.size() + 4));
-    f.write(bytes, std::streamsize(n));
-    return OkStatus();
-  };
   float secs = float(render_seconds);
-  VOX_RETURN_IF_ERROR(
-      patch(std::string("renderTimeSeconds\0float\0", 24), reinterpret_cast<char*>(&secs), 4));
+  f.seekp(std::streamoff(at["renderTimeSeconds"]));
+  f.write(reinterpret_cast<const char*>(&secs), 4);  // little-endian (x86, EXR)
   std::string padded = timings_json + std::string(kTimingsSlot - timings_json.size(), ' ');
-  VOX_RETURN_IF_ERROR(
-      patch(std::string("vox:timings\0string\0", 19), padded.data(), padded.size()));
+  f.seekp(std::streamoff(at["vox:timings"]));
+  f.write(padded.data(), std::streamsize(padded.size()));
   f.flush();
   if (!f) return IoError(path + ": writing timings failed");
   return OkStatus();
@@ -228,8 +287,9 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
     for (auto& b : band) b.assign(size_t(w) * tile, 0.0f);
     std::vector<uint8_t> row(size_t(w) * 3);
 
+    VOX_ASSIGN_OR_RETURN(AtomicFile atomic, AtomicFile::Create(png_path));
     PngFile out;
-    out.fp = fopen(png_path.c_str(), "wb");
+    out.fp = fopen(atomic.temp_path().c_str(), "wb");
     if (!out.fp) return IoError(png_path + ": cannot open for writing");
     out.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
     if (!out.png) return ResourceExhaustedError(png_path + ": libpng init failed");
@@ -260,7 +320,11 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
       }
     }
     png_write_end(out.png, nullptr);
-    if (fflush(out.fp) != 0) return IoError(png_path + ": write failed");
+    const bool flushed = fflush(out.fp) == 0;
+    const bool closed = fclose(out.fp) == 0;
+    out.fp = nullptr;
+    if (!flushed || !closed) return IoError(png_path + ": write failed");
+    return atomic.Commit();
   } catch (const std::exception& e) {
     return IoError(exr_path + ": cannot read EXR for the preview: " + e.what());
   }

@@ -9,8 +9,13 @@
 // (world-space unit normal) and voxel.i voxel.j voxel.k (OpenVDB index
 // coordinates of the hit voxel; exact up to 2^24). All FLOAT.
 // Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
-// vox:part ("I/N"), vox:tileOrder, plus renderTimeSeconds (float, as pbrt)
-// and vox:timings (JSON), which are patched in place after the last tile.
+// vox:part ("I/N"), vox:tileOrder, vox:storeId (the store's store_id, hex),
+// plus renderTimeSeconds (float, as pbrt) and vox:timings (JSON), which are
+// patched in place after the last tile.
+//
+// Every file is written to a temporary beside its target and renamed over it
+// only when complete (render/internal/atomic_file.h): a failed render or
+// merge never replaces an earlier output with a partial one.
 //
 // Thread safety: TiledExrWriter::WriteTile is thread-safe; everything else is
 // thread-compatible.
@@ -66,11 +71,18 @@ struct TileBuffer {
 
 using ExrAttributes = std::map<std::string, std::string>;
 
+class AtomicFile;
+
+// OkStatus when `path` can be written as an output (EXR, PNG, JSON): its
+// directory exists and is writable and `path` is not a directory. Tools run
+// it on every output path before any work.
+Status CheckOutputPath(const std::string& path);
+
 class TiledExrWriter {
  public:
-  // Creates `path` (ZIP-compressed tiles of `tile` pixels, random tile order)
+  // Starts `path` (ZIP-compressed tiles of `tile` pixels, random tile order)
   // with the given string attributes, and reserves renderTimeSeconds and
-  // vox:timings for PatchTimings.
+  // vox:timings for Finish. The file is written to a temporary beside `path`.
   static StatusOr<std::unique_ptr<TiledExrWriter>> Create(const std::string& path, int width,
                                                           int height, int tile,
                                                           const ImageLayers& layers,
@@ -78,19 +90,26 @@ class TiledExrWriter {
   ~TiledExrWriter();
   // Writes one tile; thread-safe.
   Status WriteTile(const TileRect& rect, const TileBuffer& buf);
-  // Finishes the file (tiles not written are left missing: a partial image).
-  Status Close();
+  // Finishes the file (tiles not written are left missing: a partial image),
+  // records the timings (JSON, at most 1000 bytes) and renames it to `path`.
+  Status Finish(double render_seconds, const std::string& timings_json);
+  // Finish without timings.
+  Status Close() { return Finish(0.0, ""); }
+  // Drops the temporary; an earlier file at `path` stays as it was.
+  void Abandon();
 
  private:
   TiledExrWriter() = default;
   std::string path_;
+  std::unique_ptr<AtomicFile> out_;
   ImageLayers layers_;
   std::mutex mu_;
   std::unique_ptr<Imf::TiledOutputFile> file_;
 };
 
 // Writes renderTimeSeconds and vox:timings (JSON, at most 1000 bytes) into
-// the reserved header slots of a closed file written by TiledExrWriter.
+// the reserved header slots of a closed file written by TiledExrWriter,
+// found by walking the header's attributes (any header size).
 Status PatchTimings(const std::string& path, double render_seconds,
                     const std::string& timings_json);
 
@@ -113,7 +132,7 @@ struct ExrImage {
 StatusOr<ExrImage> ReadExr(const std::string& path);
 
 // Writes an 8-bit sRGB PNG of the R, G, B channels of a complete tiled EXR,
-// one row of tiles at a time (bounded memory).
+// one row of tiles at a time (bounded memory), atomically.
 Status WritePngPreview(const std::string& exr_path, const std::string& png_path);
 
 }  // namespace vox

@@ -50,6 +50,7 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
     return InvalidArgumentError("tile size " + std::to_string(options.tile_size) + ": must be in " +
                                 std::to_string(kMinTileSize) + ".." +
                                 std::to_string(kMaxTileSize));
+  VOX_RETURN_IF_ERROR(CheckTileCount(cam.width, cam.height, options.tile_size));
   if (options.threads < 0)
     return InvalidArgumentError("threads " + std::to_string(options.threads) +
                                 ": must not be negative (0: all cores)");
@@ -155,18 +156,17 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
   stats->tiles = done.load();
   stats->cache_end = volume->cache_stats();
   if (!first_error.ok()) {
-    if (writer) (void)writer->Close();
+    if (writer) writer->Abandon();  // an earlier file at exr_path stays intact
     return first_error;
   }
   const ProgressSnapshot last = snapshot();
   progress.Finish(uint64_t(last.tiles_done), uint64_t(last.tiles_total),
                   [&](double elapsed) { return ProgressLine(last, elapsed); });
   if (!writer) return OkStatus();
-  VOX_RETURN_IF_ERROR(writer->Close());
   nlohmann::json timings{{"render_seconds", stats->render_seconds},
                          {"write_seconds", stats->write_seconds},
                          {"threads", threads}};
-  VOX_RETURN_IF_ERROR(PatchTimings(options.exr_path, stats->render_seconds, timings.dump()));
+  VOX_RETURN_IF_ERROR(writer->Finish(stats->render_seconds, timings.dump()));
   stats->close_seconds = frame_clock.Seconds();
   return OkStatus();
 }

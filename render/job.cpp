@@ -7,6 +7,7 @@
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "render/frame.h"
+#include "render/internal/atomic_file.h"
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "storage/store.h"
@@ -18,6 +19,10 @@ Status RunRenderJob(const RenderJobOptions& o) {
   if (!o.preview_path.empty() && !o.part.whole())
     return InvalidArgumentError(
         "--preview needs the whole image; with --tiles, preview the vox-merge output");
+  // Output paths are checked before any work: a bad one fails in a moment,
+  // not after the render. The files are written atomically at the end.
+  for (const std::string* out : {&o.exr_path, &o.preview_path, &o.stats_path})
+    if (!out->empty()) VOX_RETURN_IF_ERROR(CheckOutputPath(*out));
   OpenOptions open;
   open.cache_bytes = o.cache_mb << 20;
   VOX_ASSIGN_OR_RETURN(auto volume, Store::Open(o.store_dir, open));
@@ -31,6 +36,9 @@ Status RunRenderJob(const RenderJobOptions& o) {
     camera = DefaultCamera(lo, hi, o.default_width, o.default_height);
   } else {
     VOX_ASSIGN_OR_RETURN(camera, LoadCamera(o.camera_path));
+    glm::dvec3 lo, hi;
+    WorldBounds(meta, &lo, &hi);
+    VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext(o.camera_path));
   }
   Scene scene;
   if (!o.scene_path.empty()) {
@@ -57,6 +65,11 @@ Status RunRenderJob(const RenderJobOptions& o) {
   fo.progress = ChooseProgressMode(o.log, o.quiet);
   fo.progress_out = o.log;
   fo.attrs["vox:store"] = o.store_dir;
+  {
+    char id[17];
+    snprintf(id, sizeof id, "%016llx", (unsigned long long)volume->store_id());
+    fo.attrs["vox:storeId"] = id;  // vox-merge refuses parts of different stores
+  }
   fo.attrs["vox:grid"] = meta.grid_name;
   fo.attrs["vox:source"] = meta.source_file;
   FrameStats stats;
@@ -71,10 +84,7 @@ Status RunRenderJob(const RenderJobOptions& o) {
                                   {"frame_seconds", frame_seconds},
                                   {"preview_seconds", preview_seconds},
                                   {"total_seconds", total.Seconds()}});
-    std::ofstream out(o.stats_path);
-    out << json << "\n";
-    out.close();
-    if (!out) return IoError(o.stats_path + ": cannot write the stats");
+    VOX_RETURN_IF_ERROR(WriteFileAtomically(o.stats_path, json + "\n"));
   }
   if (!o.quiet) {
     uint64_t total = 0;

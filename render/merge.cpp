@@ -8,6 +8,8 @@
 #include <nlohmann/json.hpp>
 
 #include "render/exr.h"
+#include "render/frame.h"
+#include "render/internal/atomic_file.h"
 #include "render/tiles.h"
 
 namespace vox {
@@ -15,10 +17,17 @@ namespace vox {
 Status MergeParts(const std::vector<std::string>& parts, const std::string& out_path,
                   MergeResult* result) {
   if (parts.empty()) return InvalidArgumentError("vox-merge: no part files given");
+  // Before reading anything: the output must not be one of the parts (by
+  // device and inode, so ./p1.exr and p1.exr or a hard link are caught), and
+  // its directory must be writable.
+  for (const std::string& p : parts)
+    if (p == out_path || SameFile(p, out_path))
+      return InvalidArgumentError("output " + out_path + " is the part " + p +
+                                  "; writing it would destroy that part");
+  VOX_RETURN_IF_ERROR(CheckOutputPath(out_path));
   std::vector<ExrInfo> infos;
   std::vector<PartSpec> specs;
   for (const std::string& p : parts) {
-    if (p == out_path) return InvalidArgumentError(p + ": the output is also listed as a part");
     VOX_ASSIGN_OR_RETURN(ExrInfo info, ReadExrInfo(p));
     auto it = info.attrs.find("vox:part");
     if (it == info.attrs.end())
@@ -45,6 +54,15 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
     if (o.tile != ref.tile)
       return differ("tile size", std::to_string(ref.tile), std::to_string(o.tile));
     if (o.channels != ref.channels) return differ("channel list", "", "");
+    {
+      auto a = ref.attrs.find("vox:storeId"), b = o.attrs.find("vox:storeId");
+      std::string va = a == ref.attrs.end() ? "<none>" : a->second;
+      std::string vb = b == o.attrs.end() ? "<none>" : b->second;
+      if (va != vb)
+        return InvalidArgumentError(parts[i] + " and " + parts[0] +
+                                    " were rendered from different stores (store_id " + vb +
+                                    " vs " + va + "; was the store re-ingested between parts?)");
+    }
     for (const char* key : {"vox:camera", "vox:scene", "vox:split", "vox:store", "vox:passes"}) {
       auto a = ref.attrs.find(key), b = o.attrs.find(key);
       std::string va = a == ref.attrs.end() ? "<none>" : a->second;
@@ -77,6 +95,10 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
   attrs.erase("vox:timings");
   attrs["vox:part"] = "1/1";
   attrs["vox:mergedFrom"] = std::to_string(n) + " parts";
+  if (ref.tile > kMaxTileSize)
+    return UnsupportedError(parts[0] + ": tile size " + std::to_string(ref.tile) +
+                            " is larger than vox writes (" + std::to_string(kMaxTileSize) + ")");
+  VOX_RETURN_IF_ERROR(CheckTileCount(ref.width, ref.height, ref.tile).WithContext(parts[0]));
   const TileLayout layout(ref.width, ref.height, ref.tile);
   VOX_ASSIGN_OR_RETURN(auto writer, TiledExrWriter::Create(out_path, ref.width, ref.height,
                                                            ref.tile, layers, attrs));
@@ -116,11 +138,10 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
       return IoError(path + ": cannot read: " + e.what());
     }
   }
-  VOX_RETURN_IF_ERROR(writer->Close());
   nlohmann::json timings{{"parts", n},
                          {"sum_render_seconds", res.sum_render_seconds},
                          {"max_render_seconds", res.max_render_seconds}};
-  VOX_RETURN_IF_ERROR(PatchTimings(out_path, res.max_render_seconds, timings.dump()));
+  VOX_RETURN_IF_ERROR(writer->Finish(res.max_render_seconds, timings.dump()));
   if (result) *result = res;
   return OkStatus();
 }

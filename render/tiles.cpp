@@ -18,6 +18,20 @@ uint64_t Spread(uint32_t v) {
 
 }  // namespace
 
+Status CheckTileCount(int width, int height, int tile) {
+  if (width < 1 || height < 1 || tile < 1)
+    return InvalidArgumentError("image " + std::to_string(width) + "x" + std::to_string(height) +
+                                " in tiles of " + std::to_string(tile) +
+                                ": sizes must be positive");
+  const int64_t n = ((int64_t(width) + tile - 1) / tile) * ((int64_t(height) + tile - 1) / tile);
+  if (n > kMaxTiles)
+    return InvalidArgumentError(
+        "image " + std::to_string(width) + "x" + std::to_string(height) + " in " +
+        std::to_string(tile) + "-pixel tiles has " + std::to_string(n) + " tiles, more than the " +
+        std::to_string(kMaxTiles) + " allowed; use a larger --tile-size or a smaller image");
+  return OkStatus();
+}
+
 StatusOr<PartSpec> ParsePartSpec(std::string_view text) {
   auto slash = text.find('/');
   auto bad = [&]() {

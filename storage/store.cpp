@@ -106,6 +106,7 @@ class StoreImpl : public Store {
     pf_queue_.clear();
     pf_generation_.fetch_add(1);  // the batch in progress stops at its next run
   }
+  uint64_t store_id() const override { return store_id_; }
 
   uint64_t resident_bytes() const override {
     return top_.size() * sizeof(CompactCell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
@@ -155,6 +156,7 @@ class StoreImpl : public Store {
   const OpenOptions options_;
   StoreMeta meta_;
   int depth_ = 0;
+  uint64_t store_id_ = 0;
   uint8_t flags_ = 0;
   std::vector<CompactCell> top_;  // traversal form (the file holds the build form)
   std::vector<uint8_t> top_attr_;
@@ -376,6 +378,7 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   const Footer f = *footer_or;
   if (f.store_id != ih.store_id)
     return CorruptionError("'" + ipath + "': header and footer belong to different stores");
+  store_id_ = ih.store_id;
 
   // Each block: in bounds, checksum, raw codec.
   const uint64_t blocks_end = isize - kFooterSize;

@@ -169,6 +169,9 @@ class Store : public Volume, public BrickSource {
   // Bytes held in memory for the life of the Store: top cells, top payloads
   // and the brick table (not the cache).
   virtual uint64_t resident_bytes() const = 0;
+  // The store_id of the index header and footer (FORMAT.md): random per
+  // ingest, so a store re-ingested at the same path has a different one.
+  virtual uint64_t store_id() const = 0;
 };
 
 }  // namespace vox

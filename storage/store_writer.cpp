@@ -1,20 +1,20 @@
 // StoreWriter: streams bricks into a temporary directory beside the target,
 // then writes the index, fsyncs and renames into place (FORMAT.md).
 #include <fcntl.h>
-#include <sys/stat.h>
+#include <signal.h>
 #include <stdio.h>
+#include <sys/stat.h>
 #include <unistd.h>
+#include <zstd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <mutex>
 #include <random>
-#include <cstring>
 #include <unordered_set>
-
-#include <zstd.h>
 
 #include "storage/file.h"
 #include "storage/internal/format.h"
@@ -32,7 +32,8 @@ std::string CoordString(const glm::u64vec3& c) {
 
 struct CoordHash {
   size_t operator()(const glm::u64vec3& c) const {
-    uint64_t h = c.x * 0x9E3779B97F4A7C15ull ^ (c.y + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full ^
+    uint64_t h = c.x * 0x9E3779B97F4A7C15ull ^
+                 (c.y + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full ^
                  (c.z + 0x165667B19E3779F9ull) * 0x27D4EB2F165667C5ull;
     return size_t(h ^ (h >> 29));
   }
@@ -65,6 +66,71 @@ Status ValidateMeta(const StoreMeta& m) {
   if (m.grid_class != GridClass::kLevelSet && m.grid_class != GridClass::kFogVolume)
     return InvalidArgumentError("unknown grid class " + std::to_string(int(m.grid_class)));
   return OkStatus();
+}
+
+// Reads the first `n` bytes (or the last `n` when `from_end`) of a file.
+bool ReadBytes(const fs::path& path, bool from_end, size_t n, uint8_t* out) {
+  FILE* f = fopen(path.c_str(), "rb");
+  if (!f) return false;
+  bool ok = fseeko(f, from_end ? -off_t(n) : 0, from_end ? SEEK_END : SEEK_SET) == 0 &&
+            fread(out, 1, n, f) == n;
+  fclose(f);
+  return ok;
+}
+
+// Why `dir` is not a complete vox store that --force may replace, or "" when
+// it is one: exactly index.vxi and bricks.vxb, regular files, with valid
+// headers (and index footer) carrying one store_id (FORMAT.md).
+std::string NotAStoreReason(const fs::path& dir) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name != kIndexFileName && name != kBrickFileName)
+      return "it holds '" + name + "', which is not a store file";
+    if (!e.is_regular_file(ec)) return "'" + name + "' is not a regular file";
+  }
+  if (ec) return "it cannot be listed: " + ec.message();
+  const fs::path index = dir / kIndexFileName, bricks = dir / kBrickFileName;
+  if (!fs::exists(index, ec)) return std::string("it has no ") + kIndexFileName;
+  if (!fs::exists(bricks, ec)) return std::string("it has no ") + kBrickFileName;
+  uint8_t ih[kFileHeaderSize], bh[kFileHeaderSize], foot[kFooterSize];
+  if (!ReadBytes(index, false, kFileHeaderSize, ih) || !ReadBytes(index, true, kFooterSize, foot))
+    return std::string(kIndexFileName) + " is too short to be a store index";
+  if (!ReadBytes(bricks, false, kFileHeaderSize, bh))
+    return std::string(kBrickFileName) + " is too short to be a brick file";
+  auto i = DecodeFileHeader(ih, kIndexMagic, index.string());
+  if (!i.ok()) return i.status().message();
+  auto b = DecodeFileHeader(bh, kBrickMagic, bricks.string());
+  if (!b.ok()) return b.status().message();
+  auto f = DecodeFooter(foot, index.string());
+  if (!f.ok()) return f.status().message();
+  if (i->store_id != b->store_id || i->store_id != f->store_id)
+    return "its index and brick file belong to different stores";
+  return "";
+}
+
+// Removes temporary store directories `.NAME.tmp-PID-XXXXXXXX` (and their
+// `.old` variants) beside `target` left by processes that no longer run.
+void RemoveStaleTemporaries(const fs::path& parent, const std::string& name) {
+  const std::string prefix = "." + name + ".tmp-";
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(parent, ec)) {
+    const std::string entry = e.path().filename().string();
+    if (entry.compare(0, prefix.size(), prefix) != 0) continue;
+    std::string rest = entry.substr(prefix.size());
+    if (rest.size() > 4 && rest.compare(rest.size() - 4, 4, ".old") == 0)
+      rest.resize(rest.size() - 4);
+    const size_t dash = rest.find('-');
+    if (dash == std::string::npos || dash == 0 || dash > 10 || rest.size() != dash + 9) continue;
+    if (rest.find_first_not_of("0123456789") != dash) continue;
+    if (rest.find_first_not_of("0123456789abcdef", dash + 1) != std::string::npos) continue;
+    const long pid = std::stol(rest.substr(0, dash));
+    if (pid <= 0 || pid == long(getpid())) continue;
+    if (kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to judge)
+    if (!e.is_directory(ec) || e.is_symlink(ec)) continue;
+    std::error_code rec;
+    fs::remove_all(e.path(), rec);
+  }
 }
 
 class StoreWriterImpl : public StoreWriter {
@@ -110,8 +176,7 @@ class StoreWriterImpl : public StoreWriter {
       if (v.x >= local || v.y >= local || v.z >= local)
         return InvalidArgumentError("voxel (" + std::to_string(v.x) + "," + std::to_string(v.y) +
                                     "," + std::to_string(v.z) + ") of brick " + CoordString(c) +
-                                    " outside the brick's 2^" + std::to_string(depth_) +
-                                    " voxels");
+                                    " outside the brick's 2^" + std::to_string(depth_) + " voxels");
       glm::u64vec3 l(v.x, v.y, v.z);
       lo = glm::min(lo, l);
       hi = glm::max(hi, l);
@@ -138,10 +203,10 @@ class StoreWriterImpl : public StoreWriter {
     std::vector<VoxelAttributes> attrs(pts.size());
     for (size_t k = 0; k < pts.size(); ++k) {
       if (k > 0 && pts[k].x == pts[k - 1].x && pts[k].y == pts[k - 1].y && pts[k].z == pts[k - 1].z)
-        return Unsee(c, InvalidArgumentError("brick " + CoordString(c) + " has voxel (" +
-                                             std::to_string(pts[k].x) + "," +
-                                             std::to_string(pts[k].y) + "," +
-                                             std::to_string(pts[k].z) + ") twice"));
+        return Unsee(
+            c, InvalidArgumentError("brick " + CoordString(c) + " has voxel (" +
+                                    std::to_string(pts[k].x) + "," + std::to_string(pts[k].y) +
+                                    "," + std::to_string(pts[k].z) + ") twice"));
       attrs[k] = voxels[pts[k].ref].attr;
       pts[k].ref = MakeLeafRef(uint32_t(k));
     }
@@ -155,10 +220,10 @@ class StoreWriterImpl : public StoreWriter {
                                            "levels per brick"));
     std::string raw = EncodeBrickRaw(cells, attrs, depth_, flags_, options_.normal_bits);
     if (raw.size() > kMaxBrickRawBytes)
-      return Unsee(c, InvalidArgumentError("brick " + CoordString(c) + " is " +
-                                           std::to_string(raw.size()) + " bytes; the limit is " +
-                                           std::to_string(kMaxBrickRawBytes) +
-                                           " (choose a deeper brick level)"));
+      return Unsee(
+          c, InvalidArgumentError("brick " + CoordString(c) + " is " + std::to_string(raw.size()) +
+                                  " bytes; the limit is " + std::to_string(kMaxBrickRawBytes) +
+                                  " (choose a deeper brick level)"));
     ZSTD_CCtx* cctx = ThreadCCtx();
     if (cctx == nullptr) return Fail(ResourceExhaustedError("cannot allocate a zstd context"));
     std::string frame(ZSTD_compressBound(raw.size()), '\0');
@@ -331,7 +396,8 @@ class StoreWriterImpl : public StoreWriter {
       } else {
         return ErrnoError("cannot replace store", target_, errno);
       }
-      if (ec) return IoError("cannot remove the replaced store at '" + temp_ + "': " + ec.message());
+      if (ec)
+        return IoError("cannot remove the replaced store at '" + temp_ + "': " + ec.message());
     } else if (rename(temp_.c_str(), target_.c_str()) != 0) {
       return ErrnoError("cannot rename '" + temp_ + "' to", target_, errno);
     }
@@ -381,13 +447,17 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
   if (!ec && fs::exists(st)) {
     if (!options.force)
       return InvalidArgumentError("'" + target + "' already exists (use --force to replace it)");
-    // Replace only a store or an empty directory, never arbitrary data.
-    bool is_store = fs::is_directory(st) && (fs::exists(tp / kIndexFileName, ec) ||
-                                             fs::exists(tp / kBrickFileName, ec));
-    bool empty_dir = fs::is_directory(st) && fs::is_empty(tp, ec);
-    if (!is_store && !empty_dir)
+    // Replace only a complete store or an empty directory, never other data.
+    if (!fs::is_directory(st))
       return InvalidArgumentError("'" + target +
-                                  "' exists and is not a vox store; refusing to replace it");
+                                  "' exists and is not a directory; --force replaces only a vox "
+                                  "store or an empty directory");
+    if (!fs::is_empty(tp, ec)) {
+      const std::string why = NotAStoreReason(tp);
+      if (!why.empty())
+        return InvalidArgumentError("'" + target + "' is not a vox store (" + why +
+                                    "); --force replaces only a vox store or an empty directory");
+    }
     replace = true;
   }
   fs::path parent = tp.parent_path();
@@ -395,6 +465,7 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
   if (!fs::is_directory(parent, ec))
     return NotFoundError("cannot create store '" + target + "': directory '" + parent.string() +
                          "' does not exist");
+  RemoveStaleTemporaries(parent, tp.filename().string());
   std::random_device rd;
   uint64_t id = (uint64_t(rd()) << 32) ^ rd() ^
                 uint64_t(std::chrono::steady_clock::now().time_since_epoch().count());

@@ -18,6 +18,7 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <type_traits>
 
 #include "core/octree.h"
 #include "core/ray.h"
@@ -274,6 +275,16 @@ inline int TravelSign(double unscaled) { return unscaled >= 0 ? 1 : -1; }
 template <class Real>
 bool ClipToGrid(const glm::dvec3& origin, const Real D[3], const int s[3], Real G, Real p[3],
                 Real* t_start) {
+  if constexpr (std::is_floating_point_v<Real>) {  // exact Reals need no help
+    if (IsFarOrigin(origin, double(G))) {           // exact entry point (core/ray.h)
+      const double Dd[3] = {double(D[0]), double(D[1]), double(D[2])};
+      long double q[3], t;
+      if (!ClipFarRay(origin, Dd, s, double(G), q, &t)) return false;
+      for (int a = 0; a < 3; ++a) p[a] = Real(q[a]);
+      *t_start = Real(t);
+      return true;
+    }
+  }
   Real o[3] = {Real(origin.x), Real(origin.y), Real(origin.z)};
   Real t0 = Real(0), t1 = Real(0);
   bool bounded = false;

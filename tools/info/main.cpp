@@ -5,6 +5,7 @@
 // Exit status: 0 on success, 1 when the store cannot be read, 2 on bad usage.
 #include <cstdint>
 #include <cstdio>
+#include <new>
 #include <optional>
 #include <string>
 
@@ -31,7 +32,7 @@ int Usage(const std::string& msg) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int RunTool(int argc, char** argv) {
   Options opt;
   vox::FlagReader flags(argc, argv);
   while (flags.Next()) {
@@ -63,4 +64,15 @@ int main(int argc, char** argv) {
   }
   std::fputs(vox::FormatStoreInfo(*info).c_str(), stdout);
   return 0;
+}
+
+// Allocation failures anywhere (an image, a brick, a table sized from input)
+// end with a clear message and exit 1, never an abort.
+int main(int argc, char** argv) {
+  try {
+    return RunTool(argc, argv);
+  } catch (const std::bad_alloc&) {
+    fprintf(stderr, "vox-info: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
+    return 1;
+  }
 }

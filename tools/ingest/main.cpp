@@ -2,12 +2,19 @@
 //   vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]
 //              [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B] [--threads N]
 //              [--force] [--quiet]
-// Exit codes: 0 done, 1 the ingest failed, 2 bad command line.
+// Exit codes: 0 done, 1 the ingest failed, 2 bad command line, 128+N killed
+// by signal N (SIGINT, SIGTERM: the temporary store directory is removed).
+#include <pthread.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <new>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "ingest/ingest.h"
@@ -37,9 +44,72 @@ int UsageError(const std::string& message) {
   return 2;
 }
 
+// SIGINT and SIGTERM (a Slurm time-out) are blocked in every thread and
+// taken by one thread with sigwait, which is an ordinary thread: it removes
+// this process's temporary store directory `.NAME.tmp-PID-*` beside the
+// output (storage/FORMAT.md, "Writing") and exits with 128 + the signal.
+void RemoveOwnTemporaries(const std::string& output) {
+  namespace fs = std::filesystem;
+  std::string target = output;
+  while (target.size() > 1 && target.back() == '/') target.pop_back();
+  fs::path tp(target), parent = tp.parent_path();
+  if (parent.empty()) parent = ".";
+  const std::string prefix =
+      "." + tp.filename().string() + ".tmp-" + std::to_string(getpid()) + "-";
+  for (int attempt = 0; attempt < 3; ++attempt) {  // writers may still be adding files
+    std::error_code ec;
+    bool left = false;
+    for (const auto& e : fs::directory_iterator(parent, ec)) {
+      if (e.path().filename().string().compare(0, prefix.size(), prefix) != 0) continue;
+      std::error_code rec;
+      fs::remove_all(e.path(), rec);
+      left = left || fs::exists(e.path(), rec);
+    }
+    if (!left) return;
+  }
+}
+
+void StartSignalThread(const std::string& output) {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);  // inherited by every thread created later
+  std::thread([set, output] {
+    int sig = 0;
+    if (sigwait(&set, &sig) != 0) return;
+    std::fprintf(stderr, "\nvox-ingest: %s: removing the unfinished store and exiting\n",
+                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)");
+    RemoveOwnTemporaries(output);
+    std::_Exit(128 + sig);
+  }).detach();
+}
+
+// Test hook: with VOX_INGEST_TEST_STALL set, the first progress report
+// stalls the ingest (the temporary store exists), so tests can signal a
+// real ingest mid-way.
+class StallingProgress : public vox::ProgressSink {
+ public:
+  explicit StallingProgress(vox::ProgressSink* inner) : inner_(inner) {}
+  void Message(std::string_view line) override {
+    if (inner_) inner_->Message(line);
+  }
+  void Progress(uint64_t done, uint64_t total, uint64_t voxels) override {
+    std::fprintf(stderr, "vox-ingest: test stall\n");
+    for (;;) pause();
+    if (inner_) inner_->Progress(done, total, voxels);
+  }
+  void Done() override {
+    if (inner_) inner_->Done();
+  }
+
+ private:
+  vox::ProgressSink* inner_;
+};
+
 }  // namespace
 
-int main(int argc, char** argv) {
+static int RunTool(int argc, char** argv) {
   vox::IngestOptions o;
   bool quiet = false;
   std::vector<std::string> positional;
@@ -91,9 +161,13 @@ int main(int argc, char** argv) {
   if (o.zstd_level < 1 || o.zstd_level > 22) return UsageError("--zstd-level must be in 1..22");
   if (auto lv = vox::ParseLevels(o.levels); !lv.ok()) return UsageError(lv.status().message());
 
+  StartSignalThread(o.output);
   std::unique_ptr<vox::ProgressSink> progress;
   if (!quiet) progress = vox::MakeStderrProgress(isatty(STDERR_FILENO) != 0);
-  auto stats = vox::Ingest(o, progress.get());
+  std::unique_ptr<vox::ProgressSink> stall;
+  if (std::getenv("VOX_INGEST_TEST_STALL") != nullptr)
+    stall = std::make_unique<StallingProgress>(progress.get());
+  auto stats = vox::Ingest(o, stall ? stall.get() : progress.get());
   if (!stats.ok()) {
     std::fprintf(stderr, "vox-ingest: %s\n", stats.status().ToString().c_str());
     return 1;
@@ -112,4 +186,15 @@ int main(int argc, char** argv) {
                  s.seconds_bricks, s.seconds_finish);
   }
   return 0;
+}
+
+// Allocation failures anywhere (an image, a brick, a table sized from input)
+// end with a clear message and exit 1, never an abort.
+int main(int argc, char** argv) {
+  try {
+    return RunTool(argc, argv);
+  } catch (const std::bad_alloc&) {
+    fprintf(stderr, "vox-ingest: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
+    return 1;
+  }
 }

@@ -1,6 +1,7 @@
 // vox-merge: assembles the partial EXRs of `vox-render --tiles I/N` into one
 // image. Parses flags and calls vox::MergeParts.
 #include <cstdio>
+#include <new>
 #include <optional>
 #include <string>
 #include <vector>
@@ -24,7 +25,7 @@ int Usage(const std::string& error) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int RunTool(int argc, char** argv) {
   std::vector<std::string> parts;
   std::string out, preview;
   bool quiet = false;
@@ -49,7 +50,8 @@ int main(int argc, char** argv) {
   if (out.empty()) return Usage("no output given (-o out.exr)");
   if (parts.empty()) return Usage("no part files given");
   vox::MergeResult result;
-  vox::Status s = vox::MergeParts(parts, out, &result);
+  vox::Status s = preview.empty() ? vox::OkStatus() : vox::CheckOutputPath(preview);
+  if (s.ok()) s = vox::MergeParts(parts, out, &result);
   if (s.ok() && !preview.empty()) s = vox::WritePngPreview(out, preview);
   if (!s.ok()) {
     fprintf(stderr, "vox-merge: %s\n", s.ToString().c_str());
@@ -61,4 +63,15 @@ int main(int argc, char** argv) {
             out.c_str(), result.parts, (long long)result.tiles, result.max_render_seconds,
             result.sum_render_seconds);
   return 0;
+}
+
+// Allocation failures anywhere (an image, a brick, a table sized from input)
+// end with a clear message and exit 1, never an abort.
+int main(int argc, char** argv) {
+  try {
+    return RunTool(argc, argv);
+  } catch (const std::bad_alloc&) {
+    fprintf(stderr, "vox-merge: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
+    return 1;
+  }
 }

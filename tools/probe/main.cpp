@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <new>
 #include <optional>
 #include <string>
 
@@ -79,7 +80,7 @@ int Run(const TracerT& tracer, const glm::i64vec3& origin, bool stats) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int RunTool(int argc, char** argv) {
   Options opt;
   vox::FlagReader flags(argc, argv);
   while (flags.Next()) {
@@ -168,4 +169,15 @@ int main(int argc, char** argv) {
   auto tr = vox::AutoTracer<long double>::Create(view, n1);
   if (!tr.ok()) return Fail(tr.status().message());
   return Run(*tr, origin, opt.stats);
+}
+
+// Allocation failures anywhere (an image, a brick, a table sized from input)
+// end with a clear message and exit 1, never an abort.
+int main(int argc, char** argv) {
+  try {
+    return RunTool(argc, argv);
+  } catch (const std::bad_alloc&) {
+    fprintf(stderr, "vox-probe: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
+    return 1;
+  }
 }

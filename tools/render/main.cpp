@@ -2,6 +2,7 @@
 // Parses flags into RenderJobOptions and calls vox::RunRenderJob.
 #include <climits>
 #include <cstdio>
+#include <new>
 #include <optional>
 #include <string>
 
@@ -40,7 +41,7 @@ int Usage(const std::string& error) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int RunTool(int argc, char** argv) {
   vox::RenderJobOptions o;
   vox::FlagReader flags(argc, argv);
   while (flags.Next()) {
@@ -116,4 +117,15 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+// Allocation failures anywhere (an image, a brick, a table sized from input)
+// end with a clear message and exit 1, never an abort.
+int main(int argc, char** argv) {
+  try {
+    return RunTool(argc, argv);
+  } catch (const std::bad_alloc&) {
+    fprintf(stderr, "vox-render: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
+    return 1;
+  }
 }

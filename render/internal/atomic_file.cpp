@@ -1,0 +1,159 @@
+#include "render/internal/atomic_file.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <optional>
+#include <utility>
+
+namespace vox {
+namespace {
+
+void SplitPath(const std::string& path, std::string* dir, std::string* name) {
+  const size_t slash = path.rfind('/');
+  if (slash == std::string::npos) {
+    *dir = ".";
+    *name = path;
+  } else {
+    *dir = slash == 0 ? "/" : path.substr(0, slash);
+    *name = path.substr(slash + 1);
+  }
+}
+
+std::string ErrnoText() { return std::strerror(errno); }
+
+Status SyncFd(int fd, const std::string& what) {
+  if (fsync(fd) != 0) return IoError(what + ": fsync failed: " + ErrnoText());
+  return OkStatus();
+}
+
+}  // namespace
+
+Status CheckOutputPath(const std::string& path) {
+  if (path.empty()) return InvalidArgumentError("empty output path");
+  std::string dir, name;
+  SplitPath(path, &dir, &name);
+  if (name.empty() || name == "." || name == "..")
+    return InvalidArgumentError(path + ": output path names a directory, not a file");
+  struct stat st;
+  if (stat(dir.c_str(), &st) != 0)
+    return NotFoundError(path + ": output directory " + dir + " does not exist");
+  if (!S_ISDIR(st.st_mode)) return InvalidArgumentError(path + ": " + dir + " is not a directory");
+  if (access(dir.c_str(), W_OK | X_OK) != 0)
+    return IoError(path + ": output directory " + dir + " is not writable");
+  if (stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
+    return InvalidArgumentError(path + ": output path is a directory");
+  return OkStatus();
+}
+
+bool SameFile(const std::string& a, const std::string& b) {
+  struct stat sa, sb;
+  if (stat(a.c_str(), &sa) != 0 || stat(b.c_str(), &sb) != 0) return false;
+  return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+}
+
+StatusOr<AtomicFile> AtomicFile::Create(const std::string& path) {
+  VOX_RETURN_IF_ERROR(CheckOutputPath(path));
+  struct stat st;
+  if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+    return InvalidArgumentError(path + ": not a regular file; this output is written to a " +
+                                "temporary beside it and renamed over it");
+  std::string dir, name;
+  SplitPath(path, &dir, &name);
+  std::string templ =
+      (dir == "/" ? "" : dir) + "/." + name + ".tmp-" + std::to_string(long(getpid())) + "-XXXXXX";
+  int fd = mkstemp(templ.data());
+  if (fd < 0) return IoError(path + ": cannot create a temporary file: " + ErrnoText());
+  fchmod(
+      fd, 0644 & ~[] {
+        mode_t m = umask(0);
+        umask(m);
+        return m;
+      }());
+  close(fd);
+  AtomicFile f;
+  f.path_ = path;
+  f.temp_ = templ;
+  return f;
+}
+
+AtomicFile::AtomicFile(AtomicFile&& o) noexcept
+    : path_(std::move(o.path_)), temp_(std::exchange(o.temp_, std::string())) {}
+
+AtomicFile& AtomicFile::operator=(AtomicFile&& o) noexcept {
+  if (this != &o) {
+    Abandon();
+    path_ = std::move(o.path_);
+    temp_ = std::exchange(o.temp_, std::string());
+  }
+  return *this;
+}
+
+AtomicFile::~AtomicFile() { Abandon(); }
+
+void AtomicFile::Abandon() {
+  if (!temp_.empty()) unlink(temp_.c_str());
+  temp_.clear();
+}
+
+Status AtomicFile::Commit() {
+  if (temp_.empty()) return InternalError(path_ + ": output already committed or abandoned");
+  int fd = open(temp_.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    Status s = IoError(path_ + ": cannot reopen the temporary " + temp_ + ": " + ErrnoText());
+    Abandon();
+    return s;
+  }
+  Status s = SyncFd(fd, path_);
+  close(fd);
+  if (!s.ok()) {
+    Abandon();
+    return s;
+  }
+  if (rename(temp_.c_str(), path_.c_str()) != 0) {
+    s = IoError(path_ + ": cannot rename the finished output into place: " + ErrnoText());
+    Abandon();
+    return s;
+  }
+  temp_.clear();
+  std::string dir, name;
+  SplitPath(path_, &dir, &name);
+  int dfd = open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    s = SyncFd(dfd, dir);
+    close(dfd);
+  }
+  return s;
+}
+
+Status WriteFileAtomically(const std::string& path, const std::string& bytes) {
+  struct stat st;
+  const bool special =
+      stat(path.c_str(), &st) == 0 && (S_ISCHR(st.st_mode) || S_ISFIFO(st.st_mode));
+  std::optional<AtomicFile> f;
+  if (!special) {  // a device or pipe (/dev/stdout) is written in place
+    VOX_ASSIGN_OR_RETURN(AtomicFile created, AtomicFile::Create(path));
+    f.emplace(std::move(created));
+  }
+  int fd = open(special ? path.c_str() : f->temp_path().c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+  if (fd < 0) return IoError(path + ": cannot open the temporary file: " + ErrnoText());
+  size_t done = 0;
+  while (done < bytes.size()) {
+    ssize_t n = write(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      Status s = IoError(path + ": write failed: " + ErrnoText());
+      close(fd);
+      return s;
+    }
+    done += size_t(n);
+  }
+  if (close(fd) != 0) return IoError(path + ": write failed: " + ErrnoText());
+  return special ? OkStatus() : f->Commit();
+}
+
+}  // namespace vox

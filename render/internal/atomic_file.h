@@ -1,0 +1,54 @@
+// Atomic output files for vox-render and vox-merge: every output (EXR, PNG
+// preview, --stats JSON) is written to a temporary file in the target's
+// directory, named `.NAME.tmp-PID-XXXXXX`, then fsynced and renamed over the
+// target. A failed or interrupted write removes the temporary and leaves any
+// earlier file at the target untouched.
+//
+// Thread safety: thread-compatible (one AtomicFile per output).
+#ifndef VOX_RENDER_INTERNAL_ATOMIC_FILE_H_
+#define VOX_RENDER_INTERNAL_ATOMIC_FILE_H_
+
+#include <string>
+
+#include "core/status.h"
+
+namespace vox {
+
+// OkStatus when `path` can be written atomically: its directory exists, is a
+// directory and is writable, and `path` itself is not a directory. Cheap; run
+// before any long work so a bad output path fails first.
+Status CheckOutputPath(const std::string& path);
+
+// True when a and b name the same existing file (same device and inode).
+bool SameFile(const std::string& a, const std::string& b);
+
+class AtomicFile {
+ public:
+  // Creates the (empty) temporary file beside `path`.
+  static StatusOr<AtomicFile> Create(const std::string& path);
+  AtomicFile(AtomicFile&& o) noexcept;
+  AtomicFile& operator=(AtomicFile&& o) noexcept;
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+  // Removes the temporary unless Commit succeeded.
+  ~AtomicFile();
+
+  const std::string& path() const { return path_; }
+  // Where to write the content (closed: the writer opens it by name).
+  const std::string& temp_path() const { return temp_; }
+  // fsyncs the temporary, renames it over path() and fsyncs the directory.
+  Status Commit();
+  // Removes the temporary now.
+  void Abandon();
+
+ private:
+  AtomicFile() = default;
+  std::string path_, temp_;
+};
+
+// Writes `bytes` to `path` atomically.
+Status WriteFileAtomically(const std::string& path, const std::string& bytes);
+
+}  // namespace vox
+
+#endif  // VOX_RENDER_INTERNAL_ATOMIC_FILE_H_

@@ -1,0 +1,105 @@
+// vox-ingest killed mid-ingest by SIGTERM (a Slurm time-out) or SIGINT:
+// exits 128 + the signal and leaves no temporary store directory; a later
+// run removes the temporary directory of a writer that was SIGKILLed.
+// The ingest is held mid-way (after the writer created its temporary
+// directory) by the tool's VOX_INGEST_TEST_STALL hook.
+#include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "storage/store.h"
+#include "tests/ingest/ingest_test_util.h"
+
+extern char** environ;
+
+namespace vox {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<std::string> Temporaries(const std::string& dir, const std::string& name) {
+  std::vector<std::string> v;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().rfind("." + name + ".tmp-", 0) == 0)
+      v.push_back(e.path().filename().string());
+  return v;
+}
+
+class IngestSignalTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    openvdb::initialize();
+    auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+        20.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
+    grid->setName("sphere");
+    vdb_ = dir_.File("in.vdb");
+    testutil::WriteVdb(vdb_, {grid});
+  }
+  // Starts vox-ingest stalled mid-ingest; returns its pid once its temporary
+  // store directory exists.
+  pid_t StartStalled(const std::string& out) {
+    std::vector<std::string> args = {VOX_INGEST_BINARY, vdb_, out, "--quiet", "--threads", "2"};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    std::vector<std::string> env_s;
+    for (char** e = environ; *e; ++e) env_s.push_back(*e);
+    env_s.push_back("VOX_INGEST_TEST_STALL=1");
+    std::vector<char*> envp;
+    for (auto& e : env_s) envp.push_back(e.data());
+    envp.push_back(nullptr);
+    pid_t pid = -1;
+    if (posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), envp.data()) != 0) return -1;
+    const std::string name = fs::path(out).filename().string();
+    for (int i = 0; i < 3000 && Temporaries(dir_.path(), name).empty(); ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));  // into the stall
+    return pid;
+  }
+  testutil::TempDir dir_;
+  std::string vdb_;
+};
+
+TEST_F(IngestSignalTest, TermAndIntRemoveTheTemporaryStore) {
+  for (int sig : {SIGTERM, SIGINT}) {
+    const std::string out = dir_.File("store");
+    pid_t pid = StartStalled(out);
+    ASSERT_GT(pid, 0);
+    ASSERT_EQ(Temporaries(dir_.path(), "store").size(), 1u) << "the ingest never started";
+    ASSERT_EQ(kill(pid, sig), 0);
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    ASSERT_TRUE(WIFEXITED(status)) << "killed by signal " << WTERMSIG(status);
+    EXPECT_EQ(WEXITSTATUS(status), 128 + sig);
+    EXPECT_TRUE(Temporaries(dir_.path(), "store").empty());
+    EXPECT_FALSE(fs::exists(out));
+  }
+}
+
+TEST_F(IngestSignalTest, ALaterRunRemovesTheTemporaryOfAKilledOne) {
+  const std::string out = dir_.File("store");
+  pid_t pid = StartStalled(out);
+  ASSERT_GT(pid, 0);
+  ASSERT_EQ(Temporaries(dir_.path(), "store").size(), 1u);
+  ASSERT_EQ(kill(pid, SIGKILL), 0);  // no chance to clean up
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_EQ(Temporaries(dir_.path(), "store").size(), 1u);
+  const std::string cmd = std::string(VOX_INGEST_BINARY) + " " + vdb_ + " " + out + " --quiet";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  EXPECT_TRUE(Temporaries(dir_.path(), "store").empty());
+  EXPECT_TRUE(Store::Open(out, {}).ok());
+}
+
+}  // namespace
+}  // namespace vox
