@@ -263,9 +263,8 @@ StatusOr<std::unique_ptr<CompactTopology<ValueT>>> CompactTopology<ValueT>::Read
     if (uint64_t(tiles) + children > (grid.end_pos - grid.grid_pos) / 12)
       return CorruptionError(where + ": root node claims " + std::to_string(tiles) +
                              " tiles and " + std::to_string(children) + " children");
-    // At most one record per leaf: a 64-byte mask in the topology and at
-    // least 65 bytes in the buffers. Untouched capacity costs no memory.
-    t->leaves_.reserve((grid.end_pos - grid.grid_pos) / 129 + 1);
+    // At most one leaf per 64-byte mask in the topology section.
+    t->leaves_.reserve((grid.block_pos - grid.grid_pos) / 64 + 1);
     for (uint32_t n = 0; n < tiles; ++n) {
       int32_t v[3];
       ValueT value;
@@ -290,6 +289,7 @@ StatusOr<std::unique_ptr<CompactTopology<ValueT>>> CompactTopology<ValueT>::Read
       t->root_[RootKey(o)] = int64_t(t->upper_.size());
       p.template Internal<5, 7>(o);
     }
+    ::madvise(map, grid.block_pos & ~uint64_t(4095), MADV_DONTNEED);
     if (uint64_t(is.tellg()) != grid.block_pos)
       return CorruptionError(where + ": its topology ends at byte " +
                              std::to_string(uint64_t(is.tellg())) + ", not at byte " +
