@@ -5,8 +5,10 @@
 //   internal/vdb_layout.h   the .vdb layout check, before OpenVDB reads the file;
 //   internal/grid_ingest.h  brick extraction of the chosen grid (topology,
 //                           occupied bbox, brick map, the TBB brick pipeline);
+//   internal/vdb_topology.h the grid's topology as compact records, streamed
+//                           from the file (no OpenVDB tree);
 //   internal/voxel_builder.h  one voxel: coordinates, normal or density, colour;
-//   internal/leaf_values.h  leaf values read without loading them into the tree;
+//   internal/leaf_values.h  colour-grid leaf values read without loading them into the tree;
 //   internal/color.h        colour sampling from a vec3 grid;
 //   placement.h             levels and origin.
 #include "core/stopwatch.h"
@@ -30,13 +32,16 @@
 #include "ingest/internal/color.h"
 #include "ingest/internal/grid_ingest.h"
 #include "ingest/internal/vdb_layout.h"
+#include "storage/memory_budget.h"
 
 namespace vox {
 namespace {
 
-using ingest_internal::CheckVdbLayout;
 using ingest_internal::ColorSource;
 using ingest_internal::Context;
+
+// Below this an ingest cannot hold OpenVDB's registries, the threads and one brick.
+constexpr uint64_t kMinMemoryBytes = uint64_t(64) << 20;
 
 void InitOpenVdb() {
   static std::once_flag once;
@@ -81,6 +86,10 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
     return InvalidArgumentError("normal precision " + std::to_string(o.normal_bits) +
                                 " bits outside 8..16");
   if (o.threads < 0) return InvalidArgumentError("thread count must be >= 0 (0: all cores)");
+  if (o.memory_bytes != 0 && o.memory_bytes < kMinMemoryBytes)
+    return InvalidArgumentError("memory budget (--memory-mb) of " +
+                                std::to_string(o.memory_bytes >> 20) + " MiB is below the " +
+                                std::to_string(kMinMemoryBytes >> 20) + " MiB an ingest needs");
   if (o.isovalue && o.threshold)
     return InvalidArgumentError(
         "--isovalue (level sets) and --threshold (fog volumes) exclude each other");
@@ -101,7 +110,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
     return InvalidArgumentError(o.output + ": already exists; pass --force to replace it");
 
   Stopwatch t0;
-  VOX_RETURN_IF_ERROR(CheckVdbLayout(o.input));
+  VOX_ASSIGN_OR_RETURN(ingest_internal::VdbLayout layout, ingest_internal::ReadVdbLayout(o.input));
   InitOpenVdb();
   openvdb::io::File file(o.input);
   file.setCopyMaxBytes(0);  // read the file in place, no private copy
@@ -205,9 +214,24 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
       return UnsupportedError(cwhere + " has a non-linear transform");
   }
 
+  const ingest_internal::VdbLayout::Grid* grid_layout = nullptr;
+  for (const auto& g : layout.grids)
+    if (g.name == name) {
+      grid_layout = &g;
+      break;
+    }
+  if (!grid_layout)
+    return UnsupportedError(where + ": the file has no grid offsets (an OpenVDB stream or a "
+                            "file older than format 2.1.2); re-save it as a .vdb file");
+  uint64_t budget = o.memory_bytes;
+  if (budget == 0) {
+    VOX_ASSIGN_OR_RETURN(MemoryLimit limit, DetectMemoryLimit());
+    budget = limit.bytes;
+  }
+  cx.memory_budget = budget;
+  stats.memory_budget = budget;
   if (progress) progress->Message("reading the topology of " + where);
-  openvdb::GridBase::Ptr base = file.readGrid(name);
-  const openvdb::math::Transform& xform = base->transform();
+  const openvdb::math::Transform& xform = meta_grid->transform();
   std::unique_ptr<ColorSource> color;
   if (color_meta) {
     color = ingest_internal::NewColorSource(file.readGrid(o.color_grid), xform);
@@ -222,7 +246,8 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
   stats.threads = threads;
   tbb::task_arena arena(threads);
   Status s;
-  arena.execute([&] { s = ingest_internal::IngestGrid(*base, cx); });
+  const bool double_values = meta_grid->isType<openvdb::DoubleGrid>();
+  arena.execute([&] { s = ingest_internal::IngestGrid(layout, *grid_layout, double_values, cx); });
   if (!s.ok()) return s;
   stats.seconds_total = t_start.Seconds();
   if (progress) progress->Done();

@@ -1,6 +1,7 @@
 // vox::Ingest: reads one scalar grid of an OpenVDB file and writes it as a
-// vox store (storage/store.h), streaming brick region by brick region so the
-// peak memory stays far below the grid's.
+// vox store (storage/store.h), streaming brick by brick so the peak
+// memory stays far below the grid's: the topology is held as compact
+// per-leaf records (internal/vdb_topology.h), values decoded on demand.
 //
 // The occupancy rule: a level set voxel is occupied when it is active and its
 // value <= isovalue; a fog volume voxel when it is active and its density >
@@ -46,6 +47,10 @@ struct IngestOptions {
   int zstd_level = 3;
   int normal_bits = 16;     // per octahedral normal component, 8..16 (WriteOptions::normal_bits)
   int threads = 0;          // 0: all cores
+  // Bytes the ingest may hold; 0: the process's limit (its memory cgroup's,
+  // or MemAvailable: storage/memory_budget.h). Bricks in flight are sized
+  // to it; a grid whose tables alone exceed half of it is refused.
+  uint64_t memory_bytes = 0;
   bool force = false;       // replace an existing store
   std::string command_line; // recorded in the store's build_options
 };
@@ -60,9 +65,8 @@ struct IngestStats {
   uint64_t occupied_voxels = 0;
   uint64_t bricks = 0;
   uint64_t bbox_leaves_read = 0;    // leaves decoded to find the exact occupied bbox
-  // Leaves whose values ended up held by the tree (0 when the file was read
-  // with delayed loading: values are decoded into private copies and dropped).
-  uint64_t leaves_resident_in_tree = 0;
+  uint64_t topology_bytes = 0;      // the grid's compact topology and leaf tables
+  uint64_t memory_budget = 0;       // bytes the ingest sized itself to (0: no limit known)
   int threads = 0;
   double seconds_open = 0, seconds_bbox = 0, seconds_bricks = 0, seconds_finish = 0;
   double seconds_total = 0;

@@ -1,25 +1,24 @@
 // Brick extraction: the ingest of one float or double grid. See grid_ingest.h.
 //
-// How it streams. The file is opened with OpenVDB's delayed loading: reading
-// the grid loads its tree topology (nodes and active masks) but leaves every
-// leaf buffer on disk (memory-mapped) until a value is read. Values are only
-// ever read through private copies of leaf buffers (leaf_values.h), so the
-// tree itself stays topology-only for the whole ingest. Then:
-//  1. Topology pass: list the leaves with active voxels (and their node box) and
-//     the active tiles; no voxel values are read.
-//  2. Exact occupied bbox: scan the leaves from each of the 6 sides in order
+// How it streams. The grid's topology is read by CompactTopology
+// (vdb_topology.h): one pass over the file keeps a 24-byte record per leaf
+// (origin, active count, file offset) and the internal nodes' child masks and
+// tile values; no OpenVDB tree is built. Then:
+//  1. Exact occupied bbox: scan the leaves from each of the 6 sides in order
 //     of their node box until no further leaf can move the bound; each
 //     scanned leaf is decoded and dropped. Usually a few hundred leaves; all
 //     of them when nothing is occupied.
-//  3. Placement (origin, levels), the StoreWriter, and the brick map: brick
-//     coordinate -> the leaves and tiles that overlap it.
-//  4. Bricks go through a TBB pipeline: a parallel stage decodes the brick's
-//     leaves (and, for the gradient, the face neighbours it touches), builds
-//     its voxels (voxel_builder.h) in Morton order and hands them to the
-//     writer (which compresses in the calling thread); a serial in-order stage
-//     keeps the books. Peak memory: the topology + the bricks in flight (2 per
-//     thread). Leaves on a brick's faces are decoded by both bricks (a few %
-//     of CPU).
+//  2. Placement (origin, levels), the StoreWriter, and the brick map: one
+//     (brick key, leaf or tile) pair per overlap, sorted by brick in z, y, x
+//     order (16 bytes per leaf).
+//  3. Bricks go through a TBB pipeline: a serial stage gathers a brick's
+//     leaves and tiles from the sorted map; a parallel stage decodes them
+//     (and, for the gradient, the face neighbours it touches) from the file,
+//     builds its voxels (voxel_builder.h) in Morton order and hands them to
+//     the writer (which compresses in the calling thread); a serial in-order
+//     stage keeps the books. Bricks in flight are bounded by the memory
+//     budget (at most 2 per thread). Leaves on a brick's faces are decoded by
+//     both bricks (a few % of CPU).
 #include "core/stopwatch.h"
 #include "ingest/internal/grid_ingest.h"
 
@@ -28,6 +27,7 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <unordered_map>
 #include <vector>
@@ -36,7 +36,7 @@
 #include <tbb/task_arena.h>
 
 #include "core/octree.h"
-#include "ingest/internal/leaf_values.h"
+#include "ingest/internal/vdb_topology.h"
 #include "ingest/internal/voxel_builder.h"
 
 namespace vox::ingest_internal {
@@ -47,14 +47,14 @@ using openvdb::CoordBBox;
 
 std::string Quote(const std::string& s) { return "'" + s + "'"; }
 
-template <class GridT>
+template <class ValueT>
 class GridIngest {
  public:
-  using TreeT = typename GridT::TreeType;
-  using LeafT = typename TreeT::LeafNodeType;
-  using ValueT = typename GridT::ValueType;
+  using Topology = CompactTopology<ValueT>;
+  using Builder = BasicVoxelBuilder<TopologySource<ValueT>>;
 
-  GridIngest(GridT& grid, Context& cx) : grid_(grid), tree_(grid.tree()), cx_(cx) {}
+  GridIngest(const VdbLayout& layout, const VdbLayout::Grid& grid, Context& cx)
+      : layout_(layout), grid_(grid), cx_(cx) {}
 
   Status Run() {
     const bool level_set = cx_.meta.grid_class == GridClass::kLevelSet;
@@ -64,32 +64,30 @@ class GridIngest {
 
     // 1. Topology.
     Stopwatch t0;
-    uint64_t leaf_count = 0;
-    for (auto it = tree_.beginLeaf(); it; ++it) {
-      LeafT* leaf = it.getLeaf();
-      ++leaf_count;
-      if (leaf->isEmpty()) continue;  // no active voxel
-      LeafInfo li;
-      li.leaf = leaf;
-      li.active = leaf->getNodeBoundingBox();  // bounds the active voxels; no per-voxel scan
-      leaves_.push_back(li);
-    }
     {
-      auto it = tree_.cbeginValueOn();
-      it.setMaxDepth(TreeT::ValueOnCIter::LEAF_DEPTH - 1);  // tiles only
-      for (; it; ++it) {
-        if (!it.isTileValue()) continue;
-        ++cx_.stats->active_tiles;
-        if (!Occupied(*it)) continue;
-        CoordBBox b;
-        it.getBoundingBox(b);
-        tiles_.push_back({b, *it});
-        cx_.stats->occupied_tile_voxels += b.volume();
-      }
+      auto topology = Topology::Read(cx_.options.input, layout_, grid_);
+      if (!topology.ok()) return topology.status();
+      topo_ = std::move(topology).value();
+    }
+    const uint64_t leaf_count = topo_->leaves().size();
+    for (uint32_t i = 0; i < leaf_count; ++i)
+      if (topo_->leaves()[i].active) leaves_.push_back(i);  // leaves with active voxels
+    for (const auto& t : topo_->active_tiles()) {
+      ++cx_.stats->active_tiles;
+      if (!Occupied(t.value)) continue;
+      tiles_.push_back({t.box, t.value});
+      cx_.stats->occupied_tile_voxels += t.box.volume();
     }
     cx_.stats->leaf_nodes = leaf_count;
-    cx_.stats->active_voxels = tree_.activeVoxelCount();
+    cx_.stats->active_voxels = topo_->active_voxels();
+    cx_.stats->topology_bytes = topo_->MemoryBytes() + leaves_.capacity() * 4;
     cx_.stats->seconds_open += t0.Seconds();
+    if (cx_.memory_budget && cx_.stats->topology_bytes > cx_.memory_budget / 2)
+      return ResourceExhaustedError(
+          cx_.options.input + ": grid " + Quote(cx_.meta.grid_name) + " has " +
+          std::to_string(leaf_count) + " leaves whose tables take " +
+          std::to_string(cx_.stats->topology_bytes >> 20) + " MiB, more than half the memory "
+          "budget of " + std::to_string(cx_.memory_budget >> 20) + " MiB (--memory-mb)");
     Message("grid " + Quote(cx_.meta.grid_name) + ": " + std::to_string(leaf_count) +
             " leaf nodes, " + std::to_string(cx_.stats->active_tiles) + " active tiles, " +
             std::to_string(cx_.stats->active_voxels) + " active voxels");
@@ -140,9 +138,6 @@ class GridIngest {
       VOX_RETURN_IF_ERROR(WriteBricks(writer.get()));
     }
     cx_.stats->seconds_bricks = t0.Seconds();
-    // Streaming check: no leaf buffer was loaded into the tree itself.
-    for (auto it = tree_.cbeginLeaf(); it; ++it)
-      if (!it->buffer().isOutOfCore()) ++cx_.stats->leaves_resident_in_tree;
     t0.Restart();
     VOX_RETURN_IF_ERROR(writer->Finish());
     cx_.stats->seconds_finish = t0.Seconds();
@@ -150,12 +145,6 @@ class GridIngest {
   }
 
  private:
-  struct LeafInfo {
-    LeafT* leaf = nullptr;
-    CoordBBox active;    // bounds of its active voxels: the leaf's node box
-    int state = 0;       // 0: not decoded, 1: decoded
-    CoordBBox occupied;  // once decoded
-  };
   struct Tile {
     CoordBBox box;
     ValueT value;
@@ -172,19 +161,26 @@ class GridIngest {
     if (cx_.progress) cx_.progress->Message(m);
   }
 
-  // Decodes a leaf into a private buffer copy (the tree's leaf stays on disk).
-  void DecodeOccupied(LeafInfo& li) {
-    if (li.state) return;
-    LeafValues<LeafT> values;
-    const ValueT* d = values.Get(li.leaf);
-    const Coord o = li.leaf->origin();
-    for (auto m = li.leaf->getValueMask().beginOn(); m; ++m) {
+  // The node box of leaf i: bounds its active voxels.
+  CoordBBox NodeBox(uint32_t i) const {
+    return CoordBBox::createCube(topo_->leaves()[i].Origin(), 8);
+  }
+
+  // The occupied voxels' box of leaf i, decoded once.
+  const CoordBBox& DecodeOccupied(uint32_t i) {
+    auto [it, inserted] = occupied_.try_emplace(i);
+    if (!inserted) return it->second;
+    std::unique_ptr<ValueT[]> d(new ValueT[512]);
+    typename Topology::Mask mask;
+    topo_->ReadLeaf(i, d.get(), &mask, &scratch_);
+    const Coord o = topo_->leaves()[i].Origin();
+    for (auto m = mask.beginOn(); m; ++m) {
       openvdb::Index n = m.pos();
       if (!Occupied(d[n])) continue;
-      li.occupied.expand(o + Coord(int(n >> 6), int((n >> 3) & 7), int(n & 7)));
+      it->second.expand(o + Coord(int(n >> 6), int((n >> 3) & 7), int(n & 7)));
     }
-    li.state = 1;
     ++cx_.stats->bbox_leaves_read;
+    return it->second;
   }
 
   CoordBBox OccupiedBBox() {
@@ -197,23 +193,19 @@ class GridIngest {
       lo[a] = tiles_box.empty() ? kBig : tiles_box.min()[a];
       hi[a] = tiles_box.empty() ? -kBig : tiles_box.max()[a];
       for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
-      std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) {
-        return leaves_[x].active.min()[a] < leaves_[y].active.min()[a];
-      });
+      // Leaf origins along the axis, low to high (the node box is origin..origin+7).
+      auto org = [&](uint32_t x) { return topo_->leaves()[leaves_[x]].origin[a]; };
+      std::sort(order.begin(), order.end(),
+                [&](uint32_t x, uint32_t y) { return org(x) < org(y); });
       for (uint32_t i : order) {
-        LeafInfo& li = leaves_[i];
-        if (li.active.min()[a] >= lo[a]) break;
-        DecodeOccupied(li);
-        if (!li.occupied.empty()) lo[a] = std::min<int64_t>(lo[a], li.occupied.min()[a]);
+        if (org(i) >= lo[a]) break;
+        const CoordBBox& occ = DecodeOccupied(leaves_[i]);
+        if (!occ.empty()) lo[a] = std::min<int64_t>(lo[a], occ.min()[a]);
       }
-      std::sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) {
-        return leaves_[x].active.max()[a] > leaves_[y].active.max()[a];
-      });
-      for (uint32_t i : order) {
-        LeafInfo& li = leaves_[i];
-        if (li.active.max()[a] <= hi[a]) break;
-        DecodeOccupied(li);
-        if (!li.occupied.empty()) hi[a] = std::max<int64_t>(hi[a], li.occupied.max()[a]);
+      for (auto r = order.rbegin(); r != order.rend(); ++r) {
+        if (int64_t(org(*r)) + 7 <= hi[a]) break;
+        const CoordBBox& occ = DecodeOccupied(leaves_[*r]);
+        if (!occ.empty()) hi[a] = std::max<int64_t>(hi[a], occ.max()[a]);
       }
       if (lo[a] == kBig) return CoordBBox();  // nothing occupied anywhere
     }
@@ -241,16 +233,6 @@ class GridIngest {
       }
       return true;
     };
-    std::unordered_map<uint64_t, uint32_t> index;
-    auto brick = [&](int64_t x, int64_t y, int64_t z) -> BrickWork& {
-      uint64_t k = Key(x, y, z);
-      auto [it, inserted] = index.try_emplace(k, uint32_t(bricks_.size()));
-      if (inserted) {
-        bricks_.emplace_back();
-        bricks_.back().key = k;
-      }
-      return bricks_[it->second];
-    };
     int64_t lo[3], hi[3];
     // Bricks the occupied tiles cover: refuse counts a store cannot index.
     long double tile_bricks = 0;
@@ -263,31 +245,49 @@ class GridIngest {
           " has occupied active tiles covering " + std::to_string(double(tile_bricks)) +
           " bricks of " + std::to_string(int64_t(1) << B_) + "^3 voxels; vox expands tiles to "
           "voxels and cannot index that many");
-    for (uint32_t i = 0; i < leaves_.size(); ++i) {
-      if (!range(leaves_[i].active, lo, hi)) continue;
+    // (brick key, leaf index) and (brick key, tile index) pairs; the key's
+    // numeric order is z, y, x order of brick coordinates: neighbours stay close.
+    for (uint32_t i : leaves_) {
+      if (!range(NodeBox(i), lo, hi)) continue;
       for (int64_t z = lo[2]; z <= hi[2]; ++z)
         for (int64_t y = lo[1]; y <= hi[1]; ++y)
-          for (int64_t x = lo[0]; x <= hi[0]; ++x) brick(x, y, z).leaves.push_back(i);
+          for (int64_t x = lo[0]; x <= hi[0]; ++x) leaf_map_.push_back({Key(x, y, z), i});
     }
+    std::vector<uint32_t>().swap(leaves_);
     for (uint32_t i = 0; i < tiles_.size(); ++i) {
       if (!range(tiles_[i].box, lo, hi)) continue;
       for (int64_t z = lo[2]; z <= hi[2]; ++z)
         for (int64_t y = lo[1]; y <= hi[1]; ++y)
-          for (int64_t x = lo[0]; x <= hi[0]; ++x) brick(x, y, z).tiles.push_back(i);
+          for (int64_t x = lo[0]; x <= hi[0]; ++x) tile_map_.push_back({Key(x, y, z), i});
     }
-    // Bricks in z, y, x order of their coordinates: neighbours stay close.
-    std::sort(bricks_.begin(), bricks_.end(), [&](const BrickWork& p, const BrickWork& q) {
-      for (int a : {2, 1, 0}) {
-        int64_t u = KeyCoord(p.key, a), v = KeyCoord(q.key, a);
-        if (u != v) return u < v;
-      }
-      return false;
-    });
+    std::sort(leaf_map_.begin(), leaf_map_.end());
+    std::sort(tile_map_.begin(), tile_map_.end());
+    // Count the bricks.
+    size_t li = 0, ti = 0;
+    while (li < leaf_map_.size() || ti < tile_map_.size()) {
+      NextBrick(&li, &ti);
+      ++brick_count_;
+    }
     return OkStatus();
   }
 
+  // The brick at map positions *li, *ti (the smaller key of the two), whose
+  // entries it consumes.
+  BrickWork NextBrick(size_t* li, size_t* ti) const {
+    BrickWork bw;
+    const uint64_t kNone = ~uint64_t(0);
+    const uint64_t lk = *li < leaf_map_.size() ? leaf_map_[*li].first : kNone;
+    const uint64_t tk = *ti < tile_map_.size() ? tile_map_[*ti].first : kNone;
+    bw.key = std::min(lk, tk);
+    for (; *li < leaf_map_.size() && leaf_map_[*li].first == bw.key; ++*li)
+      bw.leaves.push_back(leaf_map_[*li].second);
+    for (; *ti < tile_map_.size() && tile_map_[*ti].first == bw.key; ++*ti)
+      bw.tiles.push_back(tile_map_[*ti].second);
+    return bw;
+  }
+
   // One brick's voxels in Morton order. Runs concurrently on many bricks;
-  // reads leaf values only through private decoded copies (leaf_values.h).
+  // decodes the leaves it needs from the file, then drops them.
   std::vector<BrickVoxel> ExtractBrick(const BrickWork& bw) {
     const int64_t size = int64_t(1) << B_;
     int64_t rmin[3], rmax[3];
@@ -297,7 +297,8 @@ class GridIngest {
     }
     std::vector<BrickVoxel> out;
     std::unique_ptr<ColorReader> color = cx_.color ? cx_.color->NewReader() : nullptr;
-    VoxelBuilder<GridT> builder(grid_, level_set_, color.get(), rmin);
+    Builder builder(*topo_, level_set_, color.get(), rmin);
+    auto& source = builder.source();
 
     // Fast path: bricks of at least 8^3 without tiles hold whole leaves
     // (the origin is aligned to the brick size); visiting the leaves in
@@ -308,19 +309,19 @@ class GridIngest {
       std::vector<LeafPoint> order(bw.leaves.size());  // leaf coordinates in the brick
       uint64_t expected = 0;
       for (size_t i = 0; i < bw.leaves.size(); ++i) {
-        const LeafT* leaf = leaves_[bw.leaves[i]].leaf;
-        const Coord o = leaf->origin();
-        order[i] = {uint64_t(o.x() - rmin[0]) >> 3, uint64_t(o.y() - rmin[1]) >> 3,
-                    uint64_t(o.z() - rmin[2]) >> 3, NodeRef(i)};
-        expected += leaf->onVoxelCount();
+        const auto& leaf = topo_->leaves()[bw.leaves[i]];
+        order[i] = {uint64_t(leaf.origin[0] - rmin[0]) >> 3,
+                    uint64_t(leaf.origin[1] - rmin[1]) >> 3,
+                    uint64_t(leaf.origin[2] - rmin[2]) >> 3, NodeRef(i)};
+        expected += leaf.active;
       }
       SortMorton(&order);
       out.reserve(size_t(expected));
       const auto& table = MortonLeafOrder();
       for (const LeafPoint& p : order) {
-        const LeafT* leaf = leaves_[bw.leaves[p.ref]].leaf;
+        const uint32_t leaf = bw.leaves[p.ref];
         builder.BeginLeaf(leaf);
-        const auto& mask = leaf->getValueMask();
+        const auto& mask = source.Mask(leaf);
         for (uint16_t n : table) {
           if (!mask.isOn(n)) continue;
           const ValueT v = builder.LeafValue(n);
@@ -329,11 +330,10 @@ class GridIngest {
       }
       return out;
     }
-    for (uint32_t li_index : bw.leaves) {
-      const LeafT* leaf = leaves_[li_index].leaf;
+    for (uint32_t leaf : bw.leaves) {
       builder.BeginLeaf(leaf);
-      const Coord o = leaf->origin();
-      for (auto m = leaf->getValueMask().beginOn(); m; ++m) {
+      const Coord o = source.Origin(leaf);
+      for (auto m = source.Mask(leaf).beginOn(); m; ++m) {
         const openvdb::Index n = m.pos();
         const int64_t x = int64_t(o.x()) + int(n >> 6), y = int64_t(o.y()) + int((n >> 3) & 7),
                       z = int64_t(o.z()) + int(n & 7);
@@ -392,8 +392,9 @@ class GridIngest {
     struct Item {
       size_t index = 0;
       size_t voxels = 0;
+      std::shared_ptr<BrickWork> work;
     };
-    const size_t total = bricks_.size();
+    const size_t total = brick_count_;
     Message("writing " + std::to_string(total) + " bricks of " + std::to_string(1 << B_) +
             "^3 voxels");
     std::atomic<bool> failed{false};
@@ -404,9 +405,9 @@ class GridIngest {
       if (first_error.ok()) first_error = std::move(s);
       failed.store(true);
     };
-    size_t next = 0, written = 0;
+    size_t next = 0, written = 0, li = 0, ti = 0;
     uint64_t voxels_done = 0;
-    const size_t tokens = size_t(std::max(2, 2 * tbb::this_task_arena::max_concurrency()));
+    const size_t tokens = BricksInFlight();
     tbb::parallel_pipeline(
         tokens,
         tbb::make_filter<void, Item>(
@@ -416,13 +417,14 @@ class GridIngest {
                 fc.stop();
                 return Item{};
               }
-              return Item{next++, 0};
+              return Item{next++, 0,
+                          std::make_shared<BrickWork>(NextBrick(&li, &ti))};
             }) &
             tbb::make_filter<Item, Item>(
                 tbb::filter_mode::parallel,
                 [&](Item it) -> Item {
                   if (failed.load()) return it;
-                  const BrickWork& bw = bricks_[it.index];
+                  const BrickWork& bw = *it.work;
                   try {
                     std::vector<BrickVoxel> voxels = ExtractBrick(bw);
                     it.voxels = voxels.size();
@@ -444,6 +446,7 @@ class GridIngest {
                   } catch (const std::exception& e) {
                     fail(InternalError(cx_.options.input + ": " + e.what()));
                   }
+                  it.work.reset();
                   return it;
                 }) &
             tbb::make_filter<Item, void>(
@@ -459,26 +462,49 @@ class GridIngest {
     return OkStatus();
   }
 
-  GridT& grid_;
-  TreeT& tree_;
+  // Bricks in flight: 2 per thread, fewer when the memory budget left after
+  // the tables cannot hold them. A brick's worst case: its voxels twice
+  // (built, then sorted or encoded), its decoded leaves and their face
+  // neighbours, and the writer's encode and compress buffers.
+  size_t BricksInFlight() const {
+    const int threads = tbb::this_task_arena::max_concurrency();
+    size_t tokens = size_t(std::max(2, 2 * threads));
+    if (cx_.memory_budget == 0) return tokens;
+    const uint64_t side = uint64_t(1) << B_;
+    const uint64_t voxels = side * side * side;
+    const uint64_t leaves = std::max<uint64_t>(1, voxels / 512) * 2 + 8;
+    const uint64_t per_brick = voxels * (2 * sizeof(BrickVoxel) + 16) +
+                               leaves * (sizeof(ValueT) * 512 + 128);
+    const uint64_t fixed = cx_.stats->topology_bytes +
+                           (leaf_map_.capacity() + tile_map_.capacity()) * 16 + kProcessBase;
+    const uint64_t left = cx_.memory_budget > fixed ? cx_.memory_budget - fixed : 0;
+    tokens = std::min<size_t>(tokens, size_t(left / per_brick));
+    return std::max<size_t>(tokens, 1);
+  }
+  // Code, libraries, OpenVDB's registries, thread stacks, allocator arenas.
+  static constexpr uint64_t kProcessBase = uint64_t(64) << 20;
+
+  const VdbLayout& layout_;
+  const VdbLayout::Grid& grid_;
   Context& cx_;
+  std::unique_ptr<Topology> topo_;
   bool level_set_ = true;
   ValueT iso_{}, threshold_{};
-  std::vector<LeafInfo> leaves_;  // leaves with active voxels
+  std::vector<uint32_t> leaves_;  // leaves with active voxels (until the brick map)
+  std::unordered_map<uint32_t, CoordBBox> occupied_;  // leaves decoded for the bbox
+  std::vector<char> scratch_;
   std::vector<Tile> tiles_;       // occupied active tiles
   int B_ = 0;
   int64_t origin_[3] = {0, 0, 0};
-  std::vector<BrickWork> bricks_;
+  std::vector<std::pair<uint64_t, uint32_t>> leaf_map_, tile_map_;  // (brick key, index)
+  size_t brick_count_ = 0;
 };
 }  // namespace
 
-Status IngestGrid(openvdb::GridBase& grid, Context& cx) {
-  if (auto* fg = dynamic_cast<openvdb::FloatGrid*>(&grid))
-    return GridIngest<openvdb::FloatGrid>(*fg, cx).Run();
-  if (auto* dg = dynamic_cast<openvdb::DoubleGrid*>(&grid))
-    return GridIngest<openvdb::DoubleGrid>(*dg, cx).Run();
-  return InternalError("grid " + Quote(cx.meta.grid_name) + " in " + cx.options.input +
-                       ": grid type changed between metadata and read");
+Status IngestGrid(const VdbLayout& layout, const VdbLayout::Grid& grid, bool double_values,
+                  Context& cx) {
+  if (double_values) return GridIngest<double>(layout, grid, cx).Run();
+  return GridIngest<float>(layout, grid, cx).Run();
 }
 
 }  // namespace vox::ingest_internal

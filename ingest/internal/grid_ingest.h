@@ -1,5 +1,5 @@
 // Brick extraction: the ingest of one float or double grid whose metadata
-// ingest.cpp has read and checked. Lists the topology, finds the exact
+// ingest.cpp has read and checked. Reads its compact topology, finds the exact
 // occupied bbox, places the grid (ingest/placement.h), creates the writer and
 // streams the bricks through it (see grid_ingest.cpp for how). Private to
 // ingest and its tests.
@@ -14,6 +14,7 @@
 #include "core/status.h"
 #include "ingest/ingest.h"
 #include "ingest/internal/color.h"
+#include "ingest/internal/vdb_layout.h"
 
 namespace vox::ingest_internal {
 
@@ -25,11 +26,14 @@ struct Context {
   LevelsChoice choice;
   StoreMeta meta;  // source, grid, class, transform, options filled in by the caller
   ColorSource* color = nullptr;
+  uint64_t memory_budget = 0;  // bytes the ingest may hold (0: no limit known)
 };
 
-// Ingests `grid` (a FloatGrid or DoubleGrid, read with delayed loading) into
-// a store made by cx.factory; fills cx.meta's placement and cx.stats.
-Status IngestGrid(openvdb::GridBase& grid, Context& cx);
+// Ingests `grid` of the file cx.options.input (whose layout is `layout`; a
+// FloatGrid, or a DoubleGrid when `double_values`) into a store made by
+// cx.factory; fills cx.meta's placement and cx.stats.
+Status IngestGrid(const VdbLayout& layout, const VdbLayout::Grid& grid, bool double_values,
+                  Context& cx);
 
 }  // namespace vox::ingest_internal
 

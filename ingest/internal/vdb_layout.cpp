@@ -66,7 +66,10 @@ class LayoutReader {
 
 }  // namespace
 
-Status CheckVdbLayout(const std::string& path) {
+Status CheckVdbLayout(const std::string& path) { return ReadVdbLayout(path).status(); }
+
+StatusOr<VdbLayout> ReadVdbLayout(const std::string& path) {
+  VdbLayout layout;
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return IoError(path + ": " + std::strerror(errno));
   struct Closer {
@@ -84,9 +87,12 @@ Status CheckVdbLayout(const std::string& path) {
   VOX_RETURN_IF_ERROR(r.Read(&version, 4, "file version"));
   if (version < 211) {
     VOX_RETURN_IF_ERROR(r.Skip(8, "file version"));
-    return OkStatus();  // pre-2.1.1 files: left to OpenVDB
+    layout.file_version = version;
+    return layout;  // pre-2.1.1 files: left to OpenVDB
   }
-  VOX_RETURN_IF_ERROR(r.Skip(8, "library version"));
+  layout.file_version = version;
+  VOX_RETURN_IF_ERROR(r.Read(&layout.library_major, 4, "library version"));
+  VOX_RETURN_IF_ERROR(r.Read(&layout.library_minor, 4, "library version"));
   char has_offsets = 1;
   if (version >= 212) VOX_RETURN_IF_ERROR(r.Read(&has_offsets, 1, "grid offsets flag"));
   if (version >= 220 && version < 222) VOX_RETURN_IF_ERROR(r.Skip(1, "compression flag"));
@@ -101,7 +107,8 @@ Status CheckVdbLayout(const std::string& path) {
     VOX_RETURN_IF_ERROR(r.String(&s, "file metadata type"));
     VOX_RETURN_IF_ERROR(r.String(&s, "file metadata value"));
   }
-  if (!has_offsets) return OkStatus();  // a stream without offsets: left to OpenVDB
+  if (!has_offsets) return layout;
+  layout.has_offsets = true;  // a stream without offsets: left to OpenVDB
   int32_t grids = 0;
   VOX_RETURN_IF_ERROR(r.Read(&grids, 4, "grid count"));
   if (grids < 0 || uint64_t(grids) > r.size()) return r.Truncated("grid count");
@@ -109,7 +116,12 @@ Status CheckVdbLayout(const std::string& path) {
     std::string name;
     VOX_RETURN_IF_ERROR(r.String(&name, "grid name"));
     VOX_RETURN_IF_ERROR(r.String(&s, "grid type"));
-    if (version >= 216) VOX_RETURN_IF_ERROR(r.String(&s, "instance parent name"));
+    VdbLayout::Grid grid;
+    grid.name = GridDescriptorName(name);
+    if (version >= 216) {
+      VOX_RETURN_IF_ERROR(r.String(&s, "instance parent name"));
+      grid.instance = !s.empty();
+    }
     int64_t pos[3];
     VOX_RETURN_IF_ERROR(r.Read(pos, sizeof pos, "grid offsets"));
     if (pos[0] < int64_t(r.pos()) || pos[1] < pos[0] || pos[2] < pos[1] ||
@@ -118,9 +130,13 @@ Status CheckVdbLayout(const std::string& path) {
                              Quote(GridDescriptorName(name)) + " spans bytes " +
                              std::to_string(pos[0]) + ".." + std::to_string(pos[2]) +
                              " of a " + std::to_string(r.size()) + "-byte file");
+    grid.grid_pos = uint64_t(pos[0]);
+    grid.block_pos = uint64_t(pos[1]);
+    grid.end_pos = uint64_t(pos[2]);
+    layout.grids.push_back(grid);
     VOX_RETURN_IF_ERROR(r.Seek(uint64_t(pos[2]), "next grid descriptor"));
   }
-  return OkStatus();
+  return layout;
 }
 
 }  // namespace vox::ingest_internal

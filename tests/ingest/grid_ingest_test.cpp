@@ -1,8 +1,8 @@
 // Brick extraction (ingest/internal/grid_ingest.h) driven directly: the
 // bricks handed to the writer hold exactly the voxels OpenVDB reports active
 // and occupied (tiles expanded), each brick's voxels strictly in Morton order
-// (the writer relies on it and does not sort again), on the leaf-only fast
-// path, the mixed leaf-and-tile path and bricks smaller than a leaf.
+// (the writer relies on it and does not sort again), read from the file's
+// compact topology, on the leaf-only fast path, the mixed leaf-and-tile path and bricks smaller than a leaf.
 #include <map>
 #include <string>
 
@@ -32,10 +32,9 @@ class GridIngestTest : public ::testing::Test {
     SCOPED_TRACE("levels " + levels);
     const std::string path = dir_.File("g.vdb");
     testutil::WriteVdb(path, {g});
-    openvdb::io::File file(path);
-    file.open(true);
-    auto loaded = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(g->getName()));
-    ASSERT_TRUE(loaded);
+    auto layout = ingest_internal::ReadVdbLayout(path);
+    ASSERT_TRUE(layout.ok()) << layout.status().ToString();
+    ASSERT_EQ(layout->grids.size(), 1u);
     IngestOptions o;
     o.input = path;
     o.output = dir_.File("unused");
@@ -48,10 +47,10 @@ class GridIngestTest : public ::testing::Test {
     cx.meta.grid_name = g->getName();
     cx.meta.grid_class = GridClass::kLevelSet;
     cx.meta.has_normal = true;
-    Status s = IngestGrid(*loaded, cx);
+    Status s = IngestGrid(*layout, layout->grids[0], /*double_values=*/false, cx);
     ASSERT_TRUE(s.ok()) << s.ToString();
     EXPECT_TRUE(store_.finished);
-    EXPECT_EQ(stats_.leaves_resident_in_tree, 0u);
+    EXPECT_EQ(stats_.leaf_nodes, g->tree().leafCount());
 
     // OpenVDB's answer: every active voxel with value <= 0, tiles expanded.
     std::map<Ijk, bool> want;

@@ -88,6 +88,23 @@ TEST_F(IngestToolTest, UsageErrors) {
   EXPECT_FALSE(std::filesystem::exists(out));
 }
 
+TEST_F(IngestToolTest, BadMemoryBudgetsNameTheFlagAndLeaveNoStore) {
+  std::string out = dir_.File("m");
+  for (const std::string& v : {"", "abc", "0", "-5", "12Q", "0.5"}) {
+    Result r = RunTool(vdb_ + " " + out + " --quiet --memory-mb" + (v.empty() ? "" : " " + v));
+    EXPECT_EQ(r.exit_code, 2) << v << "\n" << r.output;
+    EXPECT_NE(r.output.find("--memory-mb"), std::string::npos) << r.output;
+  }
+  // Parsed, but below what an ingest needs: the ingest refuses it.
+  Result r = RunTool(vdb_ + " " + out + " --quiet --memory-mb 8");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--memory-mb"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(out));
+  r = RunTool(vdb_ + " " + out + " --quiet --memory-mb 256");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(std::filesystem::exists(out));
+}
+
 // --normal-bits 12 against the default 16 on a level set large enough that
 // attributes, not headers, make up the bricks file: the same voxels, normals
 // within the two precisions' documented errors of each other (storage/FORMAT.md:

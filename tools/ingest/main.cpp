@@ -1,7 +1,7 @@
 // vox-ingest: reads an OpenVDB grid and writes a vox store.
 //   vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]
 //              [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B] [--threads N]
-//              [--force] [--quiet]
+//              [--memory-mb N] [--force] [--quiet]
 // Exit codes: 0 done, 1 the ingest failed, 2 bad command line, 128+N killed
 // by signal N (SIGINT, SIGTERM: the temporary store directory is removed).
 #include <pthread.h>
@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "ingest/ingest.h"
+#include "storage/memory_budget.h"
 #include "tools/common/flags.h"
 
 namespace {
@@ -25,7 +26,7 @@ namespace {
 constexpr char kUsage[] =
     "usage: vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]\n"
     "                  [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B]\n"
-    "                  [--threads N] [--force] [--quiet]\n"
+    "                  [--threads N] [--memory-mb N] [--force] [--quiet]\n"
     "  --grid NAME      the grid to ingest (default: the first float or double grid)\n"
     "  --levels         auto (32^3 bricks) or N1+N2: N1 resident levels above bricks of\n"
     "                   N2 levels (2^N2 voxels per axis); each at most 20, N1+N2 at most 40\n"
@@ -36,6 +37,8 @@ constexpr char kUsage[] =
     "  --normal-bits B  level sets: bits per octahedral normal component, 8..16 (default 16,\n"
     "                   max error 0.004 degrees; 12: 0.06 degrees and a smaller store)\n"
     "  --threads N      worker threads (default: all cores)\n"
+    "  --memory-mb N    memory the ingest may hold, MiB or with a unit (512, 2G; default: the\n"
+    "                   process's memory cgroup limit or available memory)\n"
     "  --force          replace an existing store\n"
     "  --quiet          no progress output\n";
 
@@ -125,11 +128,16 @@ static int RunTool(int argc, char** argv) {
     } else if (a == "--quiet") {
       quiet = true;
     } else if (a == "--grid" || a == "--levels" || a == "--isovalue" || a == "--threshold" ||
-               a == "--color" || a == "--zstd-level" || a == "--normal-bits" || a == "--threads") {
+               a == "--color" || a == "--zstd-level" || a == "--normal-bits" || a == "--threads" ||
+               a == "--memory-mb") {
       const std::string flag = a;
       const std::optional<std::string> v = flags.Value();
       if (!v) return UsageError(flag + " needs a value");
-      if (flag == "--grid") {
+      if (flag == "--memory-mb") {
+        auto bytes = vox::ParseMemorySize("--memory-mb", *v);
+        if (!bytes.ok()) return UsageError(bytes.status().message());
+        o.memory_bytes = *bytes;
+      } else if (flag == "--grid") {
         o.grid_name = *v;
       } else if (flag == "--levels") {
         o.levels = *v;
