@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 
 namespace vox {
@@ -118,6 +119,49 @@ class MmapFile : public RandomAccessFile {
   bool check_;
 };
 
+class PreadFile : public RandomAccessFile {
+ public:
+  PreadFile(std::string path, int fd, uint64_t size)
+      : path_(std::move(path)), fd_(fd), size_(size) {}
+  ~PreadFile() override { close(fd_); }
+  const std::string& path() const override { return path_; }
+  uint64_t size() const override { return size_; }
+
+  Status Read(uint64_t offset, size_t n, uint8_t* scratch) const override {
+    if (offset > size_ || n > size_ - offset) return RangeError(path_, offset, n, size_);
+    size_t done = 0;
+    while (done < n) {
+      ssize_t r = pread(fd_, scratch + done, n - done, off_t(offset + done));
+      if (r < 0) {
+        if (errno == EINTR) continue;
+        return ErrnoError("cannot read bytes [" + std::to_string(offset) + ", " +
+                              std::to_string(offset + n) + ") of",
+                          path_, errno);
+      }
+      if (r == 0) {  // end of file before the end of a range inside size(): it shrank
+        auto now = CurrentSize();
+        return IoError("'" + path_ + "' shrank from " + std::to_string(size_) + " to " +
+                       (now.ok() ? std::to_string(*now) : std::string("?")) +
+                       " bytes while open (needed bytes up to " + std::to_string(offset + n) +
+                       ")");
+      }
+      done += size_t(r);
+    }
+    return OkStatus();
+  }
+
+  StatusOr<uint64_t> CurrentSize() const override {
+    struct stat st;
+    if (fstat(fd_, &st) != 0) return ErrnoError("cannot stat", path_, errno);
+    return uint64_t(st.st_size);
+  }
+
+ private:
+  std::string path_;
+  int fd_;
+  uint64_t size_;
+};
+
 class MemoryFile : public RandomAccessFile {
  public:
   MemoryFile(std::string name, std::string contents)
@@ -138,6 +182,24 @@ class MemoryFile : public RandomAccessFile {
 
 }  // namespace
 
+StatusOr<uint64_t> ProcessIoBytes() {
+  FILE* f = std::fopen("/proc/self/io", "re");
+  if (f == nullptr)
+    return UnsupportedError("cannot open '/proc/self/io': " + std::string(std::strerror(errno)));
+  char line[256];
+  unsigned long long v = 0;
+  bool found = false;
+  while (std::fgets(line, sizeof(line), f) != nullptr) {
+    if (std::sscanf(line, "read_bytes: %llu", &v) == 1) {
+      found = true;
+      break;
+    }
+  }
+  std::fclose(f);
+  if (!found) return UnsupportedError("'/proc/self/io' has no read_bytes line");
+  return uint64_t(v);
+}
+
 Status ErrnoError(const std::string& what, const std::string& path, int err) {
   std::string m = what + " '" + path + "': " + std::strerror(err);
   if (err == ENOSPC || err == EDQUOT || err == EFBIG) return ResourceExhaustedError(m);
@@ -145,20 +207,40 @@ Status ErrnoError(const std::string& what, const std::string& path, int err) {
   return IoError(m);
 }
 
-StatusOr<std::unique_ptr<RandomAccessFile>> OpenMmapFile(const std::string& path,
-                                                         bool check_size_each_read) {
+namespace {
+// Opens a regular file read-only; its fd and stat.
+Status OpenRegular(const std::string& path, int* fd_out, struct stat* st) {
   int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) return ErrnoError("cannot open", path, errno);
-  struct stat st;
-  if (fstat(fd, &st) != 0) {
+  if (fstat(fd, st) != 0) {
     int err = errno;
     close(fd);
     return ErrnoError("cannot stat", path, err);
   }
-  if (!S_ISREG(st.st_mode)) {
+  if (!S_ISREG(st->st_mode)) {
     close(fd);
     return IoError("'" + path + "' is not a regular file");
   }
+  *fd_out = fd;
+  return OkStatus();
+}
+}  // namespace
+
+StatusOr<std::unique_ptr<RandomAccessFile>> OpenPreadFile(const std::string& path,
+                                                          bool random_access) {
+  int fd = -1;
+  struct stat st;
+  VOX_RETURN_IF_ERROR(OpenRegular(path, &fd, &st));
+  if (random_access) posix_fadvise(fd, 0, 0, POSIX_FADV_RANDOM);  // a hint: failure is harmless
+  return std::unique_ptr<RandomAccessFile>(new PreadFile(path, fd, uint64_t(st.st_size)));
+}
+
+StatusOr<std::unique_ptr<RandomAccessFile>> OpenMmapFile(const std::string& path,
+                                                         bool check_size_each_read,
+                                                         bool random_access) {
+  int fd = -1;
+  struct stat st;
+  VOX_RETURN_IF_ERROR(OpenRegular(path, &fd, &st));
   const uint8_t* base = nullptr;
   if (st.st_size > 0) {
     void* p = mmap(nullptr, size_t(st.st_size), PROT_READ, MAP_SHARED, fd, 0);
@@ -168,6 +250,7 @@ StatusOr<std::unique_ptr<RandomAccessFile>> OpenMmapFile(const std::string& path
       return ErrnoError("cannot mmap", path, err);
     }
     base = static_cast<const uint8_t*>(p);
+    if (random_access) madvise(p, size_t(st.st_size), MADV_RANDOM);  // a hint
   }
   InstallBusHandler();
   return std::unique_ptr<RandomAccessFile>(

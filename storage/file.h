@@ -1,6 +1,7 @@
-// The file layer under vox's store: read-only random access files (memory
-// mapped, in memory, and a fault-injecting wrapper for tests) and an
-// append-only writable file. Every error names the file.
+// The file layer under vox's store: read-only random access files (read
+// with pread, memory mapped, in memory, and a fault-injecting wrapper for
+// tests), an append-only writable file, and the process's disk read counter.
+// Every error names the file.
 //
 // Thread safety: RandomAccessFile::Read and CurrentSize are thread-safe.
 // A WritableFile is used by one thread at a time. FaultInjectionFile's
@@ -32,12 +33,25 @@ class RandomAccessFile {
   virtual StatusOr<uint64_t> CurrentSize() const { return size(); }
 };
 
+// Opens `path` for reads with pread(2): a read costs the pages it covers and
+// nothing more (no page-fault read-around, which on a disk with a large
+// read_ahead_kb turns each small brick read into megabytes). A file that
+// shrank underneath gives IoError naming the file (a short read is checked
+// against fstat). `random_access` also tells the kernel not to read ahead
+// (posix_fadvise RANDOM); by default its heuristics still read ahead for
+// sequential runs of reads.
+StatusOr<std::unique_ptr<RandomAccessFile>> OpenPreadFile(const std::string& path,
+                                                          bool random_access = false);
+
 // Maps `path` read-only. Reads copy out of the mapping under a SIGBUS guard:
 // a file truncated under a running process gives IoError naming the file,
 // never an unexplained SIGBUS. `check_size_each_read` also fstat()s before
 // each read, for a precise message (tests turn it off to reach the guard).
+// `random_access` sets madvise(MADV_RANDOM) on the mapping (faults read
+// single pages instead of reading around).
 StatusOr<std::unique_ptr<RandomAccessFile>> OpenMmapFile(const std::string& path,
-                                                         bool check_size_each_read = true);
+                                                         bool check_size_each_read = true,
+                                                         bool random_access = false);
 
 // A file held in memory, named `name` in messages.
 std::unique_ptr<RandomAccessFile> NewMemoryFile(std::string name, std::string contents);
@@ -98,6 +112,12 @@ class WritableFile {
 
 // fsyncs a directory, so that renames and creations in it are durable.
 Status SyncDir(const std::string& dir);
+
+// Bytes this process has caused to be read from storage (the read_bytes
+// line of /proc/self/io: page-cache misses, whatever read them; reads served
+// from the page cache are not counted). Unavailable (Unsupported) where the
+// kernel has no per-task I/O accounting.
+StatusOr<uint64_t> ProcessIoBytes();
 
 // "<what> '<path>': <strerror(err)>" as an IoError (ResourceExhausted for
 // ENOSPC/EDQUOT/EFBIG, NotFound for ENOENT).

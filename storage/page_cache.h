@@ -3,6 +3,8 @@
 // a missing key wait for one load instead of each loading it. A returned
 // shared_ptr pins its value: eviction drops only the cache's reference, so
 // a pinned value stays valid (and outside the budget) until released.
+// Values inserted ahead of need (InsertPrefetched) are marked until first
+// asked for, so prefetch hits and prefetched bytes not yet used are known.
 //
 // Thread safety: every member is thread-safe. The loader runs without the
 // cache's lock held and must not call back into the same key.
@@ -31,6 +33,9 @@ struct PageCacheCounters {
   uint64_t charge = 0;     // bytes held now
   uint64_t capacity = 0;
   uint64_t entries = 0;
+  uint64_t prefetched = 0;       // values inserted by InsertPrefetched
+  uint64_t prefetch_hits = 0;    // of those, asked for before eviction
+  uint64_t prefetch_unused = 0;  // bytes of prefetched values not yet asked for
 };
 
 template <class V>
@@ -92,10 +97,32 @@ class PageCache {
     InsertLocked(key, std::move(value), charge);
   }
 
+  // Caches a value loaded ahead of need, unless `key` is cached or being
+  // loaded already (a loader's value is fresher). Returns whether inserted.
+  bool InsertPrefetched(uint64_t key, Value value, size_t charge) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (map_.count(key) != 0 || flights_.count(key) != 0) return false;
+    InsertLocked(key, std::move(value), charge, /*prefetched=*/true);
+    ++counters_.prefetched;
+    return true;
+  }
+
+  // Whether `key` is cached or being loaded; counts nothing, moves nothing.
+  bool Contains(uint64_t key) const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return map_.count(key) != 0 || flights_.count(key) != 0;
+  }
+
   void Erase(uint64_t key) {
     std::lock_guard<std::mutex> lock(mu_);
     auto it = map_.find(key);
     if (it != map_.end()) RemoveLocked(it);
+  }
+
+  // Bytes of prefetched values not yet asked for.
+  size_t PrefetchUnused() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return prefetch_unused_;
   }
 
   size_t TotalCharge() const {
@@ -110,6 +137,7 @@ class PageCache {
     c.charge = usage_;
     c.capacity = capacity_;
     c.entries = map_.size();
+    c.prefetch_unused = prefetch_unused_;
     return c;
   }
 
@@ -118,6 +146,7 @@ class PageCache {
     Value value;
     size_t charge = 0;
     std::list<uint64_t>::iterator lru;
+    bool prefetched = false;  // inserted ahead of need and not asked for yet
   };
   struct Flight {
     bool done = false;
@@ -130,21 +159,28 @@ class PageCache {
     if (it == map_.end()) return nullptr;
     lru_.splice(lru_.begin(), lru_, it->second.lru);
     ++counters_.hits;
+    if (it->second.prefetched) {
+      it->second.prefetched = false;
+      prefetch_unused_ -= it->second.charge;
+      ++counters_.prefetch_hits;
+    }
     return it->second.value;
   }
 
   void RemoveLocked(typename std::unordered_map<uint64_t, Entry>::iterator it) {
     usage_ -= it->second.charge;
+    if (it->second.prefetched) prefetch_unused_ -= it->second.charge;
     lru_.erase(it->second.lru);
     map_.erase(it);
   }
 
-  void InsertLocked(uint64_t key, Value value, size_t charge) {
+  void InsertLocked(uint64_t key, Value value, size_t charge, bool prefetched = false) {
     auto it = map_.find(key);
     if (it != map_.end()) RemoveLocked(it);
     lru_.push_front(key);
-    map_.emplace(key, Entry{std::move(value), charge, lru_.begin()});
+    map_.emplace(key, Entry{std::move(value), charge, lru_.begin(), prefetched});
     usage_ += charge;
+    if (prefetched) prefetch_unused_ += charge;
     while (usage_ > capacity_ && !lru_.empty()) {
       RemoveLocked(map_.find(lru_.back()));
       ++counters_.evictions;
@@ -158,6 +194,7 @@ class PageCache {
   std::list<uint64_t> lru_;  // front: most recently used
   std::unordered_map<uint64_t, std::shared_ptr<Flight>> flights_;
   size_t usage_ = 0;
+  size_t prefetch_unused_ = 0;
   PageCacheCounters counters_;
 };
 
@@ -191,6 +228,15 @@ class ShardedPageCache {
     Shard(key).Insert(key, std::move(value), charge);
   }
   void Erase(uint64_t key) { Shard(key).Erase(key); }
+  bool InsertPrefetched(uint64_t key, Value value, size_t charge) {
+    return Shard(key).InsertPrefetched(key, std::move(value), charge);
+  }
+  bool Contains(uint64_t key) const { return Shard(key).Contains(key); }
+  size_t PrefetchUnused() const {
+    size_t t = 0;
+    for (const auto& s : shards_) t += s->PrefetchUnused();
+    return t;
+  }
 
   size_t TotalCharge() const {
     size_t t = 0;
@@ -210,13 +256,16 @@ class ShardedPageCache {
       t.evictions += c.evictions;
       t.charge += c.charge;
       t.entries += c.entries;
+      t.prefetched += c.prefetched;
+      t.prefetch_hits += c.prefetch_hits;
+      t.prefetch_unused += c.prefetch_unused;
     }
     t.capacity = capacity_;
     return t;
   }
 
  private:
-  PageCache<V>& Shard(uint64_t key) {
+  PageCache<V>& Shard(uint64_t key) const {
     // Neighbouring keys (bricks close in Morton order) land in different shards.
     uint64_t h = key * 0x9E3779B97F4A7C15ull;
     return *shards_[(h >> 32) % shards_.size()];

@@ -1,11 +1,17 @@
 // Store::Open and the store reader: checks every block of the index at open,
-// then serves bricks from the mapped brick file through the page cache.
+// then serves bricks from the brick file through the page cache, and reads
+// requested bricks ahead on an I/O thread (Prefetch).
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <atomic>
-#include <exception>
-#include <new>
+#include <condition_variable>
 #include <cstring>
+#include <deque>
+#include <exception>
+#include <mutex>
+#include <new>
+#include <thread>
 
 #include <zstd.h>
 
@@ -32,6 +38,15 @@ class StoreImpl : public Store {
  public:
   StoreImpl(std::string dir, const OpenOptions& options)
       : dir_(std::move(dir)), options_(options), cache_(options.cache_bytes) {}
+  ~StoreImpl() override {
+    {
+      std::lock_guard<std::mutex> lock(pf_mu_);
+      pf_stop_ = true;
+    }
+    pf_generation_.fetch_add(1);
+    pf_cv_.notify_all();
+    if (pf_thread_.joinable()) pf_thread_.join();
+  }
 
   Status Load(std::unique_ptr<RandomAccessFile> index, std::unique_ptr<RandomAccessFile> bricks);
 
@@ -73,10 +88,25 @@ class StoreImpl : public Store {
     s.bytes_decompressed = bytes_decompressed_.load(std::memory_order_relaxed);
     s.bytes_resident = c.charge;
     s.capacity = c.capacity;
+    s.prefetched = c.prefetched;
+    s.prefetch_hits = c.prefetch_hits;
+    s.prefetch_dropped = pf_dropped_.load(std::memory_order_relaxed);
+    s.prefetch_failed = pf_failed_.load(std::memory_order_relaxed);
+    s.bytes_read = bytes_read_.load(std::memory_order_relaxed);
+    auto io = ProcessIoBytes();
+    s.process_read_bytes = io.ok() ? *io : 0;
     return s;
   }
 
   std::string description() const override { return dir_; }
+
+  void Prefetch(std::span<const uint32_t> brick_ids) override;
+  void CancelPrefetch() override {
+    std::lock_guard<std::mutex> lock(pf_mu_);
+    pf_dropped_.fetch_add(pf_queue_.size(), std::memory_order_relaxed);
+    pf_queue_.clear();
+    pf_generation_.fetch_add(1);  // the batch in progress stops at its next run
+  }
 
   uint64_t resident_bytes() const override {
     return top_.size() * sizeof(Cell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
@@ -108,6 +138,10 @@ class StoreImpl : public Store {
   }
 
   StatusOr<std::shared_ptr<DecodedBrick>> LoadBrick(uint32_t id);
+  // Checks and decodes brick `id` from its record (stored_size + trailer bytes).
+  StatusOr<std::shared_ptr<DecodedBrick>> DecodeRecord(uint32_t id, const uint8_t* record);
+  void PrefetchLoop();
+  void PrefetchBatch(std::vector<uint32_t> ids);
 
   StatusOr<VoxelAttributes> BrickAttributes(const DecodedBrick& b, uint32_t brick,
                                             uint32_t payload) const {
@@ -129,42 +163,173 @@ class StoreImpl : public Store {
   std::unique_ptr<RandomAccessFile> bricks_;
   ShardedPageCache<DecodedBrick> cache_;
   std::atomic<uint64_t> bytes_decompressed_{0};
+  std::atomic<uint64_t> bytes_read_{0};
+
+  // Prefetch: requests queue under pf_mu_; one I/O thread, started by the
+  // first Prefetch, serves them until the store closes.
+  std::mutex pf_mu_;
+  std::condition_variable pf_cv_;
+  std::deque<uint32_t> pf_queue_;
+  bool pf_stop_ = false;
+  std::thread pf_thread_;
+  std::atomic<uint64_t> pf_generation_{0};  // bumped by CancelPrefetch and close
+  std::atomic<uint64_t> pf_dropped_{0}, pf_failed_{0};
 };
 
+// Queue bound, and how reads of neighbouring bricks merge: a gap up to
+// kMaxGap joins the run while the run's gap bytes stay under half its brick
+// bytes (plus a page), so a run never reads more than 1.5x what it needs.
+constexpr size_t kMaxPrefetchQueue = size_t(1) << 16;
+constexpr size_t kPrefetchBatch = 4096;
+constexpr uint64_t kMaxGap = 32 << 10;
+constexpr uint64_t kMaxRun = 4 << 20;
+
+void StoreImpl::Prefetch(std::span<const uint32_t> brick_ids) {
+  if (brick_ids.empty() || table_.empty()) return;
+  {
+    std::lock_guard<std::mutex> lock(pf_mu_);
+    if (pf_stop_) return;
+    if (!pf_thread_.joinable()) pf_thread_ = std::thread([this] { PrefetchLoop(); });
+    for (uint32_t id : brick_ids)
+      if (id < table_.size()) pf_queue_.push_back(id);
+    if (pf_queue_.size() > kMaxPrefetchQueue) {
+      size_t over = pf_queue_.size() - kMaxPrefetchQueue;
+      pf_queue_.erase(pf_queue_.begin(), pf_queue_.begin() + ptrdiff_t(over));
+      pf_dropped_.fetch_add(over, std::memory_order_relaxed);
+    }
+  }
+  pf_cv_.notify_one();
+}
+
+void StoreImpl::PrefetchLoop() {
+  for (;;) {
+    std::vector<uint32_t> ids;
+    {
+      std::unique_lock<std::mutex> lock(pf_mu_);
+      pf_cv_.wait(lock, [&] { return pf_stop_ || !pf_queue_.empty(); });
+      if (pf_stop_) return;
+      size_t n = std::min(pf_queue_.size(), kPrefetchBatch);
+      ids.assign(pf_queue_.begin(), pf_queue_.begin() + ptrdiff_t(n));
+      pf_queue_.erase(pf_queue_.begin(), pf_queue_.begin() + ptrdiff_t(n));
+    }
+    PrefetchBatch(std::move(ids));
+  }
+}
+
+void StoreImpl::PrefetchBatch(std::vector<uint32_t> ids) {
+  std::sort(ids.begin(), ids.end());
+  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+  std::erase_if(ids, [&](uint32_t id) { return cache_.Contains(id); });
+  // File order (records lie in the order the ingest wrote them: spatial
+  // neighbours close together), so neighbours merge into runs.
+  std::sort(ids.begin(), ids.end(),
+            [&](uint32_t a, uint32_t b) { return table_[a].offset < table_[b].offset; });
+  const size_t budget = cache_.capacity() / 2;
+  const uint64_t generation = pf_generation_.load();
+  std::vector<uint8_t> buf;
+  size_t i = 0;
+  auto drop_rest = [&] { pf_dropped_.fetch_add(ids.size() - i, std::memory_order_relaxed); };
+  while (i < ids.size()) {
+    if (pf_generation_.load() != generation) {  // cancelled or closing
+      drop_rest();
+      return;
+    }
+    // One run: ids[i, j) read as bytes [begin, end).
+    const uint64_t begin = table_[ids[i]].offset;
+    uint64_t end = begin + table_[ids[i]].stored_size + kTrailerSize;
+    uint64_t useful = end - begin, gaps = 0, raw = table_[ids[i]].raw_size;
+    size_t j = i + 1;
+    for (; j < ids.size(); ++j) {
+      const BrickEntry& e = table_[ids[j]];
+      const uint64_t size = e.stored_size + kTrailerSize;
+      const uint64_t gap = e.offset >= end ? e.offset - end : 0;
+      if (e.offset < end || gap > kMaxGap || 2 * (gaps + gap) > useful + size + 8192 ||
+          e.offset + size - begin > kMaxRun)
+        break;
+      gaps += gap;
+      useful += size;
+      raw += e.raw_size;
+      end = e.offset + size;
+    }
+    if (cache_.PrefetchUnused() + raw > budget) {  // tight: prefetching would evict what it read
+      drop_rest();
+      return;
+    }
+    buf.resize(end - begin);
+    Status rs = bricks_->Read(begin, buf.size(), buf.data());
+    bytes_read_.fetch_add(buf.size(), std::memory_order_relaxed);
+    if (!rs.ok()) {  // each brick's own fetch will read it again and report
+      pf_failed_.fetch_add(j - i, std::memory_order_relaxed);
+      i = j;
+      continue;
+    }
+    for (; i < j; ++i) {
+      const uint32_t id = ids[i];
+      if (cache_.Contains(id)) continue;
+      StatusOr<std::shared_ptr<DecodedBrick>> b = InternalError("unreached");
+      try {
+        b = DecodeRecord(id, buf.data() + (table_[id].offset - begin));
+      } catch (const std::exception&) {
+        b = ResourceExhaustedError("prefetch");
+      }
+      if (!b.ok()) {
+        pf_failed_.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
+      size_t charge = (*b)->charge();
+      cache_.InsertPrefetched(id, std::shared_ptr<const DecodedBrick>(std::move(*b)), charge);
+    }
+  }
+  constexpr size_t kKeep = size_t(8) << 20;
+  if (buf.capacity() > kKeep) std::vector<uint8_t>().swap(buf);
+}
+
 StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
+  const BrickEntry& e = table_[id];
+  // Read the record (its own bytes only), then check and decode it.
+  thread_local std::vector<uint8_t> record;
+  struct Trim {  // scratch grows to the largest brick seen; an outsized one is not kept
+    ~Trim() {
+      if (record.capacity() > (size_t(64) << 20)) std::vector<uint8_t>().swap(record);
+    }
+  } trim;
+  record.resize(size_t(e.stored_size) + kTrailerSize);
+  Status rs = bricks_->Read(e.offset, record.size(), record.data());
+  bytes_read_.fetch_add(record.size(), std::memory_order_relaxed);
+  if (!rs.ok())
+    return rs.WithContext("reading brick " + std::to_string(id) + " (offset " +
+                          std::to_string(e.offset) + ") in '" + bricks_->path() + "'");
+  return DecodeRecord(id, record.data());
+}
+
+StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id,
+                                                                const uint8_t* record) {
   const BrickEntry& e = table_[id];
   const std::string& path = bricks_->path();
   auto where = [&] {
     return "brick " + std::to_string(id) + " (offset " + std::to_string(e.offset) + ") in '" +
            path + "'";
   };
-  // Copy the record out of the mapping (guarded against SIGBUS), then check it.
-  thread_local std::vector<uint8_t> record, raw;
-  // Scratch grows to the largest brick seen; an outsized one is not kept.
+  thread_local std::vector<uint8_t> raw;
   struct Trim {
     ~Trim() {
-      constexpr size_t kKeep = size_t(64) << 20;
-      if (record.capacity() > kKeep) std::vector<uint8_t>().swap(record);
-      if (raw.capacity() > kKeep) std::vector<uint8_t>().swap(raw);
+      if (raw.capacity() > (size_t(64) << 20)) std::vector<uint8_t>().swap(raw);
     }
   } trim;
-  record.resize(size_t(e.stored_size) + kTrailerSize);
-  Status rs = bricks_->Read(e.offset, record.size(), record.data());
-  if (!rs.ok()) return rs.WithContext("reading " + where());
   if (options_.verify_checksums) {
-    auto codec = CheckTrailer(record.data(), e.stored_size, "brick " + std::to_string(id), path,
+    auto codec = CheckTrailer(record, e.stored_size, "brick " + std::to_string(id), path,
                               e.offset);
     if (!codec.ok()) return codec.status();
-    if (DecodeFixed32(record.data() + e.stored_size + 1) != e.crc)
+    if (DecodeFixed32(record + e.stored_size + 1) != e.crc)
       return CorruptionError(where() + ": record checksum differs from the brick table's");
   }
   uint8_t codec = record[e.stored_size];
   if (codec != e.codec)
     return CorruptionError(where() + ": codec " + std::to_string(codec) +
                            " differs from the brick table's " + std::to_string(e.codec));
-  const uint8_t* bytes = record.data();
+  const uint8_t* bytes = record;
   if (codec == kCodecZstd) {
-    unsigned long long content = ZSTD_getFrameContentSize(record.data(), e.stored_size);
+    unsigned long long content = ZSTD_getFrameContentSize(record, e.stored_size);
     if (content == ZSTD_CONTENTSIZE_ERROR || content == ZSTD_CONTENTSIZE_UNKNOWN ||
         content != e.raw_size)
       return CorruptionError(where() + ": zstd frame content size " +
@@ -175,7 +340,7 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
     ZSTD_DCtx* dctx = ThreadDCtx();
     if (dctx == nullptr) return ResourceExhaustedError("cannot allocate a zstd context");
     raw.resize(e.raw_size);
-    size_t n = ZSTD_decompressDCtx(dctx, raw.data(), raw.size(), record.data(), e.stored_size);
+    size_t n = ZSTD_decompressDCtx(dctx, raw.data(), raw.size(), record, e.stored_size);
     if (ZSTD_isError(n))
       return CorruptionError(where() + ": zstd: " + ZSTD_getErrorName(n));
     if (n != e.raw_size)
@@ -343,15 +508,20 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir, const OpenO
     return InvalidArgumentError("'" + dir + "' is not a store directory");
   std::string base = dir;
   while (base.size() > 1 && base.back() == '/') base.pop_back();
-  auto open = [&](const char* name) {
-    auto f = OpenMmapFile(base + "/" + name);
+  // Both files are read with pread: the index once, sequentially, at open;
+  // bricks as random reads of their own bytes (no read-ahead: a fault's
+  // read-around on a mapping, or the kernel's read-ahead, would read
+  // megabytes per brick on disks with a large read_ahead_kb, thrashing under
+  // a memory limit). Prefetch merges neighbouring bricks into larger reads.
+  auto open = [&](const char* name, bool random_access) {
+    auto f = OpenPreadFile(base + "/" + name, random_access);
     if (!f.ok() && f.status().code() == StatusCode::kNotFound)
       return StatusOr<std::unique_ptr<RandomAccessFile>>(
           f.status().WithContext("'" + base + "' is not a complete vox store"));
     return f;
   };
-  VOX_ASSIGN_OR_RETURN(auto index, open(storage_internal::kIndexFileName));
-  VOX_ASSIGN_OR_RETURN(auto bricks, open(storage_internal::kBrickFileName));
+  VOX_ASSIGN_OR_RETURN(auto index, open(storage_internal::kIndexFileName, false));
+  VOX_ASSIGN_OR_RETURN(auto bricks, open(storage_internal::kBrickFileName, true));
   return storage_internal::OpenStoreFromFiles(base, std::move(index), std::move(bricks), options);
 }
 

@@ -25,6 +25,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -114,6 +115,12 @@ struct CacheStats {
   uint64_t bytes_decompressed = 0;  // total decompressed since open
   uint64_t bytes_resident = 0;      // decompressed bytes held now
   uint64_t capacity = 0;
+  // Prefetch (Store::Prefetch): bricks decoded ahead and cached, those later
+  // fetched from the cache, requests dropped (queue full, cancelled, budget
+  // tight) and failed (the brick's own fetch reads it again and reports).
+  uint64_t prefetched = 0, prefetch_hits = 0, prefetch_dropped = 0, prefetch_failed = 0;
+  uint64_t bytes_read = 0;          // brick file bytes vox's reads asked for since open
+  uint64_t process_read_bytes = 0;  // the process's bytes read from storage (ProcessIoBytes)
 };
 
 class Volume {
@@ -142,6 +149,18 @@ class Store : public Volume, public BrickSource {
   static StatusOr<std::unique_ptr<Store>> Open(const std::string& dir, const OpenOptions& options);
   ~Store() override = default;
 
+  // Asks for bricks to be read and decoded ahead of their FetchBrick, in the
+  // background: returns at once. An I/O thread reads the compressed bytes of
+  // the requested bricks not yet cached in runs of neighbours (bricks lie in
+  // Morton order), decodes them and caches them, so later fetches hit. It
+  // never makes a fetch wait for another brick; it stays within the cache
+  // budget: prefetched bricks not yet fetched use at most half of it, and
+  // requests past that (or past a bounded queue, oldest first) are dropped. A brick
+  // whose prefetch fails is not cached: its fetch reads it again and reports
+  // the error. Unknown ids are ignored.
+  virtual void Prefetch(std::span<const uint32_t> brick_ids) = 0;
+  // Drops the requests not yet started (one in progress finishes).
+  virtual void CancelPrefetch() = 0;
   // Bytes held in memory for the life of the Store: top cells, top payloads
   // and the brick table (not the cache).
   virtual uint64_t resident_bytes() const = 0;
