@@ -218,7 +218,15 @@ std::string StatsJson(const Renderer& renderer, const FrameStats& st,
                 {"evictions", b.evictions - a.evictions},
                 {"bytes_decompressed", b.bytes_decompressed - a.bytes_decompressed},
                 {"bytes_resident", b.bytes_resident},
-                {"capacity", b.capacity}};
+                {"capacity", b.capacity},
+                {"prefetched", b.prefetched - a.prefetched},
+                {"prefetch_hits", b.prefetch_hits - a.prefetch_hits},
+                {"prefetch_dropped", b.prefetch_dropped - a.prefetch_dropped},
+                {"prefetch_failed", b.prefetch_failed - a.prefetch_failed}};
+  // Bytes the frame read: those the store asked for, and those the process
+  // read from storage (/proc/self/io read_bytes: page cache misses).
+  j["io"] = {{"brick_bytes_read", b.bytes_read - a.bytes_read},
+             {"read_bytes", b.process_read_bytes - a.process_read_bytes}};
   json timings{{"render_seconds", st.render_seconds},
                {"write_seconds", st.write_seconds},
                {"close_seconds", st.close_seconds}};

@@ -60,9 +60,12 @@ std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> Renderer::N
   std::unique_ptr<ThreadState, ThreadStateDeleter> ts(new ThreadState());
   OctreeView view = volume_->view();
   if (view.bricks != nullptr) {
-    const uint64_t capacity = volume_->cache_stats().capacity;
-    ts->bricks = std::make_unique<LendingBrickTable>(
-        view.bricks, LendingBrickTable::SlotBits(capacity > 0 ? capacity : uint64_t(1) << 30));
+    int bits = options_.table_slot_bits;
+    if (bits < 0) {
+      const uint64_t capacity = volume_->cache_stats().capacity;
+      bits = LendingBrickTable::SlotBits(capacity > 0 ? capacity : uint64_t(1) << 30);
+    }
+    ts->bricks = std::make_unique<LendingBrickTable>(view.bricks, bits);
     view.bricks = ts->bricks.get();
   }
   auto t = RenderTracer::Create(view, tracer_.n1());

@@ -77,6 +77,10 @@ struct RenderPasses {
 struct RenderOptions {
   int n1 = 0;  // first-step levels of the two-step traversal; 0: DefaultFirstStepLevels
   ImageLayers layers;
+  // Size of each thread's pinned-brick table, log2 of its slots (0..16); -1:
+  // from the volume's cache capacity (LendingBrickTable::SlotBits). A memory
+  // budget sets it so the pins stay within their share (SlotBitsForBytes).
+  int table_slot_bits = -1;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -95,7 +99,8 @@ class Renderer {
 
   // Per-thread state (a small pinned-brick table in front of the volume's
   // cache: storage/brick_table.h); optional, for speed. Use one per thread;
-  // release it before the volume, after the frame (it pins up to 256 bricks).
+  // release it before the volume, after the frame (it pins up to
+  // 2^table_slot_bits bricks).
   struct ThreadState;
   struct ThreadStateDeleter {
     void operator()(ThreadState* ts) const;

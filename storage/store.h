@@ -164,6 +164,17 @@ class Store : public Volume, public BrickSource {
   // Bytes held in memory for the life of the Store: top cells, top payloads
   // and the brick table (not the cache).
   virtual uint64_t resident_bytes() const = 0;
+  // Brick sizes from the brick table, for sizing caches and pins.
+  struct BrickSizes {
+    uint64_t max_decoded = 0;   // the largest brick as the cache holds it (its charge)
+    uint64_t mean_decoded = 0;
+    uint64_t max_stored = 0;    // the largest brick record on disk
+  };
+  virtual BrickSizes brick_sizes() const = 0;
+  // Changes the brick cache's budget (OpenOptions::cache_bytes), evicting
+  // down to it; the cache keeps the number of shards chosen at open. For
+  // sizing the cache from a memory budget once resident_bytes() is known.
+  virtual void SetCacheCapacity(uint64_t bytes) = 0;
 };
 
 }  // namespace vox
