@@ -80,6 +80,10 @@ Status RunRenderJob(const RenderJobOptions& o) {
   FrameOptions fo;
   fo.exr_path = o.exr_path;
   fo.threads = threads;
+  if (o.prefetch) {
+    Store* store = volume.get();
+    fo.prefetch = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+  }
   fo.tile_size = o.tile_size;
   fo.part = o.part;
   fo.progress = ChooseProgressMode(o.log, o.quiet);

@@ -32,6 +32,7 @@ struct RenderJobOptions {
   uint64_t memory_bytes = 0;
   size_t cache_mb = 0;  // an explicit brick cache inside the budget; 0: what the budget leaves
   int threads = 0;
+  bool prefetch = true;  // read the next tiles' bricks ahead (FrameOptions::prefetch)
   int tile_size = 64;
   PartSpec part;
   ImageLayers layers;

@@ -39,6 +39,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/ray.h"
 #include "core/status.h"
@@ -110,6 +111,12 @@ class Renderer {
   // Renders `rect` into `buf` (pixel (x, y) of the image at buf(x - x0, y - y0)).
   Status RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
                     ThreadState* ts = nullptr) const;
+
+  // The bricks the primary rays of every `stride`-th pixel (in x and y) of
+  // `rect` enter first, appended to `ids` (repeats removed): traced through
+  // the resident top only, reading no brick, for prefetching a tile's
+  // bricks before it renders.
+  void FirstBricks(const TileRect& rect, int stride, std::vector<uint32_t>* ids) const;
 
   Volume* volume() const { return volume_; }
   const RenderPasses& passes() const { return passes_; }

@@ -41,4 +41,14 @@ StatusOr<MemoryBudget> BudgetStore(Store* store, uint64_t total, BudgetInputs in
   return b;
 }
 
+StatusOr<MemoryBudget> BudgetReader(Store* store, uint64_t total, uint64_t cache_override) {
+  BudgetInputs in;
+  in.image_width = in.image_height = 1;
+  in.tile_size = 1;
+  in.channels = 1;
+  in.threads = 1;
+  in.cache_override = cache_override;
+  return BudgetStore(store, total, in);
+}
+
 }  // namespace vox

@@ -41,6 +41,10 @@ StatusOr<ProcessBudget> ChooseProcessBudget(uint64_t explicit_bytes);
 // the MiB it needs when its resident top and minimal cache do not fit.
 StatusOr<MemoryBudget> BudgetStore(Store* store, uint64_t total, BudgetInputs in);
 
+// The same for a reader that renders no image, on one thread (vox-probe,
+// vox-info --verify); `cache_override` as BudgetInputs::cache_override.
+StatusOr<MemoryBudget> BudgetReader(Store* store, uint64_t total, uint64_t cache_override);
+
 }  // namespace vox
 
 #endif  // VOX_STORAGE_STORE_BUDGET_H_
