@@ -32,7 +32,7 @@ const char kUsage[] =
     "               sized within it (1/16 kept as headroom)\n"
     "  --cache-mb   decompressed brick cache, inside the memory budget (default: what the\n"
     "               budget leaves)\n"
-    "  --no-prefetch  do not read the next tiles' bricks ahead while tracing\n"
+    "  --prefetch   read the next tiles' bricks ahead while tracing (experimental)\n"
     "  --threads    render threads (default: all cores)\n"
     "  --tile-size  tile side in pixels (default 64)\n"
     "  --tiles I/N  render only part I (1-based) of N; assemble the parts with vox-merge\n"
@@ -59,8 +59,8 @@ int main(int argc, char** argv) {
       o.single_step = true;
     } else if (a == "--quiet") {
       o.quiet = true;
-    } else if (a == "--no-prefetch") {
-      o.prefetch = false;
+    } else if (a == "--prefetch") {
+      o.prefetch = true;
     } else if (a == "--cam" || a == "--scene" || a == "-o" || a == "--preview" || a == "--split" ||
                a == "--cache-mb" || a == "--memory-mb" || a == "--threads" || a == "--tile-size" || a == "--tiles" ||
                a == "--stats" || a == "--layers" || a == "--size") {
