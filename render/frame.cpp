@@ -111,6 +111,19 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
     return s;
   };
 
+  // Prefetch cursor: tiles [begin, scanned) have had their bricks asked for.
+  std::atomic<int64_t> scanned{begin};
+  auto prefetch_ahead = [&](int64_t i) {
+    const int64_t target = std::min(end, i + 1 + int64_t(std::max(options.prefetch_tiles, 0)));
+    std::vector<uint32_t> ids;
+    for (int64_t j = scanned.load(); j < target; j = scanned.load()) {
+      if (!scanned.compare_exchange_weak(j, j + 1)) continue;
+      ids.clear();
+      renderer.FirstBricks(layout.order()[size_t(j)], options.prefetch_stride, &ids);
+      if (!ids.empty()) options.prefetch(ids);
+    }
+  };
+
   Stopwatch frame_clock;
   tbb::task_arena arena(threads);
   arena.execute([&] {
@@ -121,6 +134,7 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
         const int64_t i = cursor.fetch_add(1);
         if (i >= end) return;
         const TileRect& rect = layout.order()[size_t(i)];
+        if (options.prefetch) prefetch_ahead(i);
         uint64_t rays_before = 0;
         for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
         const uint64_t entries_before = w.counters.trace.brick_fetches;
@@ -218,7 +232,15 @@ std::string StatsJson(const Renderer& renderer, const FrameStats& st,
                 {"evictions", b.evictions - a.evictions},
                 {"bytes_decompressed", b.bytes_decompressed - a.bytes_decompressed},
                 {"bytes_resident", b.bytes_resident},
-                {"capacity", b.capacity}};
+                {"capacity", b.capacity},
+                {"prefetched", b.prefetched - a.prefetched},
+                {"prefetch_hits", b.prefetch_hits - a.prefetch_hits},
+                {"prefetch_dropped", b.prefetch_dropped - a.prefetch_dropped},
+                {"prefetch_failed", b.prefetch_failed - a.prefetch_failed}};
+  // Bytes the frame read: those the store asked for, and those the process
+  // read from storage (/proc/self/io read_bytes: page cache misses).
+  j["io"] = {{"brick_bytes_read", b.bytes_read - a.bytes_read},
+             {"read_bytes", b.process_read_bytes - a.process_read_bytes}};
   json timings{{"render_seconds", st.render_seconds},
                {"write_seconds", st.write_seconds},
                {"close_seconds", st.close_seconds}};

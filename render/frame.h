@@ -13,6 +13,8 @@
 #define VOX_RENDER_FRAME_H_
 
 #include <cstdio>
+#include <functional>
+#include <span>
 #include <string>
 
 #include "core/progress.h"
@@ -45,6 +47,13 @@ struct FrameOptions {
   ProgressMode progress = ProgressMode::kQuiet;
   FILE* progress_out = stderr;
   ExrAttributes attrs;  // extra header attributes
+  // Prefetch: when set, the bricks the next `prefetch_tiles` tiles' primary
+  // rays enter first (Renderer::FirstBricks of every prefetch_stride-th pixel) are handed to
+  // it before those tiles render (e.g. Store::Prefetch), so reading them
+  // overlaps tracing.
+  std::function<void(std::span<const uint32_t>)> prefetch;
+  int prefetch_tiles = 4;
+  int prefetch_stride = 2;  // trace every n-th pixel's primary ray in x and y
 };
 
 struct FrameStats {

@@ -1,7 +1,11 @@
 #include "render/job.h"
 
+#include <algorithm>
 #include <charconv>
+#include <malloc.h>
 #include <fstream>
+#include <nlohmann/json.hpp>
+#include <thread>
 
 #include "core/stopwatch.h"
 #include "core/tracer.h"
@@ -11,6 +15,7 @@
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "storage/store.h"
+#include "storage/store_budget.h"
 
 namespace vox {
 Status RunRenderJob(const RenderJobOptions& o) {
@@ -23,9 +28,19 @@ Status RunRenderJob(const RenderJobOptions& o) {
   // not after the render. The files are written atomically at the end.
   for (const std::string* out : {&o.exr_path, &o.preview_path, &o.stats_path})
     if (!out->empty()) VOX_RETURN_IF_ERROR(CheckOutputPath(*out));
+  if (o.threads < 0)
+    return InvalidArgumentError("threads " + std::to_string(o.threads) +
+                                ": must not be negative (0: all cores)");
+  VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(o.memory_bytes));
   OpenOptions open;
-  open.cache_bytes = o.cache_mb << 20;
+  // The budget bounds the cache (BudgetStore sets it once the resident top
+  // is known); opening with it gives the cache its number of shards.
+  open.cache_bytes = o.cache_mb > 0 ? o.cache_mb << 20 : process.bytes;
   VOX_ASSIGN_OR_RETURN(auto volume, Store::Open(o.store_dir, open));
+  // Open's scratch (the index blocks, as large as the resident top) is
+  // free but stays in the main heap, which the render threads' allocator
+  // arenas do not reuse: give it back so the budget's estimate holds.
+  malloc_trim(0);
   const double open_seconds = phase.Lap();
   const StoreMeta& meta = volume->meta();
 
@@ -54,12 +69,34 @@ Status RunRenderJob(const RenderJobOptions& o) {
   } else if (!o.split.empty()) {
     VOX_ASSIGN_OR_RETURN(ro.n1, ParseSplit(o.split, meta.levels));
   }
+  // The budget's split, before any output exists: a store whose resident
+  // top does not fit fails here, saying how much it needs.
+  const int threads =
+      o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+  BudgetInputs bi;
+  bi.image_width = camera.width;
+  bi.image_height = camera.height;
+  bi.tile_size = std::clamp(o.tile_size, kMinTileSize, kMaxTileSize);
+  bi.threads = threads;
+  bi.channels = 5 + (o.layers.normal ? 3 : 0) + (o.layers.voxel ? 3 : 0);
+  bi.cache_override = uint64_t(o.cache_mb) << 20;
+  VOX_ASSIGN_OR_RETURN(const MemoryBudget budget, BudgetStore(volume.get(), process.bytes, bi));
+  int slot_bits = 0;
+  while ((2 << slot_bits) <= budget.pins_per_thread) ++slot_bits;
+  ro.table_slot_bits = slot_bits;
+  if (!o.quiet)
+    fprintf(o.log, "vox-render: memory %s; %s\n", process.ToString().c_str(),
+            budget.ToString().c_str());
   VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(volume.get(), camera, scene, ro));
   const double setup_seconds = phase.Lap();
 
   FrameOptions fo;
   fo.exr_path = o.exr_path;
-  fo.threads = o.threads;
+  fo.threads = threads;
+  if (o.prefetch) {
+    Store* store = volume.get();
+    fo.prefetch = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+  }
   fo.tile_size = o.tile_size;
   fo.part = o.part;
   fo.progress = ChooseProgressMode(o.log, o.quiet);
@@ -78,13 +115,19 @@ Status RunRenderJob(const RenderJobOptions& o) {
   if (!o.preview_path.empty()) VOX_RETURN_IF_ERROR(WritePngPreview(o.exr_path, o.preview_path));
   const double preview_seconds = phase.Lap();
   if (!o.stats_path.empty()) {
-    std::string json = StatsJson(*renderer, stats,
-                                 {{"open_seconds", open_seconds},
-                                  {"setup_seconds", setup_seconds},
-                                  {"frame_seconds", frame_seconds},
-                                  {"preview_seconds", preview_seconds},
-                                  {"total_seconds", total.Seconds()}});
-    VOX_RETURN_IF_ERROR(WriteFileAtomically(o.stats_path, json + "\n"));
+    nlohmann::json json = nlohmann::json::parse(
+        StatsJson(*renderer, stats,
+                  {{"open_seconds", open_seconds},
+                   {"setup_seconds", setup_seconds},
+                   {"frame_seconds", frame_seconds},
+                   {"preview_seconds", preview_seconds},
+                   {"total_seconds", total.Seconds()}}));
+    nlohmann::json memory = nlohmann::json::parse(budget.ToJson());
+    memory["source"] = process.source;
+    memory["table_slots"] = 1 << slot_bits;
+    memory["max_brick_bytes"] = volume->brick_sizes().max_decoded;
+    json["memory"] = memory;
+    VOX_RETURN_IF_ERROR(WriteFileAtomically(o.stats_path, json.dump(2) + "\n"));
   }
   if (!o.quiet) {
     uint64_t total = 0;

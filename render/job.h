@@ -1,6 +1,6 @@
 // vox::RunRenderJob: everything `vox-render` does, from options to files:
-// opens the store, reads the camera (or frames the volume) and the scene,
-// renders the image (or one part of it) to EXR, and writes the optional PNG
+// chooses the memory budget, opens the store and sizes its cache from the
+// budget, reads the camera (or frames the volume) and the scene, renders the image (or one part of it) to EXR, and writes the optional PNG
 // preview and --stats JSON. The tool's main only parses flags.
 //
 // Thread safety: thread-compatible.
@@ -26,8 +26,16 @@ struct RenderJobOptions {
   std::string stats_path;    // empty: none
   std::string split;         // --split N1+N2 or N1; empty: DefaultFirstStepLevels
   bool single_step = false;
-  size_t cache_mb = 1024;
+  // The process's memory budget in bytes (--memory-mb); 0: detected
+  // (storage/store_budget.h). The brick cache, the threads' pinned bricks
+  // and the buffers are sized within it.
+  uint64_t memory_bytes = 0;
+  size_t cache_mb = 0;  // an explicit brick cache inside the budget; 0: what the budget leaves
   int threads = 0;
+  // Read the next tiles' bricks ahead (FrameOptions::prefetch). Off by
+  // default: on a loaded machine it did not measurably shorten cold frames,
+  // and its reads and buffers add to the process's memory.
+  bool prefetch = false;
   int tile_size = 64;
   PartSpec part;
   ImageLayers layers;

@@ -15,6 +15,26 @@ namespace {
 
 using render_internal::kInf;
 
+// Notes the first kRecordedBricks bricks a traversal enters, reading none:
+// each looks empty (the ray goes on through it), and the next ends the ray
+// (an error without a message: no allocation). Call Restart per ray.
+class RecordingSource : public BrickSource {
+ public:
+  static constexpr int kRecordedBricks = 1;
+  explicit RecordingSource(std::vector<uint32_t>* ids) : ids_(ids) {}
+  void Restart() { entered_ = 0; }
+  StatusOr<BrickView> FetchBrick(uint32_t id) override {
+    if (entered_++ == kRecordedBricks) return NotFoundError(std::string());
+    ids_->push_back(id);
+    static const Cell kEmpty{};
+    return BrickView{&kEmpty, 1, nullptr, nullptr};
+  }
+
+ private:
+  std::vector<uint32_t>* ids_;
+  int entered_ = 0;
+};
+
 double RadicalInverse2(uint32_t k) {
   k = (k << 16) | (k >> 16);
   k = ((k & 0x55555555u) << 1) | ((k & 0xAAAAAAAAu) >> 1);
@@ -60,9 +80,12 @@ std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> Renderer::N
   std::unique_ptr<ThreadState, ThreadStateDeleter> ts(new ThreadState());
   OctreeView view = volume_->view();
   if (view.bricks != nullptr) {
-    const uint64_t capacity = volume_->cache_stats().capacity;
-    ts->bricks = std::make_unique<LendingBrickTable>(
-        view.bricks, LendingBrickTable::SlotBits(capacity > 0 ? capacity : uint64_t(1) << 30));
+    int bits = options_.table_slot_bits;
+    if (bits < 0) {
+      const uint64_t capacity = volume_->cache_stats().capacity;
+      bits = LendingBrickTable::SlotBits(capacity > 0 ? capacity : uint64_t(1) << 30);
+    }
+    ts->bricks = std::make_unique<LendingBrickTable>(view.bricks, bits);
     view.bricks = ts->bricks.get();
   }
   auto t = RenderTracer::Create(view, tracer_.n1());
@@ -166,6 +189,25 @@ void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out) const {
   out->z = h.t;
   out->voxel = h.voxel + volume_->meta().origin;
   out->color = ShadeSurface(gr, wr.dir, h, a, 0, cx, &out->normal);
+}
+
+void Renderer::FirstBricks(const TileRect& rect, int stride, std::vector<uint32_t>* ids) const {
+  OctreeView view = volume_->view();
+  if (view.bricks == nullptr || stride < 1) return;
+  const size_t first = ids->size();
+  RecordingSource recorder(ids);
+  view.bricks = &recorder;
+  auto tracer = RenderTracer::Create(view, tracer_.n1());
+  if (!tracer.ok()) return;
+  for (int py = stride / 2; py < rect.h; py += stride)
+    for (int px = stride / 2; px < rect.w; px += stride) {
+      const WorldRay wr = camera_.PixelRay(rect.x0 + px + 0.5, rect.y0 + py + 0.5);
+      const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
+      recorder.Restart();
+      (void)tracer->FirstHit(gr);
+    }
+  std::sort(ids->begin() + ptrdiff_t(first), ids->end());
+  ids->erase(std::unique(ids->begin() + ptrdiff_t(first), ids->end()), ids->end());
 }
 
 Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,

@@ -39,6 +39,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/ray.h"
 #include "core/status.h"
@@ -77,6 +78,10 @@ struct RenderPasses {
 struct RenderOptions {
   int n1 = 0;  // first-step levels of the two-step traversal; 0: DefaultFirstStepLevels
   ImageLayers layers;
+  // Size of each thread's pinned-brick table, log2 of its slots (0..16); -1:
+  // from the volume's cache capacity (LendingBrickTable::SlotBits). A memory
+  // budget sets it so the pins stay within their share (SlotBitsForBytes).
+  int table_slot_bits = -1;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -95,7 +100,8 @@ class Renderer {
 
   // Per-thread state (a small pinned-brick table in front of the volume's
   // cache: storage/brick_table.h); optional, for speed. Use one per thread;
-  // release it before the volume, after the frame (it pins up to 256 bricks).
+  // release it before the volume, after the frame (it pins up to
+  // 2^table_slot_bits bricks).
   struct ThreadState;
   struct ThreadStateDeleter {
     void operator()(ThreadState* ts) const;
@@ -105,6 +111,12 @@ class Renderer {
   // Renders `rect` into `buf` (pixel (x, y) of the image at buf(x - x0, y - y0)).
   Status RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
                     ThreadState* ts = nullptr) const;
+
+  // The bricks the primary rays of every `stride`-th pixel (in x and y) of
+  // `rect` enter first, appended to `ids` (repeats removed): traced through
+  // the resident top only, reading no brick, for prefetching a tile's
+  // bricks before it renders.
+  void FirstBricks(const TileRect& rect, int stride, std::vector<uint32_t>* ids) const;
 
   Volume* volume() const { return volume_; }
   const RenderPasses& passes() const { return passes_; }

@@ -5,7 +5,7 @@
 namespace vox {
 
 namespace {
-int ClampSlotBits(int bits) { return bits < 1 ? 1 : bits > 16 ? 16 : bits; }
+int ClampSlotBits(int bits) { return bits < 0 ? 0 : bits > 16 ? 16 : bits; }
 }  // namespace
 
 LendingBrickTable::LendingBrickTable(BrickSource* shared, int slot_bits)
@@ -16,6 +16,13 @@ LendingBrickTable::LendingBrickTable(BrickSource* shared, int slot_bits)
 int LendingBrickTable::SlotBits(uint64_t capacity) {
   int bits = 4;
   while (bits < 8 && (uint64_t(1) << (bits + 1)) * (64u << 10) * 64 <= capacity) ++bits;
+  return bits;
+}
+
+int LendingBrickTable::SlotBitsForBytes(uint64_t pin_bytes, uint64_t brick_bytes) {
+  if (brick_bytes == 0) return 8;  // no bricks: nothing will be pinned
+  int bits = 0;
+  while (bits < 8 && (uint64_t(2) << bits) * brick_bytes <= pin_bytes) ++bits;
   return bits;
 }
 
@@ -34,7 +41,7 @@ StatusOr<BrickView> LendingBrickTable::FetchBrick(uint32_t id) {
 
 const BrickView* LendingBrickTable::LendBrick(uint32_t id, Status* error) {
   // Fibonacci hashing: neighbouring brick ids spread over the slots.
-  Slot& s = slots_[(id * 2654435761u) >> shift_];
+  Slot& s = slots_[uint64_t(id * 2654435761u) >> shift_];
   if (s.id == id && s.view.cells != nullptr) return &s.view;
   auto v = shared_->FetchBrick(id);
   if (!v.ok()) {

@@ -4,7 +4,8 @@
 // neighbouring ray just used takes neither the shared cache's lock, hash and
 // LRU nor a reference count: the table lends its views to the thread's
 // traversal (BrickSource::lends, core/octree.h). The pins hold at most
-// 2^slot_bits bricks alive beyond the shared cache's budget.
+// 2^slot_bits bricks alive beyond the shared cache's budget: a memory budget
+// sizes the table by bytes (SlotBitsForBytes).
 //
 // Thread safety: thread-compatible; one table per thread. The shared source
 // must be thread-safe and outlive the table.
@@ -21,7 +22,7 @@ namespace vox {
 
 class LendingBrickTable : public BrickSource {
  public:
-  // slot_bits is clamped to 1..16.
+  // slot_bits is clamped to 0..16 (0: one slot).
   LendingBrickTable(BrickSource* shared, int slot_bits);
 
   // Table size for a shared cache of `capacity` bytes: 256 slots (a 64 x 64
@@ -29,6 +30,10 @@ class LendingBrickTable : public BrickSource {
   // at 1 GiB, fewer (down to 16) for smaller caches, so the pins of a thread
   // stay near 1/64 of the budget for bricks of 64 KiB.
   static int SlotBits(uint64_t capacity);
+  // The most slots (a power of two, 1..256) whose pins, at `brick_bytes`
+  // each (the largest brick as the cache charges it), stay within
+  // `pin_bytes`: one slot when even two do not fit.
+  static int SlotBitsForBytes(uint64_t pin_bytes, uint64_t brick_bytes);
 
   size_t num_slots() const { return slots_.size(); }
   // Bricks held pinned now (at most num_slots()).
@@ -48,7 +53,7 @@ class LendingBrickTable : public BrickSource {
     BrickView view;  // cells == nullptr: empty
   };
   BrickSource* shared_;
-  int shift_;
+  int shift_;  // 32 - slot bits: the slot is the hash's top bits
   std::vector<Slot> slots_;
 };
 

@@ -12,6 +12,7 @@
 #define VOX_STORAGE_PAGE_CACHE_H_
 
 #include <algorithm>
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <list>
@@ -129,7 +130,16 @@ class PageCache {
     std::lock_guard<std::mutex> lock(mu_);
     return usage_;
   }
-  size_t capacity() const { return capacity_; }
+  size_t capacity() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return capacity_;
+  }
+  // Changes the capacity, evicting least recently used entries down to it.
+  void SetCapacity(size_t capacity) {
+    std::lock_guard<std::mutex> lock(mu_);
+    capacity_ = capacity;
+    EvictLocked();
+  }
 
   PageCacheCounters counters() const {
     std::lock_guard<std::mutex> lock(mu_);
@@ -181,13 +191,17 @@ class PageCache {
     map_.emplace(key, Entry{std::move(value), charge, lru_.begin(), prefetched});
     usage_ += charge;
     if (prefetched) prefetch_unused_ += charge;
+    EvictLocked();
+  }
+
+  void EvictLocked() {
     while (usage_ > capacity_ && !lru_.empty()) {
       RemoveLocked(map_.find(lru_.back()));
       ++counters_.evictions;
     }
   }
 
-  const size_t capacity_;
+  size_t capacity_;
   mutable std::mutex mu_;
   std::condition_variable cv_;
   std::unordered_map<uint64_t, Entry> map_;
@@ -243,8 +257,15 @@ class ShardedPageCache {
     for (const auto& s : shards_) t += s->TotalCharge();
     return t;
   }
-  size_t capacity() const { return capacity_; }
+  size_t capacity() const { return capacity_.load(std::memory_order_relaxed); }
   size_t num_shards() const { return shards_.size(); }
+  // Changes the total capacity (split evenly over the shards, whose number
+  // stays as chosen at construction), evicting down to it.
+  void SetCapacity(size_t capacity) {
+    capacity_.store(capacity, std::memory_order_relaxed);
+    const size_t n = shards_.size();
+    for (size_t i = 0; i < n; ++i) shards_[i]->SetCapacity(capacity / n + (i < capacity % n ? 1 : 0));
+  }
 
   PageCacheCounters counters() const {
     PageCacheCounters t;
@@ -260,7 +281,7 @@ class ShardedPageCache {
       t.prefetch_hits += c.prefetch_hits;
       t.prefetch_unused += c.prefetch_unused;
     }
-    t.capacity = capacity_;
+    t.capacity = capacity();
     return t;
   }
 
@@ -271,7 +292,7 @@ class ShardedPageCache {
     return *shards_[(h >> 32) % shards_.size()];
   }
 
-  const size_t capacity_;
+  std::atomic<size_t> capacity_;
   std::vector<std::unique_ptr<PageCache<V>>> shards_;
 };
 

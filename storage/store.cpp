@@ -112,6 +112,21 @@ class StoreImpl : public Store {
     return top_.size() * sizeof(CompactCell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
   }
 
+  BrickSizes brick_sizes() const override {
+    BrickSizes z;
+    uint64_t sum = 0;
+    for (const BrickEntry& e : table_) {
+      const uint64_t decoded = DecodedCharge(e);
+      z.max_decoded = std::max(z.max_decoded, decoded);
+      z.max_stored = std::max<uint64_t>(z.max_stored, uint64_t(e.stored_size) + kTrailerSize);
+      sum += decoded;
+    }
+    if (!table_.empty()) z.mean_decoded = sum / table_.size();
+    return z;
+  }
+
+  void SetCacheCapacity(uint64_t bytes) override { cache_.SetCapacity(size_t(bytes)); }
+
   const std::vector<BrickEntry>& table() const { return table_; }
 
  private:
@@ -137,6 +152,13 @@ class StoreImpl : public Store {
     });
   }
 
+  // What the cache charges for the brick of entry `e` once decoded
+  // (DecodedBrick::charge() of its cells and attribute planes).
+  uint64_t DecodedCharge(const BrickEntry& e) const {
+    // As DecodedBrick::charge() counts a decoded brick (its capacities are its sizes).
+    return sizeof(DecodedBrick) + uint64_t(e.num_cells) * sizeof(CompactCell) +
+           uint64_t(e.voxel_count) * AttrBytesPerVoxel(flags_) + DecodedBrick::kOverheadBytes;
+  }
   StatusOr<std::shared_ptr<DecodedBrick>> LoadBrick(uint32_t id);
   // Checks and decodes brick `id` from its record (stored_size + trailer bytes).
   StatusOr<std::shared_ptr<DecodedBrick>> DecodeRecord(uint32_t id, const uint8_t* record);

@@ -172,6 +172,17 @@ class Store : public Volume, public BrickSource {
   // The store_id of the index header and footer (FORMAT.md): random per
   // ingest, so a store re-ingested at the same path has a different one.
   virtual uint64_t store_id() const = 0;
+  // Brick sizes from the brick table, for sizing caches and pins.
+  struct BrickSizes {
+    uint64_t max_decoded = 0;   // the largest brick as the cache holds it (its charge)
+    uint64_t mean_decoded = 0;
+    uint64_t max_stored = 0;    // the largest brick record on disk
+  };
+  virtual BrickSizes brick_sizes() const = 0;
+  // Changes the brick cache's budget (OpenOptions::cache_bytes), evicting
+  // down to it; the cache keeps the number of shards chosen at open. For
+  // sizing the cache from a memory budget once resident_bytes() is known.
+  virtual void SetCacheCapacity(uint64_t bytes) = 0;
 };
 
 }  // namespace vox

@@ -4,7 +4,7 @@
 //
 //   vox-probe --generate sphere:1024 [--brick-level L] [options] < rays.txt
 //   vox-probe store/ [options] < rays.txt
-// Options: --split N1+N2|N1, --single-step, --cache-mb M, --stats,
+// Options: --split N1+N2|N1, --single-step, --memory-mb M, --cache-mb M, --stats,
 //   --fixed auto|64|128 (fixed-point word; auto: 64 up to 2^26 grids, else 128)
 #include <cstdint>
 #include <cstdio>
@@ -18,20 +18,26 @@
 #include "core/ray_text.h"
 #include "core/shapes.h"
 #include "storage/store.h"
+#include "storage/store_budget.h"
 #include "tools/common/flags.h"
 
 namespace {
 
 constexpr const char* kUsage =
     "usage: vox-probe (--generate SHAPE | STORE_DIR) [--split N1+N2|N1] [--single-step]\n"
-    "                 [--brick-level L] [--cache-mb M] [--fixed auto|64|128] [--stats] < rays.txt\n"
+    "                 [--brick-level L] [--memory-mb M] [--cache-mb M] [--fixed auto|64|128]\n"
+    "                 [--stats] < rays.txt\n"
+    "  --memory-mb: memory the process may use, in MiB (or 2G); default: the memory\n"
+    "  cgroup's limit, or 3/4 of MemAvailable. --cache-mb: the brick cache inside it\n"
+    "  (default: what the budget leaves)\n"
     "  SHAPE: sphere:N, torus:N, cubes:N, noise:N (N voxels per axis), corner:L (2^L grid)\n";
 
 struct Options {
   std::string generate, store, split;
   bool single_step = false, stats = false;
   int brick_level = -1;
-  size_t cache_mb = 256;
+  size_t cache_mb = 0;        // 0: from the memory budget
+  uint64_t memory_bytes = 0;  // 0: detected
   int fixed = 0;  // 0: auto
 };
 
@@ -99,6 +105,11 @@ static int RunTool(int argc, char** argv) {
       opt.single_step = true;
     } else if (a == "--stats") {
       opt.stats = true;
+    } else if (a == "--memory-mb") {
+      if (!(v = flags.Value())) return Fail("--memory-mb needs a size");
+      auto bytes = vox::ParseMemorySize("--memory-mb", *v);
+      if (!bytes.ok()) return Fail(bytes.status().message());
+      opt.memory_bytes = *bytes;
     } else if (a == "--brick-level" || a == "--cache-mb" || a == "--fixed") {
       if (!(v = flags.Value())) return Fail(a + " needs a number");
       int64_t n = 0;
@@ -139,11 +150,15 @@ static int RunTool(int argc, char** argv) {
     memory = std::move(tree).value();
     view = memory->view();
   } else {
+    auto budget = vox::ChooseProcessBudget(opt.memory_bytes);
+    if (!budget.ok()) return Fail(budget.status().ToString());
     vox::OpenOptions oo;
-    oo.cache_bytes = opt.cache_mb << 20;
+    oo.cache_bytes = opt.cache_mb > 0 ? opt.cache_mb << 20 : budget->bytes;
     auto s = vox::Store::Open(opt.store, oo);
     if (!s.ok()) return Fail(s.status().ToString());
     store = std::move(s).value();
+    auto split = vox::BudgetReader(store.get(), budget->bytes, uint64_t(opt.cache_mb) << 20);
+    if (!split.ok()) return Fail(split.status().ToString());
     view = store->view();
     origin = store->meta().origin;
   }

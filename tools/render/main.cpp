@@ -8,14 +8,15 @@
 
 #include "render/camera.h"
 #include "render/job.h"
+#include "storage/memory_budget.h"
 #include "tools/common/flags.h"
 
 namespace {
 
 const char kUsage[] =
     "usage: vox-render STORE_DIR [--cam cam.json] [--scene scene.json] [-o out.exr]\n"
-    "                  [--preview out.png] [--split N1+N2|N1] [--single-step] [--cache-mb M]\n"
-    "                  [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
+    "                  [--preview out.png] [--split N1+N2|N1] [--single-step] [--memory-mb M]\n"
+    "                  [--cache-mb M] [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
     "                  [--layers normal,voxel] [--size WxH]\n"
     "  --cam        camera JSON (world space of the source VDB); without it a default\n"
     "               camera frames the whole volume (--size sets its image size, default "
@@ -26,7 +27,13 @@ const char kUsage[] =
     "  --preview    also write an 8-bit sRGB PNG\n"
     "  --split      first-step levels of the two-step traversal (N1, or N1+N2 = levels)\n"
     "  --single-step  one DDA step over the whole grid (grids of at most 2^20)\n"
-    "  --cache-mb   decompressed brick cache budget (default 1024)\n"
+    "  --memory-mb  memory the whole process may use, in MiB (or with a unit: 2G);\n"
+    "               default: the memory cgroup's limit (Slurm --mem, a container), or 3/4 of\n"
+    "               MemAvailable if smaller; the brick cache, pinned bricks and buffers are\n"
+    "               sized within it (1/16 kept as headroom)\n"
+    "  --cache-mb   decompressed brick cache, inside the memory budget (default: what the\n"
+    "               budget leaves)\n"
+    "  --prefetch   read the next tiles' bricks ahead while tracing (experimental)\n"
     "  --threads    render threads (default: all cores)\n"
     "  --tile-size  tile side in pixels (default 64)\n"
     "  --tiles I/N  render only part I (1-based) of N; assemble the parts with vox-merge\n"
@@ -53,8 +60,10 @@ static int RunTool(int argc, char** argv) {
       o.single_step = true;
     } else if (a == "--quiet") {
       o.quiet = true;
+    } else if (a == "--prefetch") {
+      o.prefetch = true;
     } else if (a == "--cam" || a == "--scene" || a == "-o" || a == "--preview" || a == "--split" ||
-               a == "--cache-mb" || a == "--threads" || a == "--tile-size" || a == "--tiles" ||
+               a == "--cache-mb" || a == "--memory-mb" || a == "--threads" || a == "--tile-size" || a == "--tiles" ||
                a == "--stats" || a == "--layers" || a == "--size") {
       const std::optional<std::string> value = flags.Value();
       if (!value) return Usage(a + " needs a value");
@@ -76,6 +85,10 @@ static int RunTool(int argc, char** argv) {
         if (!vox::ParseInt(v, 1, 1 << 22, &mb))
           return Usage("--cache-mb '" + v + "': expected a positive integer");
         o.cache_mb = size_t(mb);
+      } else if (a == "--memory-mb") {
+        auto bytes = vox::ParseMemorySize("--memory-mb", v);
+        if (!bytes.ok()) return Usage(bytes.status().message());
+        o.memory_bytes = *bytes;
       } else if (a == "--threads") {
         if (!vox::ParseInt(v, 0, 4096, &o.threads))
           return Usage("--threads '" + v + "': expected 0..4096");

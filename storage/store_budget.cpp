@@ -1,0 +1,54 @@
+#include "storage/store_budget.h"
+
+#include <algorithm>
+
+namespace vox {
+
+std::string ProcessBudget::ToString() const {
+  return std::to_string((bytes + kMiB / 2) / kMiB) + " MiB (" + source + ")";
+}
+
+StatusOr<ProcessBudget> ChooseProcessBudget(uint64_t explicit_bytes) {
+  ProcessBudget b;
+  if (explicit_bytes > 0) {
+    b.bytes = explicit_bytes;
+    b.source = "--memory-mb";
+    return b;
+  }
+  VOX_ASSIGN_OR_RETURN(MemoryLimit limit, DetectMemoryLimit());
+  const uint64_t avail = limit.mem_available / 4 * 3;
+  if (limit.cgroup_bytes != 0 && (avail == 0 || limit.cgroup_bytes <= avail)) {
+    b.bytes = limit.cgroup_bytes;
+    b.source = "cgroup " + limit.cgroup_file;
+  } else if (avail != 0) {
+    b.bytes = avail;
+    b.source = "3/4 of MemAvailable";
+  } else {
+    b.bytes = kFallbackMemoryBudget;
+    b.source = "no limit found; default";
+  }
+  return b;
+}
+
+StatusOr<MemoryBudget> BudgetStore(Store* store, uint64_t total, BudgetInputs in) {
+  const Store::BrickSizes sizes = store->brick_sizes();
+  in.resident_bytes = store->resident_bytes();
+  in.max_brick_bytes = sizes.max_decoded;
+  in.max_stored_brick_bytes = sizes.max_stored;
+  auto b = SplitMemoryBudget(total, in);
+  if (!b.ok()) return b.status().WithContext("store '" + store->description() + "'");
+  store->SetCacheCapacity(b->brick_cache);
+  return b;
+}
+
+StatusOr<MemoryBudget> BudgetReader(Store* store, uint64_t total, uint64_t cache_override) {
+  BudgetInputs in;
+  in.image_width = in.image_height = 1;
+  in.tile_size = 1;
+  in.channels = 1;
+  in.threads = 1;
+  in.cache_override = cache_override;
+  return BudgetStore(store, total, in);
+}
+
+}  // namespace vox

@@ -1,0 +1,50 @@
+// vox::ChooseProcessBudget and vox::BudgetStore: the one memory budget of a
+// program that opens a store (vox-render, vox-probe, vox-info --verify), and
+// the brick cache sized from it once the store's resident top is known.
+//
+// The budget is --memory-mb when given; otherwise the memory cgroup's limit
+// (Slurm --mem, a container; storage/memory_budget.h finds it), or 3/4 of
+// MemAvailable when that is smaller or there is no cgroup limit (the rest is
+// left to other processes and the kernel); 4 GiB when neither is known.
+// SplitMemoryBudget keeps 1/16 of it as headroom and 24 MiB for the process
+// itself.
+//
+// Thread safety: free functions; BudgetStore must not race with the store's
+// readers (call it after open, before reading bricks).
+#ifndef VOX_STORAGE_STORE_BUDGET_H_
+#define VOX_STORAGE_STORE_BUDGET_H_
+
+#include <cstdint>
+#include <string>
+
+#include "core/status.h"
+#include "storage/memory_budget.h"
+#include "storage/store.h"
+
+namespace vox {
+
+struct ProcessBudget {
+  uint64_t bytes = 0;
+  std::string source;  // where it came from, e.g. "--memory-mb", "cgroup /sys/fs/...", "3/4 of MemAvailable"
+  std::string ToString() const;  // "768 MiB (cgroup ...)"
+};
+
+inline constexpr uint64_t kFallbackMemoryBudget = uint64_t(4) << 30;
+
+// `explicit_bytes` > 0: that (from --memory-mb); 0: detected as above.
+// Errors: an unparseable cgroup or meminfo file (named).
+StatusOr<ProcessBudget> ChooseProcessBudget(uint64_t explicit_bytes);
+
+// Splits `total` for a reader of `store` (in's store fields are filled in
+// from it: resident bytes, brick sizes) and sets the store's cache capacity
+// to the split's brick cache. ResourceExhaustedError naming the store and
+// the MiB it needs when its resident top and minimal cache do not fit.
+StatusOr<MemoryBudget> BudgetStore(Store* store, uint64_t total, BudgetInputs in);
+
+// The same for a reader that renders no image, on one thread (vox-probe,
+// vox-info --verify); `cache_override` as BudgetInputs::cache_override.
+StatusOr<MemoryBudget> BudgetReader(Store* store, uint64_t total, uint64_t cache_override);
+
+}  // namespace vox
+
+#endif  // VOX_STORAGE_STORE_BUDGET_H_
