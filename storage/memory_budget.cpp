@@ -250,7 +250,7 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
   MemoryBudget b;
   b.total = total;
   b.process_base = in.process_base;
-  b.headroom = total / 16;
+  b.headroom = total / 8;
   b.resident_top = in.resident_bytes;
   // One TileBuffer (tile^2 floats per channel) per thread.
   const uint64_t tile_bytes = tile * tile * ch * sizeof(float);
@@ -270,8 +270,8 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
   const uint64_t min_pins = threads * in.max_brick_bytes;  // one pin per thread
   auto need = [&] {
     const uint64_t n = fixed - b.headroom + min_cache + min_pins;
-    // headroom is total / 16: total >= n * 16 / 15.
-    return (n * 16 + 14) / 15;
+    // headroom is total / 8: total >= n * 8 / 7.
+    return (n * 8 + 6) / 7;
   };
   auto too_small = [&] {
     return ResourceExhaustedError(
@@ -279,7 +279,7 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
         FormatMiB(need()) + " MiB (in MiB: process " + FormatMiB(b.process_base) + ", resident top " +
         FormatMiB(b.resident_top) + ", tile buffers " + FormatMiB(b.tile_buffers) + ", EXR writer " +
         FormatMiB(b.exr_writer) + ", page cache " + FormatMiB(b.page_cache) + ", brick cache " +
-        FormatMiB(min_cache) + ", pins " + FormatMiB(min_pins) + ", headroom 1/16)");
+        FormatMiB(min_cache) + ", pins " + FormatMiB(min_pins) + ", headroom 1/8)");
   };
   if (fixed + min_cache + min_pins > total) return too_small();
   const uint64_t left = total - fixed;

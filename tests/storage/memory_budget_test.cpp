@@ -339,7 +339,7 @@ TEST(SplitMemoryBudget, Arithmetic) {
   EXPECT_EQ(b->total, total);
   EXPECT_EQ(Sum(*b), total);
   EXPECT_EQ(b->process_base, BudgetInputs::kDefaultProcessBase);
-  EXPECT_EQ(b->headroom, 48 * kMiB);
+  EXPECT_EQ(b->headroom, 96 * kMiB);
   EXPECT_EQ(b->resident_top, 3 * kMiB);
   EXPECT_EQ(b->tile_buffers, 2u * 64 * 64 * 5 * 4);                    // 160 KiB
   EXPECT_EQ(b->exr_writer, 2u * 2 * 64 * 64 * 5 * 4 + 256 * 8 + 1024u * 64 * 16);
