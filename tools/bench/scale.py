@@ -610,7 +610,8 @@ class Bench:
                                 for phase in phases:
                                     self.measure("vdb_render", n, vdb, store_bytes, cam, limit, phase,
                                                  run, ref)
-            self.report()
+                if n != a.grids[-1]:
+                    self.report()
         self.report()
 
     # ------------------------------------------------------------ the report
@@ -633,15 +634,20 @@ class Bench:
         fails = [int(r["failcnt"]) for r in rows if r["failcnt"] not in ("", None)]
         peak += f" ({statistics.median(fails):.0f})" if fails else ""
         paged = med("bricks_paged_in", 1, "{:.0f}")
-        read = med("inblock_bytes", MiB, "{:.1f}")
+        reads = [float(r["inblock_bytes"]) for r in rows if r["inblock_bytes"] not in ("", None)]
+        read = f"{statistics.median(reads) / MiB:.1f}" if reads else "–"
         ids = [r["identical"] for r in done]
         if killed or other:
             status = []
+            bad = [float(r["wall_s"]) for r in rows if r["exit"] != "0"]
             if killed:
                 status.append(f"OOM-killed {killed}/{len(rows)}")
             if other:
-                status.append(f"failed {other}/{len(rows)}")
-            result = ", ".join(status)
+                what = sorted({f"timeout" if r["timeout"] == "1" else
+                               f"exit {r['exit']}" if r["exit"] else f"signal {r['signal']}"
+                               for r in rows if r["exit"] != "0" and r["oom"] != "1"})
+                status.append(f"{', '.join(what)} {other}/{len(rows)}")
+            result = ", ".join(status) + f" after {statistics.median(bad):.1f} s"
         elif all(i == "ref" for i in ids) or ("ref" in ids and all(i in ("ref", "yes") for i in ids)):
             result = "reference"
         elif ids and all(i == "yes" for i in ids):
@@ -681,6 +687,20 @@ class Bench:
                  f"defaults{(' plus `' + a.render_args + '`') if a.render_args else ''}, "
                  f"`--threads {a.threads}`, {a.size[0]}x{a.size[1]} pixels, one directional light "
                  f"without shadows. Medians of {a.runs} run(s) per cell.\n")
+        runs = sorted({int(r["run"]) for r in rows})
+        counts = {}
+        for r in rows:
+            k = (r["grid"], r["tool"], r["camera"], r["limit"], r["phase"])
+            counts[k] = counts.get(k, 0) + 1
+        if counts and min(counts.values()) != max(counts.values()):
+            L.append(f"Runs per cell: {min(counts.values())} to {max(counts.values())} (CSV).\n")
+        tiny = sorted({int(r["limit_bytes"]) for r in rows if 0 < int(r["limit_bytes"]) < 32 * MiB})
+        if tiny:
+            L.append("Note: limits of "
+                     + ", ".join(f"{b / MiB:.1f}" for b in tiny)
+                     + " MiB are about the size of a render process's own code, libraries, thread "
+                     "stacks and image tiles, so those rows test the process's floor more than "
+                     "its paging; the bigger grids are the meaningful ones.\n")
         for note in self.notes:
             L.append(f"Note: {note}.\n")
         L.append("Stores: `vox-gen sphere --size N` (the unit sphere shell, 15/16 of the grid "
@@ -691,13 +711,13 @@ class Bench:
                  "applied as a memory cgroup limit around the whole process; `none` runs in a "
                  "cgroup without a limit, so peaks are measured alike.\n")
         L.append("Columns per camera: **wall** s: the whole process (start, store open, render, "
-                 "EXR write, exit); **peak** MiB (failcnt): the cgroup's peak charge, anonymous "
+                 "EXR write, exit; median of the runs that finished); **peak** MiB (failcnt): the cgroup's peak charge, anonymous "
                  "memory plus the page cache the process brought in (failcnt counts how often the "
                  "charge hit the limit, i.e. reclaim, not failure); **bricks**: bricks paged in "
                  "(`--stats` cache.bricks_paged_in); **read** MiB: bytes the process read from the "
-                 "disk (wait4 ru_inblock x 512, the same counter as /proc/PID/io read_bytes; near 0 "
+                 "disk, killed runs included (wait4 ru_inblock x 512, the same counter as /proc/PID/io read_bytes; near 0 "
                  "when warm); **pixels**: the EXR against the unlimited run's, bit for bit per "
-                 "channel (`scale.py --compare`), or how the run ended. Cold: `sync; echo 3 > "
+                 "channel (`scale.py --compare`), or how the runs ended and when. Cold: `sync; echo 3 > "
                  "/proc/sys/vm/drop_caches` first. Warm: the same command again; page cache left by "
                  "an earlier run stays charged to that run's (removed) cgroup's parent, so a warm "
                  "limited run's peak is mostly anonymous memory.\n")
@@ -809,12 +829,14 @@ class Bench:
             for (lim, phase), pts in series.items():
                 col = colors[lim]
                 dash = ' stroke-dasharray="5,3"' if phase == "cold" else ""
-                live = [(X(n), Y(v)) for n, v, _ in pts if v]
+                # Side by side within a grid size: limits, then cold/warm.
+                jit = (order.index(lim) * 2 + (phase == "warm") - len(order) + 0.5) * 7
+                live = [(X(n) + jit, Y(v)) for n, v, _ in pts if v]
                 if len(live) > 1:
                     parts.append(f'<polyline fill="none" stroke="{col}" stroke-width="1.8"{dash} points="'
                                  + " ".join(f"{x:.1f},{y:.1f}" for x, y in live) + '"/>')
                 for n, v, killed in pts:
-                    x = X(n)
+                    x = X(n) + jit
                     if v and not killed:
                         parts.append(f'<circle cx="{x:.1f}" cy="{Y(v):.1f}" r="3" fill="{col}"/>')
                     else:
@@ -829,7 +851,7 @@ class Bench:
             x += 150
         parts.append(f'<text x="20" y="{ly + 22}" font-size="12">solid: warm, dashed: cold; '
                      'x: at least one run OOM-killed or failed (peak: median over all runs; '
-                     'time: over the runs that finished)</text>')
+                     'time: over the runs that finished; x at the top: none finished)</text>')
         total_w, total_h = 2 * (W + 20) + 20, ly + 36
         return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{total_w}" height="{total_h}" '
                 f'font-family="sans-serif">\n<rect width="100%" height="100%" fill="white"/>\n'
