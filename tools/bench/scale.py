@@ -5,7 +5,7 @@ Usage (from the repository root; tools/bench/scale.sh wraps this):
 
   python3 tools/bench/scale.py [--build build] [--work /tmp/vox-scale]
       [--grids 1024,2048,4096] [--limits 1/2,1/4,1/8] [--runs 3] [--threads 2]
-      [--size 1024x1024] [--store-8192 PATH] [--vdb N=PATH ...] [--timeout 1800]
+      [--size 1024x1024] [--store-8192 PATH] [--vdb N=PATH ...] [--timeout SECONDS]
       [--render-args "--flag value ..."] [--no-cold] [--fresh]
       [--out docs/scale.md]
   python3 tools/bench/scale.py --compare A.exr B.exr   # pixel check of two tiled EXRs
@@ -21,6 +21,10 @@ unlimited and in memory cgroups of each --limits fraction of the store's size
 on disk. Each (camera, limit) gets a cold frame (`sync; echo 3 >
 /proc/sys/vm/drop_caches` first; skipped, with a note, when not root) and a
 warm frame (the same command again), --runs times; the report shows medians.
+A run is killed after --timeout seconds (default: a limited run after 10 times
+the slowest unlimited run of its grid, camera and tool, at least 60 s: under a
+tight limit a process can thrash, re-reading its code and data for a long time
+before the OOM killer acts) and recorded as timed out.
 
 Every run is one vox-render process in its own memory cgroup (v1: NAME under
 the memory mount, memory.limit_in_bytes, memory.max_usage_in_bytes,
@@ -29,7 +33,8 @@ memory.events); an unlimited run gets a cgroup without a limit so its peak is
 measured the same way. The child is moved into the cgroup before it execs.
 Recorded per run: whole-process wall time, the cgroup's peak charge (anonymous
 memory and the page cache it brought in), failcnt, the OOM kill (SIGKILL with
-oom_kill or failcnt set), the child's ru_maxrss and ru_inblock * 512 (bytes
+oom_kill or failcnt set), the child's ru_maxrss (which counts the forked
+Python before exec, about 15 MB) and ru_inblock * 512 (bytes
 it read from the block device, i.e. its /proc/PID/io read_bytes, from wait4),
 vox-render's --stats JSON (cache.bricks_paged_in, and when present
 cache.bytes_read / cache.process_read_bytes and a "memory" object), and whether
@@ -277,6 +282,16 @@ class Cgroups:
                 return int(p[1])
         return 0
 
+    def remove_stale(self):
+        """Removes empty cgroups left by an earlier run of this script that was killed."""
+        for name in os.listdir(self.mount) if self.version else []:
+            m = re.fullmatch(r"vox_scale_(\d+)_\d+", name)
+            if m and not os.path.exists(f"/proc/{m.group(1)}"):
+                try:
+                    os.rmdir(f"{self.mount}/{name}")
+                except OSError:
+                    pass
+
     def make(self, limit):
         d = f"{self.mount}/vox_scale_{os.getpid()}_{time.monotonic_ns()}"
         os.mkdir(d)
@@ -356,9 +371,16 @@ def run_process(argv, cg, limit, stdout, stderr, timeout):
     poller = select.poll()
     poller.register(pidfd, select.POLLIN)
     timed_out = False
-    if not poller.poll(timeout * 1000):
-        timed_out = True
+    try:
+        if not poller.poll(int(timeout * 1000)):
+            timed_out = True
+            os.kill(pid, signal.SIGKILL)
+    except BaseException:  # interrupted: leave no child or cgroup behind
         os.kill(pid, signal.SIGKILL)
+        os.wait4(pid, 0)
+        if d:
+            cg.finish(d)
+        raise
     _, status, ru = os.wait4(pid, 0)
     wall = time.monotonic() - t0
     os.close(pidfd)
@@ -459,6 +481,7 @@ class Bench:
             os.replace(self.csv, self.csv + f".{int(time.time())}.old")
         self.is_root = os.geteuid() == 0
         self.cg = Cgroups()
+        self.cg.remove_stale()
         self.notes = []
         if not self.is_root:
             self.notes.append("not root: cold frames skipped (dropping the page cache needs root)")
@@ -546,10 +569,18 @@ class Bench:
         if phase == "cold" and not drop_page_cache():
             log("cannot drop the page cache; cold run skipped")
             return
+        timeout = self.a.timeout
+        if not timeout:
+            # A limited run that takes far longer than the unlimited one is
+            # thrashing (re-reading its code and data from disk); give up.
+            base = [float(r["wall_s"]) for r in self.rows
+                    if r["bin"] == self.bin and r["tool"] == tool and r["grid"] == str(n)
+                    and r["camera"] == cam and r["limit"] == "none" and r["exit"] == "0"]
+            timeout = max(60.0, 10 * max(base)) if base and limit != "none" else 7200.0
         log(f"{tag}: limit {limit_bytes // MiB if limit_bytes else 'none'} MiB ...")
         r = run_process(argv, self.cg if self.cg.version else None, limit_bytes,
                         os.path.join(out, tag + ".out"), os.path.join(out, tag + ".err"),
-                        self.a.timeout)
+                        timeout)
         row = dict(key, limit_bytes=limit_bytes, store_bytes=store_bytes, loadavg=loadavg(),
                    when=time.strftime("%H:%M:%S"),
                    cgroup=f"v{self.cg.version}" if self.cg.version else "none", **r)
@@ -643,7 +674,7 @@ class Bench:
             if killed:
                 status.append(f"OOM-killed {killed}/{len(rows)}")
             if other:
-                what = sorted({f"timeout" if r["timeout"] == "1" else
+                what = sorted({f"timed out (thrashing)" if r["timeout"] == "1" else
                                f"exit {r['exit']}" if r["exit"] else f"signal {r['signal']}"
                                for r in rows if r["exit"] != "0" and r["oom"] != "1"})
                 status.append(f"{', '.join(what)} {other}/{len(rows)}")
@@ -656,7 +687,7 @@ class Bench:
             diff = max(int(r["diff_pixels"] or 0) for r in done)
             result = f"differs ({diff} px)"
         else:
-            result = "–"
+            result = "finished"
         return [wall, peak, paged, read, result]
 
     def report(self):
@@ -752,7 +783,12 @@ class Bench:
             for n in grids:
                 if n not in a.vdb:
                     L.append(f"vdb_render: no .vdb for grid {n}: skipped.\n")
-            L.append("vdb_render rows: the same cameras and cgroups, whole-process wall time "
+            L.append("vdb_render inputs: " + ", ".join(
+                f"{n}: `{p}` ({os.path.getsize(p) / MiB:.0f} MiB)" if os.path.exists(p) else f"{n}: `{p}`"
+                for n, p in sorted(a.vdb.items())) + " (`vdb_tool -sphere r=1 v=32/(15N) w=3`: the "
+                "same sphere, voxel size and band as the vox store; its whole grid is read before "
+                "rendering).\n")
+            L.append("vdb_render rows: `-shader diffuse`, the same cameras and cgroups, whole-process wall time "
                      "(reading the .vdb included); limits are the same bytes as vox's (fractions of "
                      "the vox store), and its pixels are not compared with vox's.\n")
         L.append("Long runs: `--grids 8192` (a store of a few GB, about an hour to generate on this "
@@ -871,7 +907,9 @@ def main():
     p.add_argument("--size", default="1024x1024")
     p.add_argument("--store-8192", dest="store_8192")
     p.add_argument("--vdb", action="append", default=[], metavar="N=PATH")
-    p.add_argument("--timeout", type=float, default=1800, help="seconds per run before SIGKILL")
+    p.add_argument("--timeout", type=float, default=0,
+                   help="seconds per run before SIGKILL (default: for a limited run 10x the slowest "
+                        "unlimited run of the same grid, camera and tool, at least 60 s; else 2 h)")
     p.add_argument("--render-args", default="", help="extra vox-render flags, one string")
     p.add_argument("--no-cold", action="store_true")
     p.add_argument("--fresh", action="store_true", help="ignore (and set aside) earlier results")
@@ -917,7 +955,11 @@ def main():
     a.vdb = vdb
     if a.store_8192 and 8192 not in a.grids:
         p.error("--store-8192 given but 8192 is not in --grids")
-    Bench(a).run()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit("scale: terminated"))
+    try:
+        Bench(a).run()
+    except KeyboardInterrupt:
+        sys.exit("scale: interrupted (rerun the same command to resume)")
     return 0
 
 

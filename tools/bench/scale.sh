@@ -8,7 +8,7 @@
 #
 #   tools/bench/scale.sh [--build build] [--work /tmp/vox-scale] [--grids 1024,2048,4096]
 #                        [--limits 1/2,1/4,1/8] [--runs 3] [--threads 2] [--size 1024x1024]
-#                        [--store-8192 PATH] [--vdb N=PATH]... [--timeout 1800]
+#                        [--store-8192 PATH] [--vdb N=PATH]... [--timeout SECONDS]
 #                        [--render-args "..."] [--no-cold] [--fresh] [--report-only]
 #                        [--out docs/scale.md]
 #   tools/bench/scale.sh --compare A.exr B.exr   # are two tiled EXRs' pixels identical?
