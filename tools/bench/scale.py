@@ -21,10 +21,11 @@ unlimited and in memory cgroups of each --limits fraction of the store's size
 on disk. Each (camera, limit) gets a cold frame (`sync; echo 3 >
 /proc/sys/vm/drop_caches` first; skipped, with a note, when not root) and a
 warm frame (the same command again), --runs times; the report shows medians.
-A run is killed after --timeout seconds (default: a limited run after 10 times
+A run is killed after --timeout seconds (default: a limited run after 5 times
 the slowest unlimited run of its grid, camera and tool, at least 60 s: under a
 tight limit a process can thrash, re-reading its code and data for a long time
-before the OOM killer acts) and recorded as timed out.
+before the OOM killer acts) and recorded as timed out; the same tool, grid,
+camera and phase are then not run again at that limit or tighter ones.
 
 Every run is one vox-render process in its own memory cgroup (v1: NAME under
 the memory mount, memory.limit_in_bytes, memory.max_usage_in_bytes,
@@ -548,6 +549,11 @@ class Bench:
                "phase": phase, "run": run}
         if self.have(key):
             return
+        if limit != "none" and any(
+                r["bin"] == self.bin and r["tool"] == tool and r["grid"] == str(n) and
+                r["camera"] == cam and r["phase"] == phase and r["timeout"] == "1" and
+                r["limit"] != "none" and frac_value(r["limit"]) >= frac_value(limit) for r in self.rows):
+            return  # that limit or a looser one timed out: this would too, slowly
         limit_bytes = 0 if limit == "none" else int(store_bytes * frac_value(limit))
         tag = f"{tool}_{n}_{cam}_{limit.replace('/', 'of')}_{phase}_{run}"
         out = os.path.join(self.a.work, "out")
@@ -576,7 +582,7 @@ class Bench:
             base = [float(r["wall_s"]) for r in self.rows
                     if r["bin"] == self.bin and r["tool"] == tool and r["grid"] == str(n)
                     and r["camera"] == cam and r["limit"] == "none" and r["exit"] == "0"]
-            timeout = max(60.0, 10 * max(base)) if base and limit != "none" else 7200.0
+            timeout = max(60.0, 5 * max(base)) if base and limit != "none" else 7200.0
         log(f"{tag}: limit {limit_bytes // MiB if limit_bytes else 'none'} MiB ...")
         r = run_process(argv, self.cg if self.cg.version else None, limit_bytes,
                         os.path.join(out, tag + ".out"), os.path.join(out, tag + ".err"),
@@ -773,6 +779,11 @@ class Bench:
                             c = self.cells([r for r in sel if r["camera"] == cam])
                             cells += c if c else ["–"] * len(sub)
                         L.append("| " + " | ".join([str(n), f"{sb:.0f}", tool, lim, phase] + cells) + " |")
+        if any(r["timeout"] == "1" for r in rows):
+            L.append("Timed out: a run still going after 5 times the slowest unlimited run of its "
+                     "grid, camera and tool (at least 60 s) was killed; after one, that tool, grid, "
+                     "camera and phase were not run again at that limit or tighter ones, so those "
+                     "cells hold fewer runs or none.\n")
         missing = [g for g in a.grids if g not in grids]
         L.append("")
         if missing:
@@ -908,7 +919,7 @@ def main():
     p.add_argument("--store-8192", dest="store_8192")
     p.add_argument("--vdb", action="append", default=[], metavar="N=PATH")
     p.add_argument("--timeout", type=float, default=0,
-                   help="seconds per run before SIGKILL (default: for a limited run 10x the slowest "
+                   help="seconds per run before SIGKILL (default: for a limited run 5x the slowest "
                         "unlimited run of the same grid, camera and tool, at least 60 s; else 2 h)")
     p.add_argument("--render-args", default="", help="extra vox-render flags, one string")
     p.add_argument("--no-cold", action="store_true")
