@@ -815,7 +815,8 @@ class Bench:
     def plot(self, rows, grids, order):
         """A 2x2 SVG: wall time and peak memory against grid size, full view and close-up."""
         W, H, pad = 460, 300, 58
-        colors = {"none": "#1f77b4", "1/2": "#2ca02c", "1/4": "#ff7f0e", "1/8": "#d62728"}
+        colors = {"none": "#1f77b4", "1/2": "#2ca02c", "1/4": "#ff7f0e", "1/8": "#d62728",
+                  "vdb_render": "#555555"}
         extra = ["#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
         for i, lim in enumerate(l for l in order if l not in colors):
             colors[lim] = extra[i % len(extra)]
@@ -826,12 +827,16 @@ class Bench:
         for pi, (field, ylabel, cam) in enumerate(panels):
             ox, oy = (pi % 2) * (W + 20) + 10, (pi // 2) * (H + 30) + 40
             series = {}
-            for lim in order:
+            for lim in order + ["vdb_render"]:
                 for phase in ("cold", "warm"):
                     pts = []
                     for n in grids:
-                        sel = [r for r in vox if int(r["grid"]) == n and r["camera"] == cam
-                               and r["limit"] == lim and r["phase"] == phase]
+                        if lim == "vdb_render":  # OpenVDB's renderer, unlimited, for scale
+                            sel = [r for r in rows if r["tool"] == "vdb_render" and int(r["grid"]) == n
+                                   and r["camera"] == cam and r["limit"] == "none" and r["phase"] == phase]
+                        else:
+                            sel = [r for r in vox if int(r["grid"]) == n and r["camera"] == cam
+                                   and r["limit"] == lim and r["phase"] == phase]
                         if not sel:
                             continue
                         ok = [r for r in sel if r["exit"] == "0"]
@@ -877,7 +882,7 @@ class Bench:
                 col = colors[lim]
                 dash = ' stroke-dasharray="5,3"' if phase == "cold" else ""
                 # Side by side within a grid size: limits, then cold/warm.
-                jit = (order.index(lim) * 2 + (phase == "warm") - len(order) + 0.5) * 7
+                jit = ((order + ["vdb_render"]).index(lim) * 2 + (phase == "warm") - len(order) - 0.5) * 7
                 live = [(X(n) + jit, Y(v)) for n, v, _ in pts if v]
                 if len(live) > 1:
                     parts.append(f'<polyline fill="none" stroke="{col}" stroke-width="1.8"{dash} points="'
@@ -892,17 +897,19 @@ class Bench:
                                      'stroke-width="2"/>')
         ly = 2 * (H + 30) + 48
         x = 20
-        for lim in order:
+        for lim in order + (["vdb_render"] if any(r["tool"] == "vdb_render" for r in rows) else []):
+            label = ("vox unlimited" if lim == "none" else "vdb_render unlimited" if lim == "vdb_render"
+                     else "vox, limit " + lim + " of store")
             parts.append(f'<line x1="{x}" x2="{x + 24}" y1="{ly}" y2="{ly}" stroke="{colors[lim]}" stroke-width="2"/>')
-            parts.append(f'<text x="{x + 28}" y="{ly + 4}" font-size="12">{"unlimited" if lim == "none" else "limit " + lim + " of store"}</text>')
-            x += 150
+            parts.append(f'<text x="{x + 28}" y="{ly + 4}" font-size="12">{label}</text>')
+            x += 40 + 7 * len(label)
         parts.append(f'<text x="20" y="{ly + 22}" font-size="12">solid: warm, dashed: cold; '
                      'x: at least one run OOM-killed or failed (peak: median over all runs; '
                      'time: over the runs that finished; x at the top: none finished)</text>')
         total_w, total_h = 2 * (W + 20) + 20, ly + 36
         return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{total_w}" height="{total_h}" '
                 f'font-family="sans-serif">\n<rect width="100%" height="100%" fill="white"/>\n'
-                f'<text x="20" y="24" font-size="15">vox-render scale benchmark (medians; see scale.md)</text>\n'
+                f'<text x="20" y="24" font-size="15">vox-render scale benchmark (medians; table and notes in scale.md)</text>\n'
                 + "\n".join(parts) + "\n</svg>\n")
 
 
