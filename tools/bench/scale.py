@@ -588,7 +588,7 @@ class Bench:
                         os.path.join(out, tag + ".out"), os.path.join(out, tag + ".err"),
                         timeout)
         row = dict(key, limit_bytes=limit_bytes, store_bytes=store_bytes, loadavg=loadavg(),
-                   when=time.strftime("%H:%M:%S"),
+                   when=time.strftime("%Y-%m-%d %H:%M:%S"),
                    cgroup=f"v{self.cg.version}" if self.cg.version else "none", **r)
         if os.path.exists(stats):
             try:
@@ -705,21 +705,26 @@ class Bench:
         L = []
         cmd = "tools/bench/scale.sh " + " ".join(shlex.quote(x) for x in sys.argv[1:])
         L.append("# Scale benchmark: vox-render as the volume grows and the memory limit shrinks\n")
-        L.append(f"Produced by `{cmd}` (tools/bench/scale.py documents it), "
-                 f"started {self.started}, report written {time.strftime('%Y-%m-%d %H:%M:%S %Z')}.\n")
+        whens = sorted(r["when"] for r in rows if r["when"])
+        L.append(f"Produced by `{cmd}` (tools/bench/scale.py documents it; it resumes from the "
+                 f"CSV in --work, so the runs may span several invocations): runs measured "
+                 f"{whens[0] if whens else '?'} to {whens[-1] if whens else '?'}, report written "
+                 f"{time.strftime('%Y-%m-%d %H:%M:%S %Z')}.\n")
         m = machine_notes(self.cg, self.is_root)
+        loads = sorted(float(r["loadavg"]) for r in rows if r["loadavg"])
+        load = (f"1-minute load average {loads[0]:.1f} to {loads[-1]:.1f}, median "
+                f"{statistics.median(loads):.1f}, over the runs") if loads else f"load {loadavg()}"
         L.append(f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory']}, Linux {m['kernel']}, "
                  f"memory cgroup {m['cgroup']}. **Shared and loaded**: other jobs build and test on "
-                 f"the same 2 cores (load average {self.load_start} at the start, {loadavg()} now; "
-                 "each run's load is in the CSV), so wall times are noisy and only their order of "
-                 "magnitude and the trends are meaningful.\n")
+                 f"the same cores ({load}; each run's is in the CSV), so wall times are noisy and "
+                 "only their order of magnitude and the trends are meaningful.\n")
         try:
             commit = subprocess.run(["git", "-C", os.path.dirname(os.path.abspath(__file__)),
                                      "rev-parse", "--short", "HEAD"], capture_output=True,
                                     text=True).stdout.strip()
         except OSError:
             commit = ""
-        L.append(f"vox-render: `{self.render}` (SHA-256 {self.bin}, source commit {commit or '?'}), "
+        L.append(f"vox-render: `{self.render}` (SHA-256 {self.bin}; repository at {commit or '?'} when the report was written), "
                  f"{'with' if self.has_memory_flag else 'without'} a `--memory-mb` flag; run with its "
                  f"defaults{(' plus `' + a.render_args + '`') if a.render_args else ''}, "
                  f"`--threads {a.threads}`, {a.size[0]}x{a.size[1]} pixels, one directional light "
@@ -758,11 +763,33 @@ class Bench:
                  "/proc/sys/vm/drop_caches` first. Warm: the same command again; page cache left by "
                  "an earlier run stays charged to that run's (removed) cgroup's parent, so a warm "
                  "limited run's peak is mostly anonymous memory.\n")
+        order = ["none"] + a.limits
+        # Summary: the tightest limit under which every run, cold and warm, finished.
+        L.append("Summary: the tightest limit under which every run (cold and warm) finished; "
+                 "`none` when only the unlimited runs did.\n")
+        L.append("| grid | tool | full view | close-up |")
+        L.append("|---|---|---|---|")
+        for n in grids:
+            for tool in ("vox", "vdb_render"):
+                cells = []
+                for cam in CAMERAS:
+                    best = "–"
+                    for limit in order:
+                        sel = [r for r in rows if int(r["grid"]) == n and r["tool"] == tool
+                               and r["camera"] == cam and r["limit"] == limit]
+                        if sel and all(r["exit"] == "0" for r in sel):
+                            lb = int(sel[0]["limit_bytes"])
+                            best = "none" if limit == "none" else f"{limit} ({lb / MiB:.0f} MiB)"
+                        elif limit != "none" or sel:
+                            break
+                    cells.append(best)
+                if any(r["tool"] == tool and int(r["grid"]) == n for r in rows):
+                    L.append(f"| {n} | {tool} | " + " | ".join(cells) + " |")
+        L.append("")
         hdr = ["grid", "store MiB", "tool", "limit", "phase"]
         sub = ["wall s", "peak MiB (failcnt)", "bricks", "read MiB", "pixels"]
         L.append("| " + " | ".join(hdr + [f"full: {s}" for s in sub] + [f"close-up: {s}" for s in sub]) + " |")
         L.append("|" + "---|" * (len(hdr) + 2 * len(sub)))
-        order = ["none"] + a.limits
         for n in grids:
             gr = [r for r in rows if int(r["grid"]) == n]
             sb = int(gr[0]["store_bytes"]) / MiB
