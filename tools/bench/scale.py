@@ -531,7 +531,7 @@ class Bench:
     def store_for(self, n):
         if n == 8192 and self.a.store_8192:
             if not os.path.isfile(os.path.join(self.a.store_8192, "bricks.vxb")):
-                sys.exit(f"scale: --store-8192 {self.a.store_8192}: no such store")
+                sys.exit(f"scale: --store-8192 {self.a.store_8192}: not a vox store (no bricks.vxb)")
             return self.a.store_8192
         store = os.path.join(self.a.work, f"sphere{n}.store")
         if os.path.isfile(os.path.join(store, "bricks.vxb")):
@@ -974,9 +974,10 @@ def main():
         print(exr_covered_pixels(a.covered))
         return 0
     try:
-        a.grids = [int(g) for g in a.grids.split(",") if g.strip()]
-        if not a.grids or any(g < 2 or g & (g - 1) for g in a.grids):
+        grids = [int(g) for g in a.grids.split(",") if g.strip()]
+        if not grids or any(g < 2 or g & (g - 1) for g in grids):
             raise ValueError
+        a.grids = grids
     except ValueError:
         p.error(f"--grids {a.grids}: expected powers of two, comma-separated")
     try:
