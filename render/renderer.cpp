@@ -26,7 +26,7 @@ class RecordingSource : public BrickSource {
   StatusOr<BrickView> FetchBrick(uint32_t id) override {
     if (entered_++ == kRecordedBricks) return NotFoundError(std::string());
     ids_->push_back(id);
-    static const Cell kEmpty{};
+    static const CompactCell kEmpty{};  // mask 0: an empty root
     return BrickView{&kEmpty, 1, nullptr, nullptr};
   }
 

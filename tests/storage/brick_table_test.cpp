@@ -71,7 +71,7 @@ TEST(LendingBrickTable, LendsTheSourcesCells) {
     auto truth = tree->FetchBrick(id);
     ASSERT_TRUE(truth.ok());
     ASSERT_EQ(v->num_cells, truth->num_cells) << "brick " << id;
-    EXPECT_EQ(0, std::memcmp(v->cells, truth->cells, sizeof(Cell) * v->num_cells)) << id;
+    EXPECT_EQ(0, std::memcmp(v->cells, truth->cells, sizeof(CompactCell) * v->num_cells)) << id;
     EXPECT_EQ(v->data, truth->data);
     // FetchBrick hands out the same view, with a pin of its own.
     auto copy = table.FetchBrick(id);

@@ -31,7 +31,7 @@ bool Contains(const std::string& s, const std::string& part) {
 // The decoded contents of a brick as bytes: cells, then attribute planes.
 std::string BrickBytes(const BrickView& v) {
   const auto* b = static_cast<const DecodedBrick*>(v.data);
-  std::string out(reinterpret_cast<const char*>(v.cells), v.num_cells * sizeof(Cell));
+  std::string out(reinterpret_cast<const char*>(v.cells), v.num_cells * sizeof(CompactCell));
   out.append(reinterpret_cast<const char*>(b->attr_planes.data()), b->attr_planes.size());
   out.append(reinterpret_cast<const char*>(&b->voxel_count), sizeof(b->voxel_count));
   return out;

@@ -57,24 +57,24 @@ struct StoredVoxel {
 };
 
 // Walks the octree under `cell` (grid coordinates `base`, 2^size_log2 per axis).
-Status Walk(Store& store, const Cell* pool, uint32_t cell, int size_log2, Ijk base, uint32_t brick,
-            std::map<Ijk, StoredVoxel>* out) {
+Status Walk(Store& store, const CompactCell* pool, uint32_t cell, int size_log2, Ijk base,
+            uint32_t brick, std::map<Ijk, StoredVoxel>* out) {
+  const OctreeView v = store.view();
   const int child_log2 = size_log2 - 1;
   for (unsigned d = 0; d < 8; ++d) {
-    NodeRef ref = pool[cell].child[d];
-    if (ref == kEmptyRef) continue;
+    ChildRef ref = ChildOf(pool[cell], d, v.levels - size_log2, v);
+    if (ref.kind == ChildRef::kEmpty) continue;
     Ijk c{std::get<0>(base) + (int64_t(d & 1) << child_log2),
           std::get<1>(base) + (int64_t((d >> 1) & 1) << child_log2),
           std::get<2>(base) + (int64_t((d >> 2) & 1) << child_log2)};
-    if (child_log2 == 0) {
-      if (!out->emplace(c, StoredVoxel{brick, LeafPayload(ref)}).second)
+    if (ref.kind == ChildRef::kPayload) {
+      if (!out->emplace(c, StoredVoxel{brick, ref.index}).second)
         return InternalError("voxel listed twice");
-    } else if (IsBrickRef(ref)) {
-      uint32_t id = ref & kBrickIdMask;
-      VOX_ASSIGN_OR_RETURN(BrickView b, store.FetchBrick(id));
-      VOX_RETURN_IF_ERROR(Walk(store, b.cells, 0, child_log2, c, id, out));
+    } else if (ref.kind == ChildRef::kBrick) {
+      VOX_ASSIGN_OR_RETURN(BrickView b, store.FetchBrick(ref.index));
+      VOX_RETURN_IF_ERROR(Walk(store, b.cells, 0, child_log2, c, ref.index, out));
     } else {
-      VOX_RETURN_IF_ERROR(Walk(store, pool, ref, child_log2, c, brick, out));
+      VOX_RETURN_IF_ERROR(Walk(store, pool, ref.index, child_log2, c, brick, out));
     }
   }
   return OkStatus();
