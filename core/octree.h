@@ -113,6 +113,11 @@ class BrickSource {
   // Returns brick `id`'s cells. Thread-safe. Errors (I/O, checksum) name the
   // brick and the file.
   virtual StatusOr<BrickView> FetchBrick(uint32_t id) = 0;
+  // Brick `id`'s cells if they are in memory now, without waiting for a
+  // read; otherwise UnavailableError (and nothing is read: the caller asks
+  // for the read, e.g. Store::Prefetch, and tries again later). Sources that
+  // hold every brick in memory answer as FetchBrick.
+  virtual StatusOr<BrickView> FetchBrickIfReady(uint32_t id) { return FetchBrick(id); }
 
   // Lending: a source used by one thread that keeps the bricks it hands out
   // pinned itself (a per-thread table in front of a shared cache) returns

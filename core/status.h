@@ -24,6 +24,7 @@ enum class StatusCode {
   kUnsupported,       // well-formed input vox does not handle (grid type, format major)
   kResourceExhausted, // out of memory, disk full, budget too small
   kInternal,          // a bug in vox
+  kUnavailable,       // not ready yet (a brick still being read): ask again later
 };
 
 std::string_view StatusCodeName(StatusCode code);
@@ -53,6 +54,7 @@ inline Status IoError(std::string m) { return {StatusCode::kIoError, std::move(m
 inline Status CorruptionError(std::string m) { return {StatusCode::kCorruption, std::move(m)}; }
 inline Status UnsupportedError(std::string m) { return {StatusCode::kUnsupported, std::move(m)}; }
 inline Status ResourceExhaustedError(std::string m) { return {StatusCode::kResourceExhausted, std::move(m)}; }
+inline Status UnavailableError(std::string m) { return {StatusCode::kUnavailable, std::move(m)}; }
 inline Status InternalError(std::string m) { return {StatusCode::kInternal, std::move(m)}; }
 
 // Either a T or a non-OK Status.

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -111,18 +112,46 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
     return s;
   };
 
-  // Prefetch cursor: tiles [begin, scanned) have had their bricks asked for.
-  std::atomic<int64_t> scanned{begin};
-  auto prefetch_ahead = [&](int64_t i) {
-    const int64_t target = std::min(end, i + 1 + int64_t(std::max(options.prefetch_tiles, 0)));
-    std::vector<uint32_t> ids;
-    for (int64_t j = scanned.load(); j < target; j = scanned.load()) {
-      if (!scanned.compare_exchange_weak(j, j + 1)) continue;
-      ids.clear();
-      renderer.FirstBricks(layout.order()[size_t(j)], options.prefetch_stride, &ids);
-      if (!ids.empty()) options.prefetch(ids);
+  // The scout: a thread that walks the tile order ahead of the workers,
+  // finds the bricks each tile's primary rays enter first (the resident top
+  // only, no brick read) and asks for them, so the volume reads them while
+  // the workers trace. It stays at most prefetch_tiles tiles ahead and waits
+  // while the bytes read ahead and not yet used exceed prefetch_limit.
+  std::atomic<bool> scout_stop{false};
+  std::thread scout;
+  if (options.prefetch) {
+    scout = std::thread([&] {
+      try {
+        std::vector<uint32_t> ids;
+        const int64_t ahead = std::max<int64_t>(1, options.prefetch_tiles);
+        for (int64_t j = begin; j < end; ++j) {
+          for (;;) {
+            if (scout_stop.load() || abort.load()) return;
+            const bool far = j >= cursor.load() + ahead;
+            const bool full = options.prefetch_backlog && options.prefetch_limit > 0 &&
+                              options.prefetch_backlog() > options.prefetch_limit;
+            if (!far && !full) break;
+            std::this_thread::sleep_for(std::chrono::microseconds(200));
+          }
+          j = std::max(j, cursor.load());  // tiles the workers started need no scouting
+          if (j >= end) return;
+          ids.clear();
+          renderer.FirstBricks(layout.order()[size_t(j)], options.prefetch_stride, &ids);
+          if (!ids.empty()) options.prefetch(ids);
+        }
+      } catch (const std::exception&) {
+        // Prefetching is an optimisation: without it, the workers read what they need.
+      }
+    });
+  }
+  struct JoinScout {
+    std::atomic<bool>& stop;
+    std::thread& t;
+    ~JoinScout() {
+      stop = true;
+      if (t.joinable()) t.join();
     }
-  };
+  } join_scout{scout_stop, scout};
 
   Stopwatch frame_clock;
   tbb::task_arena arena(threads);
@@ -134,7 +163,6 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
         const int64_t i = cursor.fetch_add(1);
         if (i >= end) return;
         const TileRect& rect = layout.order()[size_t(i)];
-        if (options.prefetch) prefetch_ahead(i);
         uint64_t rays_before = 0;
         for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
         const uint64_t entries_before = w.counters.trace.brick_fetches;
@@ -162,6 +190,8 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
       }
     });
   });
+  scout_stop = true;
+  if (scout.joinable()) scout.join();
   stats->render_seconds = frame_clock.Lap();
   for (Worker& w : workers) {
     stats->counters.Add(w.counters);
@@ -224,11 +254,12 @@ std::string StatsJson(const Renderer& renderer, const FrameStats& st,
               {"traversals", t.rays},
               {"hits", t.hits}};
   j["attribute_lookups"] = c.attribute_lookups;
+  j["deferred_pixels"] = c.deferred_pixels;
   const CacheStats& a = st.cache_start;
   const CacheStats& b = st.cache_end;
   j["cache"] = {{"hits", b.hits - a.hits},
                 {"misses", b.misses - a.misses},
-                {"bricks_paged_in", b.misses - a.misses},
+                {"bricks_paged_in", b.misses - a.misses + b.prefetched - a.prefetched},
                 {"evictions", b.evictions - a.evictions},
                 {"bytes_decompressed", b.bytes_decompressed - a.bytes_decompressed},
                 {"bytes_resident", b.bytes_resident},

@@ -47,12 +47,16 @@ struct FrameOptions {
   ProgressMode progress = ProgressMode::kQuiet;
   FILE* progress_out = stderr;
   ExrAttributes attrs;  // extra header attributes
-  // Prefetch: when set, the bricks the next `prefetch_tiles` tiles' primary
-  // rays enter first (Renderer::FirstBricks of every prefetch_stride-th pixel) are handed to
-  // it before those tiles render (e.g. Store::Prefetch), so reading them
-  // overlaps tracing.
+  // Prefetch: when set, a scout thread hands it the bricks the next tiles'
+  // primary rays enter first (Renderer::FirstBricks of every
+  // prefetch_stride-th pixel) before those tiles render (e.g.
+  // Store::Prefetch), so reading them overlaps tracing. The scout stays at
+  // most prefetch_tiles tiles ahead, and waits while prefetch_backlog()
+  // (bytes read ahead and not yet used) exceeds prefetch_limit.
   std::function<void(std::span<const uint32_t>)> prefetch;
-  int prefetch_tiles = 4;
+  std::function<uint64_t()> prefetch_backlog;
+  uint64_t prefetch_limit = 0;  // 0: no limit besides prefetch_tiles
+  int prefetch_tiles = 64;
   int prefetch_stride = 2;  // trace every n-th pixel's primary ray in x and y
 };
 

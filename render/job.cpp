@@ -36,6 +36,16 @@ Status RunRenderJob(const RenderJobOptions& o) {
   // The budget bounds the cache (BudgetStore sets it once the resident top
   // is known); opening with it gives the cache its number of shards.
   open.cache_bytes = o.cache_mb > 0 ? o.cache_mb << 20 : process.bytes;
+  if (o.io_threads < 1 || o.io_threads > kMaxIoThreads)
+    return InvalidArgumentError("--io-threads " + std::to_string(o.io_threads) + ": must be 1.." +
+                                std::to_string(kMaxIoThreads));
+  // Each I/O thread holds a run of bricks in its buffer and in the page
+  // cache (2 x kPrefetchRunBytes): at most one per 32 MiB of budget, so a
+  // small budget keeps its memory for the cache.
+  const int io_threads = o.prefetch ? int(std::clamp<uint64_t>(process.bytes / (32 * kMiB), 1,
+                                                               uint64_t(o.io_threads)))
+                                    : 0;
+  open.io_threads = std::max(io_threads, 1);
   VOX_ASSIGN_OR_RETURN(auto volume, Store::Open(o.store_dir, open));
   // Open's scratch (the index blocks, as large as the resident top) is
   // free but stays in the main heap, which the render threads' allocator
@@ -80,6 +90,7 @@ Status RunRenderJob(const RenderJobOptions& o) {
   bi.threads = threads;
   bi.channels = 5 + (o.layers.normal ? 3 : 0) + (o.layers.voxel ? 3 : 0);
   bi.cache_override = uint64_t(o.cache_mb) << 20;
+  bi.io_threads = io_threads;
   VOX_ASSIGN_OR_RETURN(const MemoryBudget budget, BudgetStore(volume.get(), process.bytes, bi));
   int slot_bits = 0;
   while ((2 << slot_bits) <= budget.pins_per_thread) ++slot_bits;
@@ -87,6 +98,10 @@ Status RunRenderJob(const RenderJobOptions& o) {
   if (!o.quiet)
     fprintf(o.log, "vox-render: memory %s; %s\n", process.ToString().c_str(),
             budget.ToString().c_str());
+  if (o.prefetch) {
+    Store* store = volume.get();
+    ro.read_ahead = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+  }
   VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(volume.get(), camera, scene, ro));
   const double setup_seconds = phase.Lap();
 
@@ -96,6 +111,10 @@ Status RunRenderJob(const RenderJobOptions& o) {
   if (o.prefetch) {
     Store* store = volume.get();
     fo.prefetch = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+    fo.prefetch_backlog = [store] { return store->PrefetchBacklog(); };
+    // Half the cache may hold bricks read ahead (Store::Prefetch); the scout
+    // waits at a quarter so the store seldom has to drop requests.
+    fo.prefetch_limit = budget.brick_cache / 4;
   }
   fo.tile_size = o.tile_size;
   fo.part = o.part;
@@ -125,6 +144,7 @@ Status RunRenderJob(const RenderJobOptions& o) {
     nlohmann::json memory = nlohmann::json::parse(budget.ToJson());
     memory["source"] = process.source;
     memory["table_slots"] = 1 << slot_bits;
+    memory["io_threads"] = io_threads;
     memory["max_brick_bytes"] = volume->brick_sizes().max_decoded;
     json["memory"] = memory;
     VOX_RETURN_IF_ERROR(WriteFileAtomically(o.stats_path, json.dump(2) + "\n"));

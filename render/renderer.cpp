@@ -20,11 +20,10 @@ using render_internal::kInf;
 // (an error without a message: no allocation). Call Restart per ray.
 class RecordingSource : public BrickSource {
  public:
-  static constexpr int kRecordedBricks = 1;
-  explicit RecordingSource(std::vector<uint32_t>* ids) : ids_(ids) {}
+  RecordingSource(std::vector<uint32_t>* ids, int per_ray) : ids_(ids), per_ray_(per_ray) {}
   void Restart() { entered_ = 0; }
   StatusOr<BrickView> FetchBrick(uint32_t id) override {
-    if (entered_++ == kRecordedBricks) return NotFoundError(std::string());
+    if (entered_++ == per_ray_) return NotFoundError(std::string());
     ids_->push_back(id);
     static const CompactCell kEmpty{};  // mask 0: an empty root
     return BrickView{&kEmpty, 1, nullptr, nullptr};
@@ -32,6 +31,7 @@ class RecordingSource : public BrickSource {
 
  private:
   std::vector<uint32_t>* ids_;
+  int per_ray_;
   int entered_ = 0;
 };
 
@@ -58,6 +58,7 @@ void RenderCounters::Add(const RenderCounters& o) {
   pixels += o.pixels;
   hit_pixels += o.hit_pixels;
   attribute_lookups += o.attribute_lookups;
+  deferred_pixels += o.deferred_pixels;
 }
 
 std::string RenderPasses::ToString() const {
@@ -195,7 +196,10 @@ void Renderer::FirstBricks(const TileRect& rect, int stride, std::vector<uint32_
   OctreeView view = volume_->view();
   if (view.bricks == nullptr || stride < 1) return;
   const size_t first = ids->size();
-  RecordingSource recorder(ids);
+  // One brick per ray: the second is needed only when the ray passes the
+  // first without a hit, and recording two per ray read 25% more bytes
+  // than the frame needed (the 8192^3 sphere).
+  RecordingSource recorder(ids, 1);
   view.bricks = &recorder;
   auto tracer = RenderTracer::Create(view, tracer_.n1());
   if (!tracer.ok()) return;
@@ -216,50 +220,110 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
   const int spp = scene_.samples_per_pixel;
   const ImageLayers& layers = options_.layers;
   const float inf = std::numeric_limits<float>::infinity();
-  for (int py = 0; py < rect.h; ++py) {
-    for (int px = 0; px < rect.w; ++px) {
-      const int ix = rect.x0 + px, iy = rect.y0 + py;
-      glm::dvec3 color(0.0), normal(0.0);
-      double alpha = 0.0, z = kInf;
-      glm::i64vec3 voxel(0);
-      bool any_hit = false;
-      for (int k = 0; k < spp; ++k) {
-        double ox = 0.5, oy = 0.5;
-        if (spp > 1) {
-          ox = (k + 0.5) / spp;
-          oy = RadicalInverse2(uint32_t(k) + 1u);
-        }
-        Sample s;
-        ShadePixel(ix + ox, iy + oy, cx, &s);
-        if (cx.failed()) return cx.error;
-        color += s.color;
-        alpha += s.alpha;
-        if (s.hit && s.z < z) {
-          z = s.z;
-          normal = s.normal;
-          voxel = s.voxel;
-        }
-        any_hit = any_hit || s.hit;
+  // Shades pixel (px, py) of the tile. Ok, an error, or (no-wait mode only)
+  // Unavailable: a brick it needs is not in memory; the pixel is untouched
+  // and its partial work is not counted.
+  auto shade = [&](int px, int py) -> Status {
+    const int ix = rect.x0 + px, iy = rect.y0 + py;
+    glm::dvec3 color(0.0), normal(0.0);
+    double alpha = 0.0, z = kInf;
+    glm::i64vec3 voxel(0);
+    bool any_hit = false;
+    for (int k = 0; k < spp; ++k) {
+      double ox = 0.5, oy = 0.5;
+      if (spp > 1) {
+        ox = (k + 0.5) / spp;
+        oy = RadicalInverse2(uint32_t(k) + 1u);
       }
-      ++counters->pixels;
-      if (any_hit) ++counters->hit_pixels;
-      const double inv = 1.0 / spp;
-      *buf->at(kChR, px, py) = float(color.r * inv);
-      *buf->at(kChG, px, py) = float(color.g * inv);
-      *buf->at(kChB, px, py) = float(color.b * inv);
-      *buf->at(kChA, px, py) = float(alpha * inv);
-      *buf->at(kChZ, px, py) = z < kInf ? float(z) : inf;
-      if (layers.normal) {
-        *buf->at(kChNx, px, py) = float(normal.x);
-        *buf->at(kChNy, px, py) = float(normal.y);
-        *buf->at(kChNz, px, py) = float(normal.z);
+      Sample s;
+      ShadePixel(ix + ox, iy + oy, cx, &s);
+      if (cx.failed()) {
+        Status e = std::move(cx.error);
+        cx.error = OkStatus();
+        return e;
       }
-      if (layers.voxel) {
-        *buf->at(kChVi, px, py) = any_hit ? float(voxel.x) : 0.0f;
-        *buf->at(kChVj, px, py) = any_hit ? float(voxel.y) : 0.0f;
-        *buf->at(kChVk, px, py) = any_hit ? float(voxel.z) : 0.0f;
+      color += s.color;
+      alpha += s.alpha;
+      if (s.hit && s.z < z) {
+        z = s.z;
+        normal = s.normal;
+        voxel = s.voxel;
+      }
+      any_hit = any_hit || s.hit;
+    }
+    ++counters->pixels;
+    if (any_hit) ++counters->hit_pixels;
+    const double inv = 1.0 / spp;
+    *buf->at(kChR, px, py) = float(color.r * inv);
+    *buf->at(kChG, px, py) = float(color.g * inv);
+    *buf->at(kChB, px, py) = float(color.b * inv);
+    *buf->at(kChA, px, py) = float(alpha * inv);
+    *buf->at(kChZ, px, py) = z < kInf ? float(z) : inf;
+    if (layers.normal) {
+      *buf->at(kChNx, px, py) = float(normal.x);
+      *buf->at(kChNy, px, py) = float(normal.y);
+      *buf->at(kChNz, px, py) = float(normal.z);
+    }
+    if (layers.voxel) {
+      *buf->at(kChVi, px, py) = any_hit ? float(voxel.x) : 0.0f;
+      *buf->at(kChVj, px, py) = any_hit ? float(voxel.y) : 0.0f;
+      *buf->at(kChVk, px, py) = any_hit ? float(voxel.z) : 0.0f;
+    }
+    return OkStatus();
+  };
+
+  LendingBrickTable* table = ts != nullptr ? ts->bricks.get() : nullptr;
+  if (!options_.read_ahead || table == nullptr) {
+    for (int py = 0; py < rect.h; ++py)
+      for (int px = 0; px < rect.w; ++px) VOX_RETURN_IF_ERROR(shade(px, py));
+    return OkStatus();
+  }
+
+  // Deferred misses (RenderOptions::read_ahead): no-wait passes while they
+  // finish a good share of what is left, then one pass that waits.
+  struct NoWait {  // the table waits again however this returns
+    LendingBrickTable* t;
+    ~NoWait() {
+      t->set_no_wait(false);
+      t->wanted().clear();
+    }
+  } no_wait{table};
+  auto flush = [&] {
+    std::vector<uint32_t>& w = table->wanted();
+    if (w.empty()) return;
+    options_.read_ahead(w);
+    w.clear();
+  };
+  std::vector<uint32_t> pending, next;  // pixels as py * w + px
+  pending.reserve(size_t(rect.w) * size_t(rect.h));
+  for (int py = 0; py < rect.h; ++py)
+    for (int px = 0; px < rect.w; ++px) pending.push_back(uint32_t(py * rect.w + px));
+  constexpr int kMaxNoWaitPasses = 4;
+  constexpr size_t kFlushEvery = 64;  // pixels: a tile row's misses go out together, in runs
+  for (int pass = 0; !pending.empty(); ++pass) {
+    const bool last = pass == kMaxNoWaitPasses;
+    table->set_no_wait(!last);
+    next.clear();
+    size_t since_flush = 0;
+    for (uint32_t p : pending) {
+      const int px = int(p % uint32_t(rect.w)), py = int(p / uint32_t(rect.w));
+      const RenderCounters before = *counters;
+      Status s = shade(px, py);
+      if (!s.ok()) {
+        if (last || s.code() != StatusCode::kUnavailable) return s;
+        *counters = before;
+        ++counters->deferred_pixels;
+        next.push_back(p);
+      }
+      if (++since_flush == kFlushEvery) {
+        flush();
+        since_flush = 0;
       }
     }
+    flush();
+    // Few finished: the reads are behind; wait for them in the last pass.
+    if (!last && next.size() * 4 > pending.size() * 3 && pass > 0) pass = kMaxNoWaitPasses - 1;
+    pending.swap(next);
   }
   return OkStatus();
 }

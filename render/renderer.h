@@ -37,7 +37,9 @@
 #define VOX_RENDER_RENDERER_H_
 
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -62,6 +64,10 @@ struct RenderCounters {
   uint64_t pixels = 0;
   uint64_t hit_pixels = 0;  // pixels with at least one primary hit (or fog)
   uint64_t attribute_lookups = 0;
+  // Pixels put aside because a brick was still being read (RenderOptions::
+  // read_ahead), once per time; their rays' other counters count only the
+  // shading that completed.
+  uint64_t deferred_pixels = 0;
   void Add(const RenderCounters& o);
 };
 
@@ -82,6 +88,15 @@ struct RenderOptions {
   // from the volume's cache capacity (LendingBrickTable::SlotBits). A memory
   // budget sets it so the pins stay within their share (SlotBitsForBytes).
   int table_slot_bits = -1;
+  // Deferred misses: when set, a pixel whose rays enter a brick that is not
+  // in memory is put aside instead of waiting for the read; the bricks are
+  // handed to `read_ahead` (e.g. Store::Prefetch, which reads them in the
+  // background), the tile's other pixels go on, and put-aside pixels are
+  // shaded again in later passes, the last of which waits for reads. So a
+  // cold tile keeps many reads in flight instead of one per thread. Pixels
+  // come out bit-identical either way (shading is a pure function of the
+  // pixel). Needs a ThreadState per thread (RenderTile's `ts`).
+  std::function<void(std::span<const uint32_t>)> read_ahead;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -109,6 +124,7 @@ class Renderer {
   std::unique_ptr<ThreadState, ThreadStateDeleter> NewThreadState() const;
 
   // Renders `rect` into `buf` (pixel (x, y) of the image at buf(x - x0, y - y0)).
+  // Counts put-aside pixels' retries in counters->deferred_pixels.
   Status RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
                     ThreadState* ts = nullptr) const;
 

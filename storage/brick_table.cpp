@@ -43,8 +43,9 @@ const BrickView* LendingBrickTable::LendBrick(uint32_t id, Status* error) {
   // Fibonacci hashing: neighbouring brick ids spread over the slots.
   Slot& s = slots_[uint64_t(id * 2654435761u) >> shift_];
   if (s.id == id && s.view.cells != nullptr) return &s.view;
-  auto v = shared_->FetchBrick(id);
+  auto v = no_wait_ ? shared_->FetchBrickIfReady(id) : shared_->FetchBrick(id);
   if (!v.ok()) {
+    if (no_wait_ && v.status().code() == StatusCode::kUnavailable) wanted_.push_back(id);
     *error = v.status();
     return nullptr;
   }

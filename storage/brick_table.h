@@ -36,6 +36,14 @@ class LendingBrickTable : public BrickSource {
   static int SlotBitsForBytes(uint64_t pin_bytes, uint64_t brick_bytes);
 
   size_t num_slots() const { return slots_.size(); }
+
+  // No-wait mode: a brick missing from the table is taken from the shared
+  // source only if it is in memory there (FetchBrickIfReady); otherwise the
+  // fetch fails with UnavailableError and its id is added to wanted(), for
+  // the caller to have it read (Store::Prefetch) while it does other work.
+  void set_no_wait(bool no_wait) { no_wait_ = no_wait; }
+  bool no_wait() const { return no_wait_; }
+  std::vector<uint32_t>& wanted() { return wanted_; }
   // Bricks held pinned now (at most num_slots()).
   size_t pinned() const;
 
@@ -53,6 +61,8 @@ class LendingBrickTable : public BrickSource {
     BrickView view;  // cells == nullptr: empty
   };
   BrickSource* shared_;
+  bool no_wait_ = false;
+  std::vector<uint32_t> wanted_;
   int shift_;  // 32 - slot bits: the slot is the hash's top bits
   std::vector<Slot> slots_;
 };

@@ -262,8 +262,10 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
   b.exr_writer = threads * 2 * tile_bytes + tiles * sizeof(uint64_t) +
                  uint64_t(in.image_width) * tile * 4 * sizeof(float);
   // Pages of the brick file that reads in flight touch: the record and the
-  // kernel's read-ahead window (128 KiB by default) on each side.
-  b.page_cache = std::max<uint64_t>(2 * kMiB, threads * (in.max_stored_brick_bytes + 256 * 1024));
+  // kernel's read-ahead window (128 KiB by default) on each side; a
+  // prefetching I/O thread's run, in its buffer and in the page cache.
+  b.page_cache = std::max<uint64_t>(2 * kMiB, threads * (in.max_stored_brick_bytes + 256 * 1024)) +
+                 uint64_t(std::max(in.io_threads, 0)) * 2 * kPrefetchRunBytes;
   const uint64_t fixed = b.process_base + b.headroom + b.resident_top + b.tile_buffers + b.exr_writer +
                          b.page_cache;
   const uint64_t min_cache = MinBrickCacheBytes(in);

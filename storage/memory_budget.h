@@ -20,6 +20,10 @@ namespace vox {
 
 constexpr uint64_t kMiB = uint64_t(1) << 20;
 
+// The largest read a prefetching I/O thread makes at once (Store::Prefetch
+// merges neighbouring bricks into runs of at most this many bytes).
+constexpr uint64_t kPrefetchRunBytes = uint64_t(1) << 20;
+
 // What the process may use, in bytes. 0 in a field means "none found".
 struct MemoryLimit {
   uint64_t bytes = 0;          // the smallest of the limits below that exist (0: none known)
@@ -53,6 +57,7 @@ struct BudgetInputs {
   int image_width = 0, image_height = 0;
   int tile_size = 64;
   int threads = 1;
+  int io_threads = 0;             // prefetching I/O threads (0: no prefetch)
   int channels = 5;               // EXR channels: R G B A Z, + 3 per extra layer
   // Pins wanted per thread table (a power of two, 1..256); the split lowers
   // it until the tables fit their share (1/8 of what the fixed costs leave).

@@ -54,15 +54,24 @@ class PageCache {
   template <class Loader>
   StatusOr<Value> GetOrLoad(uint64_t key, Loader&& load) {
     std::unique_lock<std::mutex> lock(mu_);
-    if (Value v = LookupLocked(key)) return v;
-    auto fit = flights_.find(key);
-    if (fit != flights_.end()) {
+    for (;;) {
+      if (Value v = LookupLocked(key)) return v;
+      auto fit = flights_.find(key);
+      if (fit == flights_.end()) break;
       std::shared_ptr<Flight> f = fit->second;
-      ++counters_.hits;
-      ++counters_.joined;
+      ++f->waiters;
       cv_.wait(lock, [&] { return f->done; });
-      if (!f->status.ok()) return f->status;
-      return f->value;
+      if (!f->status.ok()) {
+        ++counters_.hits;
+        ++counters_.joined;
+        return f->status;
+      }
+      if (f->value) {
+        ++counters_.hits;
+        ++counters_.joined;
+        return f->value;
+      }
+      // A claim released without a value (a prefetch that failed): load it here.
     }
     ++counters_.misses;
     auto flight = std::make_shared<Flight>();
@@ -81,6 +90,43 @@ class PageCache {
     InsertLocked(key, loaded->first, loaded->second);
     cv_.notify_all();
     return flight->value;
+  }
+
+  // Claims `key` for a load made outside GetOrLoad (a prefetch reading many
+  // values at once): true when `key` was neither cached nor being loaded.
+  // Until FinishClaim, askers of `key` wait for it instead of loading it
+  // again. Every successful Claim must be followed by one FinishClaim.
+  bool Claim(uint64_t key) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (map_.count(key) != 0 || flights_.count(key) != 0) return false;
+    flights_.emplace(key, std::make_shared<Flight>());
+    return true;
+  }
+
+  // Ends a claim. A non-null `value` is cached, marked prefetched unless
+  // someone is already waiting for it (then it counts as a prefetch hit); a
+  // null one releases the waiters to load `key` themselves.
+  void FinishClaim(uint64_t key, Value value, size_t charge) {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto fit = flights_.find(key);
+    if (fit == flights_.end()) return;
+    std::shared_ptr<Flight> f = fit->second;
+    flights_.erase(fit);
+    f->done = true;
+    if (value) {
+      f->value = value;
+      ++counters_.prefetched;
+      if (f->waiters > 0) ++counters_.prefetch_hits;
+      InsertLocked(key, std::move(value), charge, /*prefetched=*/f->waiters == 0);
+    }
+    cv_.notify_all();
+  }
+
+  // The cached value (counting a hit), or null (counting nothing: no load
+  // follows).
+  Value Peek(uint64_t key) {
+    std::lock_guard<std::mutex> lock(mu_);
+    return LookupLocked(key);
   }
 
   // The cached value, or null. Counts a hit or a miss.
@@ -160,6 +206,7 @@ class PageCache {
   };
   struct Flight {
     bool done = false;
+    int waiters = 0;
     Status status;
     Value value;
   };
@@ -238,12 +285,17 @@ class ShardedPageCache {
     return Shard(key).GetOrLoad(key, std::forward<Loader>(load));
   }
   Value Lookup(uint64_t key) { return Shard(key).Lookup(key); }
+  Value Peek(uint64_t key) { return Shard(key).Peek(key); }
   void Insert(uint64_t key, Value value, size_t charge) {
     Shard(key).Insert(key, std::move(value), charge);
   }
   void Erase(uint64_t key) { Shard(key).Erase(key); }
   bool InsertPrefetched(uint64_t key, Value value, size_t charge) {
     return Shard(key).InsertPrefetched(key, std::move(value), charge);
+  }
+  bool Claim(uint64_t key) { return Shard(key).Claim(key); }
+  void FinishClaim(uint64_t key, Value value, size_t charge) {
+    Shard(key).FinishClaim(key, std::move(value), charge);
   }
   bool Contains(uint64_t key) const { return Shard(key).Contains(key); }
   size_t PrefetchUnused() const {

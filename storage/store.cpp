@@ -18,6 +18,7 @@
 #include "storage/internal/coding.h"
 #include "storage/internal/format.h"
 #include "storage/internal/store_impl.h"
+#include "storage/memory_budget.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"
 
@@ -45,7 +46,7 @@ class StoreImpl : public Store {
     }
     pf_generation_.fetch_add(1);
     pf_cv_.notify_all();
-    if (pf_thread_.joinable()) pf_thread_.join();
+    for (std::thread& t : pf_threads_) t.join();
   }
 
   Status Load(std::unique_ptr<RandomAccessFile> index, std::unique_ptr<RandomAccessFile> bricks);
@@ -57,6 +58,17 @@ class StoreImpl : public Store {
 
   StatusOr<BrickView> FetchBrick(uint32_t id) override {
     VOX_ASSIGN_OR_RETURN(auto b, Get(id));
+    const DecodedBrick* data = b.get();
+    return BrickView{b->cells.data(), uint32_t(b->cells.size()), std::move(b), data};
+  }
+
+  StatusOr<BrickView> FetchBrickIfReady(uint32_t id) override {
+    std::shared_ptr<const DecodedBrick> b = id < table_.size() ? cache_.Peek(id) : nullptr;
+    if (!b) {
+      if (id >= table_.size()) return Get(id).status();  // the error naming the bad id
+      return UnavailableError("brick " + std::to_string(id) + " of store '" + dir_ +
+                              "' is not in memory");
+    }
     const DecodedBrick* data = b.get();
     return BrickView{b->cells.data(), uint32_t(b->cells.size()), std::move(b), data};
   }
@@ -100,11 +112,16 @@ class StoreImpl : public Store {
 
   std::string description() const override { return dir_; }
   void Prefetch(std::span<const uint32_t> brick_ids) override;
+  uint64_t PrefetchBacklog() const override {
+    return pf_queued_raw_.load(std::memory_order_relaxed) + cache_.PrefetchUnused();
+  }
   void CancelPrefetch() override {
     std::lock_guard<std::mutex> lock(pf_mu_);
-    pf_dropped_.fetch_add(pf_queue_.size(), std::memory_order_relaxed);
+    for (const Run& r : pf_queue_) pf_dropped_.fetch_add(r.ids.size(), std::memory_order_relaxed);
     pf_queue_.clear();
-    pf_generation_.fetch_add(1);  // the batch in progress stops at its next run
+    pf_queued_bricks_ = 0;
+    pf_queued_raw_.store(0, std::memory_order_relaxed);
+    pf_generation_.fetch_add(1);  // runs being read finish; none starts under the old generation
   }
   uint64_t store_id() const override { return store_id_; }
 
@@ -162,8 +179,14 @@ class StoreImpl : public Store {
   StatusOr<std::shared_ptr<DecodedBrick>> LoadBrick(uint32_t id);
   // Checks and decodes brick `id` from its record (stored_size + trailer bytes).
   StatusOr<std::shared_ptr<DecodedBrick>> DecodeRecord(uint32_t id, const uint8_t* record);
+  // A run of bricks neighbouring in the brick file, in file order, read with
+  // one pread.
+  struct Run {
+    std::vector<uint32_t> ids;
+    uint64_t raw = 0;  // their decoded charge
+  };
   void PrefetchLoop();
-  void PrefetchBatch(std::vector<uint32_t> ids);
+  void ReadRun(const Run& run, uint64_t generation, std::vector<uint8_t>* buf);
 
   StatusOr<VoxelAttributes> BrickAttributes(const DecodedBrick& b, uint32_t brick,
                                             uint32_t payload) const {
@@ -188,13 +211,15 @@ class StoreImpl : public Store {
   std::atomic<uint64_t> bytes_decompressed_{0};
   std::atomic<uint64_t> bytes_read_{0};
 
-  // Prefetch: requests queue under pf_mu_; one I/O thread, started by the
-  // first Prefetch, serves them until the store closes.
-  std::mutex pf_mu_;
+  // Prefetch: runs queue under pf_mu_; io_threads threads, started by the
+  // first Prefetch, serve them until the store closes.
+  mutable std::mutex pf_mu_;
   std::condition_variable pf_cv_;
-  std::deque<uint32_t> pf_queue_;
+  std::deque<Run> pf_queue_;
+  size_t pf_queued_bricks_ = 0;
+  std::atomic<uint64_t> pf_queued_raw_{0};
   bool pf_stop_ = false;
-  std::thread pf_thread_;
+  std::vector<std::thread> pf_threads_;
   std::atomic<uint64_t> pf_generation_{0};  // bumped by CancelPrefetch and close
   std::atomic<uint64_t> pf_dropped_{0}, pf_failed_{0};
 };
@@ -202,65 +227,31 @@ class StoreImpl : public Store {
 // Queue bound, and how reads of neighbouring bricks merge: a gap up to
 // kMaxGap joins the run while the run's gap bytes stay under half its brick
 // bytes (plus a page), so a run never reads more than 1.5x what it needs.
-constexpr size_t kMaxPrefetchQueue = size_t(1) << 16;
-constexpr size_t kPrefetchBatch = 4096;
+// kMaxRun bounds each I/O thread's buffer (the memory budget counts it).
+constexpr size_t kMaxPrefetchQueue = size_t(1) << 16;  // bricks
 constexpr uint64_t kMaxGap = 32 << 10;
-constexpr uint64_t kMaxRun = 4 << 20;
+constexpr uint64_t kMaxRun = kPrefetchRunBytes;
 
 void StoreImpl::Prefetch(std::span<const uint32_t> brick_ids) {
   if (brick_ids.empty() || table_.empty()) return;
-  {
-    std::lock_guard<std::mutex> lock(pf_mu_);
-    if (pf_stop_) return;
-    if (!pf_thread_.joinable()) pf_thread_ = std::thread([this] { PrefetchLoop(); });
-    for (uint32_t id : brick_ids)
-      if (id < table_.size()) pf_queue_.push_back(id);
-    if (pf_queue_.size() > kMaxPrefetchQueue) {
-      size_t over = pf_queue_.size() - kMaxPrefetchQueue;
-      pf_queue_.erase(pf_queue_.begin(), pf_queue_.begin() + ptrdiff_t(over));
-      pf_dropped_.fetch_add(over, std::memory_order_relaxed);
-    }
-  }
-  pf_cv_.notify_one();
-}
-
-void StoreImpl::PrefetchLoop() {
-  for (;;) {
-    std::vector<uint32_t> ids;
-    {
-      std::unique_lock<std::mutex> lock(pf_mu_);
-      pf_cv_.wait(lock, [&] { return pf_stop_ || !pf_queue_.empty(); });
-      if (pf_stop_) return;
-      size_t n = std::min(pf_queue_.size(), kPrefetchBatch);
-      ids.assign(pf_queue_.begin(), pf_queue_.begin() + ptrdiff_t(n));
-      pf_queue_.erase(pf_queue_.begin(), pf_queue_.begin() + ptrdiff_t(n));
-    }
-    PrefetchBatch(std::move(ids));
-  }
-}
-
-void StoreImpl::PrefetchBatch(std::vector<uint32_t> ids) {
+  std::vector<uint32_t> ids;
+  ids.reserve(brick_ids.size());
+  for (uint32_t id : brick_ids)
+    if (id < table_.size() && !cache_.Contains(id)) ids.push_back(id);
   std::sort(ids.begin(), ids.end());
   ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
-  std::erase_if(ids, [&](uint32_t id) { return cache_.Contains(id); });
   // File order (records lie in the order the ingest wrote them: spatial
   // neighbours close together), so neighbours merge into runs.
   std::sort(ids.begin(), ids.end(),
             [&](uint32_t a, uint32_t b) { return table_[a].offset < table_[b].offset; });
-  const size_t budget = cache_.capacity() / 2;
-  const uint64_t generation = pf_generation_.load();
-  std::vector<uint8_t> buf;
-  size_t i = 0;
-  auto drop_rest = [&] { pf_dropped_.fetch_add(ids.size() - i, std::memory_order_relaxed); };
-  while (i < ids.size()) {
-    if (pf_generation_.load() != generation) {  // cancelled or closing
-      drop_rest();
-      return;
-    }
-    // One run: ids[i, j) read as bytes [begin, end).
+  std::vector<Run> runs;
+  for (size_t i = 0; i < ids.size();) {
     const uint64_t begin = table_[ids[i]].offset;
     uint64_t end = begin + table_[ids[i]].stored_size + kTrailerSize;
-    uint64_t useful = end - begin, gaps = 0, raw = table_[ids[i]].raw_size;
+    uint64_t useful = end - begin, gaps = 0;
+    Run run;
+    run.ids.push_back(ids[i]);
+    run.raw = DecodedCharge(table_[ids[i]]);
     size_t j = i + 1;
     for (; j < ids.size(); ++j) {
       const BrickEntry& e = table_[ids[j]];
@@ -271,40 +262,103 @@ void StoreImpl::PrefetchBatch(std::vector<uint32_t> ids) {
         break;
       gaps += gap;
       useful += size;
-      raw += e.raw_size;
       end = e.offset + size;
+      run.ids.push_back(ids[j]);
+      run.raw += DecodedCharge(e);
     }
-    if (cache_.PrefetchUnused() + raw > budget) {  // tight: prefetching would evict what it read
-      drop_rest();
-      return;
+    runs.push_back(std::move(run));
+    i = j;
+  }
+  if (runs.empty()) return;
+  {
+    std::lock_guard<std::mutex> lock(pf_mu_);
+    if (pf_stop_) return;
+    const int n = std::max(1, options_.io_threads);
+    while (int(pf_threads_.size()) < n) pf_threads_.emplace_back([this] { PrefetchLoop(); });
+    for (Run& r : runs) {
+      pf_queued_bricks_ += r.ids.size();
+      pf_queued_raw_.fetch_add(r.raw, std::memory_order_relaxed);
+      pf_queue_.push_back(std::move(r));
     }
-    buf.resize(end - begin);
-    Status rs = bricks_->Read(begin, buf.size(), buf.data());
-    bytes_read_.fetch_add(buf.size(), std::memory_order_relaxed);
-    if (!rs.ok()) {  // each brick's own fetch will read it again and report
-      pf_failed_.fetch_add(j - i, std::memory_order_relaxed);
-      i = j;
-      continue;
-    }
-    for (; i < j; ++i) {
-      const uint32_t id = ids[i];
-      if (cache_.Contains(id)) continue;
-      StatusOr<std::shared_ptr<DecodedBrick>> b = InternalError("unreached");
-      try {
-        b = DecodeRecord(id, buf.data() + (table_[id].offset - begin));
-      } catch (const std::exception&) {
-        b = ResourceExhaustedError("prefetch");
-      }
-      if (!b.ok()) {
-        pf_failed_.fetch_add(1, std::memory_order_relaxed);
-        continue;
-      }
-      size_t charge = (*b)->charge();
-      cache_.InsertPrefetched(id, std::shared_ptr<const DecodedBrick>(std::move(*b)), charge);
+    while (pf_queued_bricks_ > kMaxPrefetchQueue && !pf_queue_.empty()) {  // oldest first
+      const Run& r = pf_queue_.front();
+      pf_queued_bricks_ -= r.ids.size();
+      pf_queued_raw_.fetch_sub(r.raw, std::memory_order_relaxed);
+      pf_dropped_.fetch_add(r.ids.size(), std::memory_order_relaxed);
+      pf_queue_.pop_front();
     }
   }
-  constexpr size_t kKeep = size_t(8) << 20;
-  if (buf.capacity() > kKeep) std::vector<uint8_t>().swap(buf);
+  pf_cv_.notify_all();
+}
+
+void StoreImpl::PrefetchLoop() {
+  std::vector<uint8_t> buf;
+  for (;;) {
+    Run run;
+    uint64_t generation;
+    {
+      std::unique_lock<std::mutex> lock(pf_mu_);
+      pf_cv_.wait(lock, [&] { return pf_stop_ || !pf_queue_.empty(); });
+      if (pf_stop_) return;
+      run = std::move(pf_queue_.front());
+      pf_queue_.pop_front();
+      pf_queued_bricks_ -= run.ids.size();
+      pf_queued_raw_.fetch_sub(run.raw, std::memory_order_relaxed);
+      generation = pf_generation_.load();
+    }
+    ReadRun(run, generation, &buf);
+    if (buf.capacity() > 2 * kMaxRun) std::vector<uint8_t>().swap(buf);
+  }
+}
+
+void StoreImpl::ReadRun(const Run& run, uint64_t generation, std::vector<uint8_t>* buf) {
+  // Tight: what this run would add evicts what was read ahead before use.
+  if (cache_.PrefetchUnused() + run.raw > cache_.capacity() / 2) {
+    pf_dropped_.fetch_add(run.ids.size(), std::memory_order_relaxed);
+    return;
+  }
+  // Claim the bricks nobody has cached or started meanwhile: from here their
+  // fetches wait for this read instead of making their own.
+  std::vector<uint32_t> claimed;
+  claimed.reserve(run.ids.size());
+  for (uint32_t id : run.ids)
+    if (cache_.Claim(id)) claimed.push_back(id);
+  if (claimed.empty()) return;
+  size_t next = 0;  // claimed[next..] still to finish
+  auto release_rest = [&] {
+    for (; next < claimed.size(); ++next) cache_.FinishClaim(claimed[next], nullptr, 0);
+  };
+  if (pf_generation_.load() != generation) {  // cancelled or closing
+    pf_dropped_.fetch_add(claimed.size(), std::memory_order_relaxed);
+    release_rest();
+    return;
+  }
+  const uint64_t begin = table_[claimed.front()].offset;
+  const uint64_t end = table_[claimed.back()].offset + table_[claimed.back()].stored_size + kTrailerSize;
+  try {
+    buf->resize(end - begin);
+    Status rs = bricks_->Read(begin, buf->size(), buf->data());
+    bytes_read_.fetch_add(buf->size(), std::memory_order_relaxed);
+    if (!rs.ok()) {  // each brick's own fetch reads it again and reports
+      pf_failed_.fetch_add(claimed.size(), std::memory_order_relaxed);
+      release_rest();
+      return;
+    }
+    for (; next < claimed.size(); ++next) {
+      const uint32_t id = claimed[next];
+      auto b = DecodeRecord(id, buf->data() + (table_[id].offset - begin));
+      if (!b.ok()) {
+        pf_failed_.fetch_add(1, std::memory_order_relaxed);
+        cache_.FinishClaim(id, nullptr, 0);
+        continue;
+      }
+      const size_t charge = (*b)->charge();
+      cache_.FinishClaim(id, std::shared_ptr<const DecodedBrick>(std::move(*b)), charge);
+    }
+  } catch (const std::exception&) {  // out of memory: the fetches try again
+    pf_failed_.fetch_add(claimed.size() - next, std::memory_order_relaxed);
+    release_rest();
+  }
 }
 
 StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {

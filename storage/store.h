@@ -7,7 +7,7 @@
 // (the subtree under one occupied octant of the brick level, with its voxels'
 // attributes) is a zstd frame in bricks.vxb, read with pread (its own bytes,
 // read-ahead off) and decompressed on demand into a byte-budgeted cache, or
-// ahead of need by Prefetch on an I/O thread.
+// ahead of need by Prefetch on I/O threads.
 // The format is specified in storage/FORMAT.md.
 //
 // Coordinates: grid coordinates g in [0, 2^levels)^3 are what the octree and
@@ -112,7 +112,13 @@ class StoreWriter {
 struct OpenOptions {
   size_t cache_bytes = size_t(256) << 20;  // decompressed-brick budget
   bool verify_checksums = true;
+  // Threads reading for Prefetch: each has one read in flight, so this is
+  // the queue depth prefetching keeps on the disk (small reads of a brick's
+  // own bytes are latency-bound: several at once overlap their waits).
+  int io_threads = kDefaultIoThreads;
+  static constexpr int kDefaultIoThreads = 8;
 };
+inline constexpr int kMaxIoThreads = 256;
 
 struct CacheStats {
   uint64_t hits = 0, misses = 0, evictions = 0;
@@ -155,15 +161,21 @@ class Store : public Volume, public BrickSource {
   ~Store() override = default;
 
   // Asks for bricks to be read and decoded ahead of their FetchBrick, in the
-  // background: returns at once. An I/O thread reads the compressed bytes of
-  // the requested bricks not yet cached in runs of neighbours (bricks lie in
-  // Morton order), decodes them and caches them, so later fetches hit. It
-  // never makes a fetch wait for another brick; it stays within the cache
-  // budget: prefetched bricks not yet fetched use at most half of it, and
-  // requests past that (or past a bounded queue, oldest first) are dropped. A brick
-  // whose prefetch fails is not cached: its fetch reads it again and reports
-  // the error. Unknown ids are ignored.
+  // background: returns at once. The requested bricks not yet cached are
+  // grouped into runs of neighbours in the brick file (bricks lie in Morton
+  // order; a run reads at most 1.5x its bricks' own bytes, plus a page) and
+  // read by OpenOptions::io_threads threads, several runs in flight at once,
+  // then decoded and cached, so later fetches hit. A fetch of a brick whose
+  // run is being read waits for it instead of reading it again; a brick not
+  // started yet is read by its fetch as usual. Prefetching stays within the
+  // cache budget: prefetched bricks not yet fetched use at most half of it,
+  // and requests past that (or past a bounded queue, oldest first) are
+  // dropped. A brick whose prefetch fails is not cached: its fetch reads it
+  // again and reports the error. Unknown ids are ignored.
   virtual void Prefetch(std::span<const uint32_t> brick_ids) = 0;
+  // Decoded bytes of bricks queued for prefetching but not read yet, plus
+  // those prefetched and not fetched yet: how far prefetching is ahead.
+  virtual uint64_t PrefetchBacklog() const = 0;
   // Drops the requests not yet started (one in progress finishes).
   virtual void CancelPrefetch() = 0;
   // Bytes held in memory for the life of the Store: top cells, top payloads

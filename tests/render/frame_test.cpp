@@ -374,6 +374,75 @@ TEST_F(FrameTest, TinyCacheRendersTheSameImage) {
   EXPECT_GT(hits, 1000u);  // the sphere fills much of the frame
 }
 
+// Reading ahead (the scout's first bricks, deferred misses read in the
+// background) changes when bricks are read, never a pixel or a counter of
+// the work done: bit-identical images and equal ray and DDA counters against
+// waiting for each brick, with a cache big enough to hold the frame and one
+// so small that bricks read ahead are evicted before use.
+TEST_F(FrameTest, ReadingAheadChangesNoPixelAndNoCounter) {
+  StoreMeta meta = TestMeta(6, GridClass::kLevelSet);  // 8^3 bricks of 8^3 voxels
+  std::vector<MemoryVoxel> voxels = testing::ShellVoxels(64, {31.5, 30.5, 32.5}, 22, 25);
+  ASSERT_TRUE(testing::WriteStore(Path("store"), meta, voxels).ok());
+  Camera cam;
+  cam.position = {90, 70, 100};
+  cam.look_at = {32, 32, 32};
+  cam.fov_deg = 50;
+  cam.width = 96;
+  cam.height = 80;
+  ASSERT_TRUE(cam.Finalize().ok());
+  for (size_t cache : {size_t(64) << 20, size_t(24) << 10}) {
+    std::map<std::string, std::vector<float>> images[2];
+    RenderCounters counters[2];
+    for (int ahead : {0, 1}) {
+      OpenOptions oo;
+      oo.cache_bytes = cache;
+      oo.io_threads = 3;
+      auto vol = Store::Open(Path("store"), oo);
+      ASSERT_TRUE(vol.ok()) << vol.status().ToString();
+      Store* store = vol->get();
+      RenderOptions ro;
+      ro.layers.normal = true;
+      ro.layers.voxel = true;
+      if (ahead) ro.read_ahead = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+      auto r = Renderer::Create(store, cam, scene_, ro);  // shadows: secondary rays too
+      ASSERT_TRUE(r.ok()) << r.status().ToString();
+      FrameOptions fo;
+      fo.exr_path = Path("ahead" + std::to_string(ahead) + ".exr");
+      fo.threads = 2;
+      fo.tile_size = 16;
+      if (ahead) {
+        fo.prefetch = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+        fo.prefetch_backlog = [store] { return store->PrefetchBacklog(); };
+        fo.prefetch_limit = cache / 4;
+      }
+      FrameStats stats;
+      Status s = RenderFrame(**r, fo, &stats);
+      ASSERT_TRUE(s.ok()) << s.ToString();
+      counters[ahead] = stats.counters;
+      if (ahead) {
+        EXPECT_GT(stats.cache_end.prefetched, 0u) << "cache " << cache;
+        EXPECT_GT(stats.counters.deferred_pixels, 0u) << "cache " << cache;
+      } else {
+        EXPECT_EQ(stats.counters.deferred_pixels, 0u);
+      }
+      auto img = ReadExr(fo.exr_path);
+      ASSERT_TRUE(img.ok()) << img.status().ToString();
+      images[ahead] = img->pixels;
+    }
+    ASSERT_FALSE(images[0].empty());
+    for (const auto& [name, px] : images[0]) {
+      ASSERT_TRUE(images[1].count(name)) << name;
+      EXPECT_EQ(px, images[1][name]) << "channel " << name << ", cache " << cache;
+    }
+    for (int k = 0; k < kNumRayKinds; ++k) EXPECT_EQ(counters[0].rays[k], counters[1].rays[k]) << k;
+    EXPECT_EQ(counters[0].pixels, counters[1].pixels);
+    EXPECT_EQ(counters[0].hit_pixels, counters[1].hit_pixels);
+    EXPECT_EQ(counters[0].attribute_lookups, counters[1].attribute_lookups);
+    EXPECT_EQ(counters[0].trace.brick_fetches, counters[1].trace.brick_fetches);
+    EXPECT_GT(counters[0].rays[kRayShadow], 0u);
+  }
+}
+
 TEST(ProgressTest, LineShowsTilesRateCacheAndTimeLeft) {
   ProgressSnapshot s;
   s.tiles_done = 25;

@@ -104,6 +104,57 @@ TEST(PageCache, SingleFlightUnderManyThreads) {
   EXPECT_GT(cc.joined, 0u);
 }
 
+// A claim (a prefetch reading many values at once) makes askers wait for it;
+// a claim finished with a value serves them, one finished without lets them
+// load the value themselves. Peek never loads and counts no miss.
+TEST(PageCache, ClaimsMakeAskersWaitAndReleaseThem) {
+  Cache c(100);
+  EXPECT_EQ(c.Peek(1), nullptr);
+  EXPECT_EQ(c.counters().misses, 0u);
+  ASSERT_TRUE(c.Claim(1));
+  EXPECT_FALSE(c.Claim(1));  // claimed already
+  EXPECT_TRUE(c.Contains(1));
+  std::atomic<bool> loaded{false};
+  std::thread asker([&] {
+    auto v = c.GetOrLoad(1, [&] {
+      loaded = true;
+      return Make(-1, 10);
+    });
+    ASSERT_TRUE(v.ok());
+    EXPECT_EQ(**v, 11);
+  });
+  // The asker waits on the claim (it cannot have loaded: the claim is held).
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_FALSE(loaded.load());
+  c.FinishClaim(1, std::make_shared<const int>(11), 10);
+  asker.join();
+  EXPECT_FALSE(loaded.load());
+  EXPECT_EQ(c.counters().prefetched, 1u);
+  EXPECT_EQ(c.counters().prefetch_hits, 1u);  // it had a waiter
+  EXPECT_EQ(c.counters().prefetch_unused, 0u);
+
+  // Released without a value: the waiter loads it itself.
+  ASSERT_TRUE(c.Claim(2));
+  std::thread asker2([&] {
+    auto v = c.GetOrLoad(2, [&] { return Make(22, 10); });
+    ASSERT_TRUE(v.ok());
+    EXPECT_EQ(**v, 22);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  c.FinishClaim(2, nullptr, 0);
+  asker2.join();
+  EXPECT_EQ(*c.Peek(2), 22);
+
+  // Nobody waiting: cached as prefetched until first asked for.
+  ASSERT_TRUE(c.Claim(3));
+  c.FinishClaim(3, std::make_shared<const int>(33), 10);
+  EXPECT_EQ(c.counters().prefetch_unused, 10u);
+  EXPECT_EQ(*c.Peek(3), 33);
+  EXPECT_EQ(c.counters().prefetch_unused, 0u);
+  EXPECT_EQ(c.counters().prefetch_hits, 2u);
+  EXPECT_FALSE(c.Claim(3));  // cached
+}
+
 TEST(ShardedPageCache, BudgetAcrossShardsAndSingleFlight) {
   ShardedPageCache<int> c(1000, 8);
   EXPECT_EQ(c.num_shards(), 8u);

@@ -107,6 +107,34 @@ TEST_F(Prefetch, PrefetchedBricksEqualFetchedOnes) {
   EXPECT_EQ(after.bytes_read, before.bytes_read);
 }
 
+// The no-wait fetch the renderer's deferred misses use: a brick not in
+// memory is Unavailable at once and read nothing; once prefetched it is
+// served, equal to a plain fetch. Bad ids keep their clear error.
+TEST_F(Prefetch, FetchIfReadyNeverReads) {
+  auto s = Store::Open(dir_, {});
+  ASSERT_TRUE(s.ok());
+  for (uint32_t id = 0; id < n_; ++id) {
+    auto b = (*s)->FetchBrickIfReady(id);
+    ASSERT_FALSE(b.ok());
+    EXPECT_EQ(b.status().code(), StatusCode::kUnavailable) << b.status().ToString();
+  }
+  EXPECT_EQ((*s)->cache_stats().bytes_read, 0u);
+  EXPECT_EQ((*s)->cache_stats().misses, 0u);
+  auto bad = (*s)->FetchBrickIfReady(n_ + 3);
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  std::vector<uint32_t> ids = AllIds();
+  (*s)->Prefetch(ids);
+  WaitForPrefetch(**s, n_);
+  EXPECT_GT((*s)->PrefetchBacklog(), 0u);  // read ahead, not yet used
+  for (uint32_t id = 0; id < n_; ++id) {
+    auto b = (*s)->FetchBrickIfReady(id);
+    ASSERT_TRUE(b.ok()) << b.status().ToString();
+    EXPECT_EQ(BrickBytes(*b), truth_[id]) << "brick " << id;
+  }
+  EXPECT_EQ((*s)->PrefetchBacklog(), 0u);
+  EXPECT_EQ((*s)->cache_stats().misses, 0u);
+}
+
 TEST_F(Prefetch, BudgetBoundsPrefetchedBytes) {
   OpenOptions oo;
   oo.cache_bytes = 64 << 10;

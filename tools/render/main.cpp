@@ -30,10 +30,12 @@ const char kUsage[] =
     "  --memory-mb  memory the whole process may use, in MiB (or with a unit: 2G);\n"
     "               default: the memory cgroup's limit (Slurm --mem, a container), or 3/4 of\n"
     "               MemAvailable if smaller; the brick cache, pinned bricks and buffers are\n"
-    "               sized within it (1/16 kept as headroom)\n"
+    "               sized within it (1/8 kept as headroom)\n"
     "  --cache-mb   decompressed brick cache, inside the memory budget (default: what the\n"
     "               budget leaves)\n"
-    "  --prefetch   read the next tiles' bricks ahead while tracing (experimental)\n"
+    "  --no-prefetch  read each brick when a ray needs it, waiting for it (default: read\n"
+    "               the next tiles' bricks ahead, and shade other pixels while a brick is read)\n"
+    "  --io-threads reads in flight when prefetching (default 8)\n"
     "  --threads    render threads (default: all cores)\n"
     "  --tile-size  tile side in pixels (default 64)\n"
     "  --tiles I/N  render only part I (1-based) of N; assemble the parts with vox-merge\n"
@@ -60,11 +62,11 @@ static int RunTool(int argc, char** argv) {
       o.single_step = true;
     } else if (a == "--quiet") {
       o.quiet = true;
-    } else if (a == "--prefetch") {
-      o.prefetch = true;
+    } else if (a == "--prefetch" || a == "--no-prefetch") {  // --prefetch: the default, kept for scripts
+      o.prefetch = a == "--prefetch";
     } else if (a == "--cam" || a == "--scene" || a == "-o" || a == "--preview" || a == "--split" ||
                a == "--cache-mb" || a == "--memory-mb" || a == "--threads" || a == "--tile-size" || a == "--tiles" ||
-               a == "--stats" || a == "--layers" || a == "--size") {
+               a == "--stats" || a == "--layers" || a == "--size" || a == "--io-threads") {
       const std::optional<std::string> value = flags.Value();
       if (!value) return Usage(a + " needs a value");
       const std::string& v = *value;
@@ -89,6 +91,9 @@ static int RunTool(int argc, char** argv) {
         auto bytes = vox::ParseMemorySize("--memory-mb", v);
         if (!bytes.ok()) return Usage(bytes.status().message());
         o.memory_bytes = *bytes;
+      } else if (a == "--io-threads") {
+        if (!vox::ParseInt(v, 1, vox::kMaxIoThreads, &o.io_threads))
+          return Usage("--io-threads '" + v + "': expected 1.." + std::to_string(vox::kMaxIoThreads));
       } else if (a == "--threads") {
         if (!vox::ParseInt(v, 0, 4096, &o.threads))
           return Usage("--threads '" + v + "': expected 0..4096");
