@@ -53,6 +53,9 @@ struct FrameOptions {
   // overlaps tracing.
   std::function<void(std::span<const uint32_t>)> prefetch;
   int prefetch_tiles = 4;
+  // Called with each rendered tile, from the render threads concurrently
+  // (after the EXR write); an error stops the frame.
+  std::function<Status(const TileRect&, const TileBuffer&)> on_tile;
   int prefetch_stride = 2;  // trace every n-th pixel's primary ray in x and y
 };
 
