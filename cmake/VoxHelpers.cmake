@@ -2,6 +2,9 @@
 function(vox_library name)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
   add_library(vox_${name} STATIC ${ARG_SOURCES})
+  # Position-independent: the libraries also link into the Python module
+  # (tools/python), a shared object.
+  set_target_properties(vox_${name} PROPERTIES POSITION_INDEPENDENT_CODE ON)
   add_library(vox::${name} ALIAS vox_${name})
   target_include_directories(vox_${name} PUBLIC ${PROJECT_SOURCE_DIR})
   target_compile_options(vox_${name} PRIVATE -Wall -Wextra)

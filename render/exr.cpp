@@ -4,10 +4,12 @@
 #include <OpenEXR/ImfFloatAttribute.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfStandardAttributes.h>
 #include <OpenEXR/ImfStringAttribute.h>
 #include <OpenEXR/ImfTileDescription.h>
 #include <OpenEXR/ImfTiledInputFile.h>
 #include <OpenEXR/ImfTiledOutputFile.h>
+#include <Imath/ImathMatrix.h>
 #include <png.h>
 
 #include <algorithm>
@@ -15,8 +17,10 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <glm/geometric.hpp>
 #include <limits>
 
+#include "render/camera.h"
 #include "render/internal/atomic_file.h"
 
 namespace vox {
@@ -31,6 +35,46 @@ Imf::Slice TileSlice(float* base, int stride) {
   return Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(base), sizeof(float),
                     sizeof(float) * size_t(stride), 1, 1, 0.0, /*xTileCoords=*/true,
                     /*yTileCoords=*/true);
+}
+
+// The standard camera attributes of OpenEXR (ImfStandardAttributes.h) for
+// the vox:camera JSON `camera_json`, as render/exr.h describes them. Imath
+// matrices act on row vectors: p' = p * M.
+void AddStandardCameraAttributes(const std::string& camera_json, Imf::Header* header) {
+  StatusOr<Camera> parsed = ParseCamera(camera_json, "vox:camera");
+  if (!parsed.ok()) return;  // not a vox camera: no standard attributes
+  const Camera& cam = *parsed;
+  const glm::dvec3 r = cam.right(), u = cam.true_up(), f = cam.forward(), p = cam.position;
+  // World -> camera: x right, y up, z along the view (left-handed, as RenderMan).
+  Imath::M44d to_camera(r.x, u.x, f.x, 0,  //
+                        r.y, u.y, f.y, 0,  //
+                        r.z, u.z, f.z, 0,  //
+                        -glm::dot(p, r), -glm::dot(p, u), -glm::dot(p, f), 1);
+  // Screen half-extents as Camera::PixelRay uses them: pixel x maps to screen
+  // (2x/W - 1) sx, pixel y to (1 - 2y/H) sy.
+  const bool perspective = cam.projection == Projection::kPerspective;
+  const double sx = perspective ? std::tan(cam.fov_deg * M_PI / 360.0) : 0.5 * cam.ortho_width;
+  const double sy = sx * (double(cam.height) / double(cam.width));
+  // Camera -> NDC ((0,0) top-left, (1,1) bottom-right of the display window).
+  // Perspective: X = x/(2 sx) + z/2, Y = -y/(2 sy) + z/2, W = z (Z = 1, so
+  // the matrix is invertible and z/w is 1/depth); orthographic: W = 1 and
+  // z stays the depth.
+  const Imath::M44d to_ndc =
+      perspective ? Imath::M44d(0.5 / sx, 0, 0, 0,   //
+                                0, -0.5 / sy, 0, 0,  //
+                                0.5, 0.5, 0, 1,      //
+                                0, 0, 1, 0)
+                  : Imath::M44d(0.5 / sx, 0, 0, 0,   //
+                                0, -0.5 / sy, 0, 0,  //
+                                0, 0, 1, 0,          //
+                                0.5, 0.5, 0, 1);
+  const Imath::M44d world_to_ndc = to_camera * to_ndc;
+  Imf::addWorldToCamera(*header, Imath::M44f(to_camera));
+  Imf::addWorldToNDC(*header, Imath::M44f(world_to_ndc));
+  // The display window on the image plane: z = 1 in camera space
+  // (perspective), any plane of constant z (orthographic).
+  header->screenWindowCenter() = Imath::V2f(0.0f, 0.0f);
+  header->screenWindowWidth() = float(2.0 * sx);
 }
 
 }  // namespace
@@ -69,6 +113,8 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
     for (int c = 0; c < kNumChannels; ++c)
       if (layers.Has(c)) header.channels().insert(kChannelNames[c], Imf::Channel(Imf::FLOAT));
     for (const auto& [k, v] : attrs) header.insert(k, Imf::StringAttribute(v));
+    if (auto cam = attrs.find("vox:camera"); cam != attrs.end())
+      AddStandardCameraAttributes(cam->second, &header);
     header.insert("renderTimeSeconds", Imf::FloatAttribute(0.0f));
     header.insert("vox:timings", Imf::StringAttribute(std::string(kTimingsSlot, ' ')));
     w->file_ = std::make_unique<Imf::TiledOutputFile>(w->out_->temp_path().c_str(), header);

@@ -11,7 +11,17 @@
 // Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
 // vox:part ("I/N"), vox:tileOrder, vox:storeId (the store's store_id, hex),
 // plus renderTimeSeconds (float, as pbrt) and vox:timings (JSON), which are
-// patched in place after the last tile.
+// patched in place after the last tile. When the attributes hold a
+// vox:camera, the writer adds OpenEXR's standard camera attributes
+// (ImfStandardAttributes.h) derived from it, so a compositor can place the
+// pixels in 3D: worldToCamera (M44f, row vectors: x right, y up, z along the
+// view, origin at the camera position), worldToNDC (M44f: a world point p
+// maps to (x/w, y/w) with (x, y, z, w) = (p, 1) * M; (0, 0) is the image's
+// top-left corner, (1, 1) its bottom-right, so pixel (i, j)'s centre is
+// ((i + 0.5)/W, (j + 0.5)/H)), and the screen window (centre (0, 0), width
+// 2 tan(fov/2) on the camera-space plane z = 1 for perspective cameras,
+// ortho_width for orthographic ones). vox-merge keeps them: its output has
+// the parts' vox:camera.
 //
 // Every file is written to a temporary beside its target and renamed over it
 // only when complete (render/internal/atomic_file.h): a failed render or

@@ -170,6 +170,7 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
         const Stopwatch tw;
         if (s.ok() && writer) s = writer->WriteTile(rect, w.buf);
         w.write_seconds += tw.Seconds();
+        if (s.ok() && options.on_tile) s = options.on_tile(rect, w.buf);
         if (!s.ok()) {
           std::lock_guard<std::mutex> lock(err_mu);
           if (first_error.ok())

@@ -57,6 +57,9 @@ struct FrameOptions {
   std::function<uint64_t()> prefetch_backlog;
   uint64_t prefetch_limit = 0;  // 0: no limit besides prefetch_tiles
   int prefetch_tiles = 64;
+  // Called with each rendered tile, from the render threads concurrently
+  // (after the EXR write); an error stops the frame.
+  std::function<Status(const TileRect&, const TileBuffer&)> on_tile;
   int prefetch_stride = 2;  // trace every n-th pixel's primary ray in x and y
 };
 

@@ -4,6 +4,7 @@
 #include <charconv>
 #include <malloc.h>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <thread>
 
@@ -18,9 +19,11 @@
 #include "storage/store_budget.h"
 
 namespace vox {
-Status RunRenderJob(const RenderJobOptions& o) {
+Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
   const Stopwatch total;
   Stopwatch phase;
+  if (!o.preview_path.empty() && o.exr_path.empty())
+    return InvalidArgumentError("--preview needs an EXR output (-o)");
   if (!o.preview_path.empty() && !o.part.whole())
     return InvalidArgumentError(
         "--preview needs the whole image; with --tiles, preview the vox-merge output");
@@ -55,7 +58,12 @@ Status RunRenderJob(const RenderJobOptions& o) {
   const StoreMeta& meta = volume->meta();
 
   Camera camera;
-  if (o.camera_path.empty()) {
+  if (o.camera_path.empty() && !o.camera_json.empty()) {
+    VOX_ASSIGN_OR_RETURN(camera, ParseCamera(o.camera_json, "camera"));
+    glm::dvec3 lo, hi;
+    WorldBounds(meta, &lo, &hi);
+    VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext("camera"));
+  } else if (o.camera_path.empty()) {
     glm::dvec3 lo, hi;
     WorldBounds(meta, &lo, &hi);
     camera = DefaultCamera(lo, hi, o.default_width, o.default_height);
@@ -68,6 +76,8 @@ Status RunRenderJob(const RenderJobOptions& o) {
   Scene scene;
   if (!o.scene_path.empty()) {
     VOX_ASSIGN_OR_RETURN(scene, LoadScene(o.scene_path));
+  } else if (!o.scene_json.empty()) {
+    VOX_ASSIGN_OR_RETURN(scene, ParseScene(o.scene_json, "scene"));
   }
 
   RenderOptions ro;
@@ -91,6 +101,9 @@ Status RunRenderJob(const RenderJobOptions& o) {
   bi.channels = 5 + (o.layers.normal ? 3 : 0) + (o.layers.voxel ? 3 : 0);
   bi.cache_override = uint64_t(o.cache_mb) << 20;
   bi.io_threads = io_threads;
+  const bool keep = o.keep_image && out != nullptr;
+  const size_t pixels = size_t(camera.width) * size_t(camera.height);
+  if (keep) bi.process_base += uint64_t(pixels) * uint64_t(bi.channels) * sizeof(float);
   VOX_ASSIGN_OR_RETURN(const MemoryBudget budget, BudgetStore(volume.get(), process.bytes, bi));
   int slot_bits = 0;
   while ((2 << slot_bits) <= budget.pins_per_thread) ++slot_bits;
@@ -128,12 +141,35 @@ Status RunRenderJob(const RenderJobOptions& o) {
   }
   fo.attrs["vox:grid"] = meta.grid_name;
   fo.attrs["vox:source"] = meta.source_file;
+  if (keep) {
+    out->width = camera.width;
+    out->height = camera.height;
+    out->rgba.assign(pixels * 4, 0.0f);
+    out->z.assign(pixels, std::numeric_limits<float>::infinity());
+    out->normal.assign(o.layers.normal ? pixels * 3 : 0, 0.0f);
+    out->voxel.assign(o.layers.voxel ? pixels * 3 : 0, 0.0f);
+    // Tiles do not overlap: the render threads write disjoint pixels.
+    fo.on_tile = [out, &o](const TileRect& r, const TileBuffer& b) -> Status {
+      auto at = [&b](int c, int x, int y) { return b.ch[c][size_t(y) * size_t(b.size) + x]; };
+      for (int y = 0; y < r.h; ++y)
+        for (int x = 0; x < r.w; ++x) {
+          const size_t p = size_t(r.y0 + y) * size_t(out->width) + size_t(r.x0 + x);
+          for (int c = 0; c < 4; ++c) out->rgba[p * 4 + c] = at(kChR + c, x, y);
+          out->z[p] = at(kChZ, x, y);
+          for (int c = 0; o.layers.normal && c < 3; ++c)
+            out->normal[p * 3 + c] = at(kChNx + c, x, y);
+          for (int c = 0; o.layers.voxel && c < 3; ++c)
+            out->voxel[p * 3 + c] = at(kChVi + c, x, y);
+        }
+      return OkStatus();
+    };
+  }
   FrameStats stats;
   VOX_RETURN_IF_ERROR(RenderFrame(*renderer, fo, &stats));
   const double frame_seconds = phase.Lap();
   if (!o.preview_path.empty()) VOX_RETURN_IF_ERROR(WritePngPreview(o.exr_path, o.preview_path));
   const double preview_seconds = phase.Lap();
-  if (!o.stats_path.empty()) {
+  if (!o.stats_path.empty() || out != nullptr) {
     nlohmann::json json = nlohmann::json::parse(
         StatsJson(*renderer, stats,
                   {{"open_seconds", open_seconds},
@@ -147,7 +183,9 @@ Status RunRenderJob(const RenderJobOptions& o) {
     memory["io_threads"] = io_threads;
     memory["max_brick_bytes"] = volume->brick_sizes().max_decoded;
     json["memory"] = memory;
-    VOX_RETURN_IF_ERROR(WriteFileAtomically(o.stats_path, json.dump(2) + "\n"));
+    if (out) out->stats_json = json.dump(2);
+    if (!o.stats_path.empty())
+      VOX_RETURN_IF_ERROR(WriteFileAtomically(o.stats_path, json.dump(2) + "\n"));
   }
   if (!o.quiet) {
     uint64_t total = 0;

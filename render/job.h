@@ -1,7 +1,10 @@
 // vox::RunRenderJob: everything `vox-render` does, from options to files:
 // chooses the memory budget, opens the store and sizes its cache from the
 // budget, reads the camera (or frames the volume) and the scene, renders the image (or one part of it) to EXR, and writes the optional PNG
-// preview and --stats JSON. The tool's main only parses flags.
+// preview and --stats JSON. The tool's main only parses flags. In-process
+// callers (the Python module) may pass the camera and scene as JSON text,
+// render without an EXR and keep the image and the stats in memory
+// (RenderJobOutput).
 //
 // Thread safety: thread-compatible.
 #ifndef VOX_RENDER_JOB_H_
@@ -10,6 +13,7 @@
 #include <cstddef>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 #include "core/status.h"
 #include "render/exr.h"
@@ -20,9 +24,12 @@ namespace vox {
 
 struct RenderJobOptions {
   std::string store_dir;
-  std::string camera_path;  // empty: DefaultCamera over the store's bbox
-  std::string scene_path;   // empty: default scene
-  std::string exr_path = "render.exr";
+  std::string camera_path;  // empty: camera_json, or DefaultCamera over the store's bbox
+  std::string scene_path;   // empty: scene_json, or the default scene
+  // cam.json / scene.json text, used when the path is empty; messages name
+  // them "camera" and "scene".
+  std::string camera_json, scene_json;
+  std::string exr_path = "render.exr";  // empty: no EXR (then no preview)
   std::string preview_path;  // empty: none
   std::string stats_path;    // empty: none
   std::string split;         // --split N1+N2 or N1; empty: DefaultFirstStepLevels
@@ -47,9 +54,24 @@ struct RenderJobOptions {
   bool quiet = false;
   int default_width = 1024, default_height = 1024;  // for the default camera
   FILE* log = stderr;
+  // Keep the image in RenderJobOutput; its bytes are charged to the memory
+  // budget before the brick cache is sized.
+  bool keep_image = false;
 };
 
-Status RunRenderJob(const RenderJobOptions& options);
+// What a job hands back besides its files.
+struct RenderJobOutput {
+  std::string stats_json;  // the --stats document, written or not
+  // With keep_image: the pixels, row-major from the top row, channels
+  // interleaved per layer (R G B A; Z; N.x N.y N.z; voxel.i voxel.j voxel.k),
+  // bit for bit the EXR's. Pixels of other parts (--tiles) stay
+  // 0 (Z: +inf).
+  int width = 0, height = 0;
+  std::vector<float> rgba, z, normal, voxel;
+};
+
+// `output` may be null.
+Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* output = nullptr);
 
 }  // namespace vox
 

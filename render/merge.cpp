@@ -91,6 +91,8 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
     if (c == "N.x") layers.normal = true;
     if (c == "voxel.i") layers.voxel = true;
   }
+  // The parts' vox:camera comes along, and with it the standard camera
+  // attributes the writer derives from it (render/exr.h).
   ExrAttributes attrs = ref.attrs;
   attrs.erase("vox:timings");
   attrs["vox:part"] = "1/1";

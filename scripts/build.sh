@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Configures and builds vox (Release) into build/. Usage: scripts/build.sh [extra cmake args]
+# Configures and builds vox (Release) into build/, with the Python module in
+# build/python/ (import with PYTHONPATH=build/python). Usage: scripts/build.sh [extra cmake args]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh

@@ -4,7 +4,8 @@ set -euo pipefail
 pkgs=(build-essential cmake ninja-build pkg-config
       libopenvdb-dev libopenvdb-tools libboost-dev libboost-iostreams-dev libimath-dev
       libopenexr-dev libzstd-dev libglm-dev libtbb-dev nlohmann-json3-dev libpng-dev
-      libgtest-dev libgmock-dev libbenchmark-dev libgmp-dev python3)
+      libgtest-dev libgmock-dev libbenchmark-dev libgmp-dev python3
+      python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

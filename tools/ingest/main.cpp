@@ -20,6 +20,7 @@
 #include "ingest/ingest.h"
 #include "storage/memory_budget.h"
 #include "tools/common/flags.h"
+#include "tools/common/options.h"
 
 namespace {
 
@@ -113,61 +114,35 @@ class StallingProgress : public vox::ProgressSink {
 }  // namespace
 
 static int RunTool(int argc, char** argv) {
-  vox::IngestOptions o;
-  bool quiet = false;
+  vox::IngestCommand command;
+  vox::IngestOptions& o = command.options;
   std::vector<std::string> positional;
   vox::FlagReader flags(argc, argv);
   o.command_line = flags.CommandLine("vox-ingest");
   while (flags.Next()) {
-    const std::string& a = flags.arg();
+    const std::string a = flags.arg();
     if (flags.IsHelp()) {
       std::fputs(kUsage, stdout);
       return 0;
-    } else if (a == "--force") {
-      o.force = true;
-    } else if (a == "--quiet") {
-      quiet = true;
-    } else if (a == "--grid" || a == "--levels" || a == "--isovalue" || a == "--threshold" ||
-               a == "--color" || a == "--zstd-level" || a == "--normal-bits" || a == "--threads" ||
-               a == "--memory-mb") {
-      const std::string flag = a;
-      const std::optional<std::string> v = flags.Value();
-      if (!v) return UsageError(flag + " needs a value");
-      if (flag == "--memory-mb") {
-        auto bytes = vox::ParseMemorySize("--memory-mb", *v);
-        if (!bytes.ok()) return UsageError(bytes.status().message());
-        o.memory_bytes = *bytes;
-      } else if (flag == "--grid") {
-        o.grid_name = *v;
-      } else if (flag == "--levels") {
-        o.levels = *v;
-      } else if (flag == "--color") {
-        o.color_grid = *v;
-      } else if (flag == "--normal-bits") {
-        if (!vox::ParseInt(*v, 8, 16, &o.normal_bits))
-          return UsageError("--normal-bits " + *v + ": must be a whole number of bits in 8..16");
-      } else if (flag == "--isovalue" || flag == "--threshold") {
-        double d;
-        if (!vox::ParseDouble(*v, &d)) return UsageError(flag + " " + *v + ": not a finite number");
-        (flag == "--isovalue" ? o.isovalue : o.threshold) = d;
-      } else if (!vox::ParseInt(*v, -1000000, 1000000,
-                                flag == "--threads" ? &o.threads : &o.zstd_level)) {
-        return UsageError(flag + " " + *v + ": not a whole number");
-      }
     } else if (flags.IsFlag()) {
-      return UsageError("unknown option " + a);
+      const vox::FlagArity arity = vox::IngestFlagArity(a);
+      if (arity == vox::FlagArity::kUnknown) return UsageError("unknown option " + a);
+      std::optional<std::string> v;
+      if (arity == vox::FlagArity::kValue && !(v = flags.Value()))
+        return UsageError(a + " needs a value");
+      vox::Status s = vox::ApplyIngestFlag(&command, a, v.value_or(""));
+      if (!s.ok()) return UsageError(s.message());
     } else {
       positional.push_back(a);
     }
   }
+  const bool quiet = command.quiet;
   if (positional.size() != 2)
     return UsageError("expected an input .vdb file and an output store directory, got " +
                       std::to_string(positional.size()) + " arguments");
   o.input = positional[0];
   o.output = positional[1];
-  if (o.threads < 0) return UsageError("--threads must be >= 1 (or 0 for all cores)");
-  if (o.zstd_level < 1 || o.zstd_level > 22) return UsageError("--zstd-level must be in 1..22");
-  if (auto lv = vox::ParseLevels(o.levels); !lv.ok()) return UsageError(lv.status().message());
+  if (vox::Status s = vox::CheckIngestCommand(command); !s.ok()) return UsageError(s.message());
 
   StartSignalThread(o.output);
   std::unique_ptr<vox::ProgressSink> progress;

@@ -16,10 +16,8 @@
 
 #include "core/core.h"
 #include "core/ray_text.h"
-#include "core/shapes.h"
-#include "storage/store.h"
-#include "storage/store_budget.h"
 #include "tools/common/flags.h"
+#include "tools/common/options.h"
 
 namespace {
 
@@ -32,36 +30,24 @@ constexpr const char* kUsage =
     "  (default: what the budget leaves)\n"
     "  SHAPE: sphere:N, torus:N, cubes:N, noise:N (N voxels per axis), corner:L (2^L grid)\n";
 
-struct Options {
-  std::string generate, store, split;
-  bool single_step = false, stats = false;
-  int brick_level = -1;
-  size_t cache_mb = 0;        // 0: from the memory budget
-  uint64_t memory_bytes = 0;  // 0: detected
-  int fixed = 0;  // 0: auto
-};
 
 int Fail(const std::string& msg) {
   std::fprintf(stderr, "vox-probe: %s\n", msg.c_str());
   return 2;
 }
 
-template <class TracerT>
-int Run(const TracerT& tracer, const glm::i64vec3& origin, bool stats) {
+int Run(const vox::Prober& prober, bool stats) {
   vox::TraceCounters counters;
   std::string line;
   long lineno = 0;
   int bad = 0;
-  const glm::dvec3 shift(origin);
   while (std::getline(std::cin, line)) {
     ++lineno;
     auto ray = vox::ParseRayLine(line);
     vox::Status st = ray.status();
     std::optional<vox::Hit> hit;
     if (st.ok()) {
-      vox::Ray r = *ray;
-      r.origin -= shift;  // index space -> grid space
-      auto h = tracer.FirstHit(r, &counters);
+      auto h = prober.Trace(*ray, &counters);
       st = h.status();
       if (st.ok()) hit = *h;
     }
@@ -73,8 +59,7 @@ int Run(const TracerT& tracer, const glm::i64vec3& origin, bool stats) {
       continue;
     }
     if (hit) {
-      glm::i64vec3 v = hit->voxel + origin;
-      std::puts(vox::FormatHitLine(&v, hit->t).c_str());
+      std::puts(vox::FormatHitLine(&hit->voxel, hit->t).c_str());
     } else {
       std::puts("miss");
     }
@@ -87,45 +72,25 @@ int Run(const TracerT& tracer, const glm::i64vec3& origin, bool stats) {
 }  // namespace
 
 static int RunTool(int argc, char** argv) {
-  Options opt;
+  vox::ProbeOptions opt;
   vox::FlagReader flags(argc, argv);
   while (flags.Next()) {
     const std::string a = flags.arg();
-    std::optional<std::string> v;
     if (flags.IsHelp()) {
       std::fputs(kUsage, stdout);
       return 0;
-    } else if (a == "--generate") {
-      if (!(v = flags.Value())) return Fail("--generate needs a shape\n" + std::string(kUsage));
-      opt.generate = *v;
-    } else if (a == "--split") {
-      if (!(v = flags.Value())) return Fail("--split needs N1+N2 or N1");
-      opt.split = *v;
-    } else if (a == "--single-step") {
-      opt.single_step = true;
-    } else if (a == "--stats") {
-      opt.stats = true;
-    } else if (a == "--memory-mb") {
-      if (!(v = flags.Value())) return Fail("--memory-mb needs a size");
-      auto bytes = vox::ParseMemorySize("--memory-mb", *v);
-      if (!bytes.ok()) return Fail(bytes.status().message());
-      opt.memory_bytes = *bytes;
-    } else if (a == "--brick-level" || a == "--cache-mb" || a == "--fixed") {
-      if (!(v = flags.Value())) return Fail(a + " needs a number");
-      int64_t n = 0;
-      if (a == "--fixed" && *v == "auto") {
-        opt.fixed = 0;
-      } else if (!vox::ParseInt(*v, 0, a == "--cache-mb" ? INT64_MAX >> 20 : INT32_MAX, &n)) {
-        return Fail(a + ": '" + *v + "' is not a non-negative integer");
-      } else if (a == "--brick-level") {
-        opt.brick_level = int(n);
-      } else if (a == "--cache-mb") {
-        opt.cache_mb = size_t(n);
-      } else {
-        opt.fixed = int(n);
-      }
     } else if (flags.IsFlag()) {
-      return Fail("unknown option " + a + "\n" + kUsage);
+      const vox::FlagArity arity = vox::ProbeFlagArity(a);
+      if (arity == vox::FlagArity::kUnknown) return Fail("unknown option " + a + "\n" + kUsage);
+      std::optional<std::string> v;
+      if (arity == vox::FlagArity::kValue && !(v = flags.Value())) {
+        if (a == "--generate") return Fail("--generate needs a shape\n" + std::string(kUsage));
+        if (a == "--split") return Fail("--split needs N1+N2 or N1");
+        if (a == "--memory-mb") return Fail("--memory-mb needs a size");
+        return Fail(a + " needs a number");
+      }
+      vox::Status s = vox::ApplyProbeFlag(&opt, a, v.value_or(""));
+      if (!s.ok()) return Fail(s.message());
     } else if (opt.store.empty()) {
       opt.store = a;
     } else {
@@ -134,56 +99,9 @@ static int RunTool(int argc, char** argv) {
   }
   if (opt.generate.empty() == opt.store.empty())
     return Fail("give either --generate SHAPE or a store directory\n" + std::string(kUsage));
-  if (opt.fixed != 0 && opt.fixed != 64 && opt.fixed != 128)
-    return Fail("--fixed takes auto, 64 or 128");
-
-  std::unique_ptr<vox::MemoryOctree> memory;
-  std::unique_ptr<vox::Store> store;
-  vox::OctreeView view;
-  glm::i64vec3 origin(0);
-  if (!opt.generate.empty()) {
-    auto vol = vox::GenerateShape(opt.generate);
-    if (!vol.ok()) return Fail(vol.status().message());
-    int bl = opt.brick_level >= 0 ? opt.brick_level : std::max(1, vol->levels - 5);
-    auto tree = vox::MemoryOctree::Build(std::move(vol->voxels), vol->levels, bl);
-    if (!tree.ok()) return Fail(tree.status().message());
-    memory = std::move(tree).value();
-    view = memory->view();
-  } else {
-    auto budget = vox::ChooseProcessBudget(opt.memory_bytes);
-    if (!budget.ok()) return Fail(budget.status().ToString());
-    vox::OpenOptions oo;
-    oo.cache_bytes = opt.cache_mb > 0 ? opt.cache_mb << 20 : budget->bytes;
-    auto s = vox::Store::Open(opt.store, oo);
-    if (!s.ok()) return Fail(s.status().ToString());
-    store = std::move(s).value();
-    auto split = vox::BudgetReader(store.get(), budget->bytes, uint64_t(opt.cache_mb) << 20);
-    if (!split.ok()) return Fail(split.status().ToString());
-    view = store->view();
-    origin = store->meta().origin;
-  }
-  int n1 = vox::DefaultFirstStepLevels(view.levels);
-  if (opt.single_step) {
-    n1 = view.levels;
-    if (!opt.split.empty()) return Fail("--single-step and --split exclude each other");
-  } else if (!opt.split.empty()) {
-    auto s = vox::ParseSplit(opt.split, view.levels);
-    if (!s.ok()) return Fail(s.status().message());
-    n1 = *s;
-  }
-  if (opt.fixed == 128) {
-    auto tr = vox::Tracer<vox::Fixed128, long double>::Create(view, n1);
-    if (!tr.ok()) return Fail(tr.status().message());
-    return Run(*tr, origin, opt.stats);
-  }
-  if (opt.fixed == 64) {
-    auto tr = vox::DefaultTracer::Create(view, n1);
-    if (!tr.ok()) return Fail(tr.status().message());
-    return Run(*tr, origin, opt.stats);
-  }
-  auto tr = vox::AutoTracer<long double>::Create(view, n1);
-  if (!tr.ok()) return Fail(tr.status().message());
-  return Run(*tr, origin, opt.stats);
+  auto prober = vox::Prober::Open(opt);
+  if (!prober.ok()) return Fail(prober.status().message());
+  return Run(**prober, opt.stats);
 }
 
 // Allocation failures anywhere (an image, a brick, a table sized from input)

@@ -1,6 +1,6 @@
 // vox-render: renders a vox store to a tiled OpenEXR by discrete ray tracing.
-// Parses flags into RenderJobOptions and calls vox::RunRenderJob.
-#include <climits>
+// Parses flags into RenderJobOptions (tools/common/options.h) and calls
+// vox::RunRenderJob.
 #include <cstdio>
 #include <new>
 #include <optional>
@@ -10,6 +10,7 @@
 #include "render/job.h"
 #include "storage/memory_budget.h"
 #include "tools/common/flags.h"
+#include "tools/common/options.h"
 
 namespace {
 
@@ -58,70 +59,14 @@ static int RunTool(int argc, char** argv) {
     if (flags.IsHelp()) {
       fprintf(stdout, "%s", kUsage);
       return 0;
-    } else if (a == "--single-step") {
-      o.single_step = true;
-    } else if (a == "--quiet") {
-      o.quiet = true;
-    } else if (a == "--prefetch" || a == "--no-prefetch") {  // --prefetch: the default, kept for scripts
-      o.prefetch = a == "--prefetch";
-    } else if (a == "--cam" || a == "--scene" || a == "-o" || a == "--preview" || a == "--split" ||
-               a == "--cache-mb" || a == "--memory-mb" || a == "--threads" || a == "--tile-size" || a == "--tiles" ||
-               a == "--stats" || a == "--layers" || a == "--size" || a == "--io-threads") {
-      const std::optional<std::string> value = flags.Value();
-      if (!value) return Usage(a + " needs a value");
-      const std::string& v = *value;
-      if (a == "--cam")
-        o.camera_path = v;
-      else if (a == "--scene")
-        o.scene_path = v;
-      else if (a == "-o")
-        o.exr_path = v;
-      else if (a == "--preview")
-        o.preview_path = v;
-      else if (a == "--split")
-        o.split = v;
-      else if (a == "--stats")
-        o.stats_path = v;
-      else if (a == "--cache-mb") {
-        int mb = 0;
-        if (!vox::ParseInt(v, 1, 1 << 22, &mb))
-          return Usage("--cache-mb '" + v + "': expected a positive integer");
-        o.cache_mb = size_t(mb);
-      } else if (a == "--memory-mb") {
-        auto bytes = vox::ParseMemorySize("--memory-mb", v);
-        if (!bytes.ok()) return Usage(bytes.status().message());
-        o.memory_bytes = *bytes;
-      } else if (a == "--io-threads") {
-        if (!vox::ParseInt(v, 1, vox::kMaxIoThreads, &o.io_threads))
-          return Usage("--io-threads '" + v + "': expected 1.." + std::to_string(vox::kMaxIoThreads));
-      } else if (a == "--threads") {
-        if (!vox::ParseInt(v, 0, 4096, &o.threads))
-          return Usage("--threads '" + v + "': expected 0..4096");
-      } else if (a == "--tile-size") {
-        if (!vox::ParseInt(v, INT_MIN, INT_MAX, &o.tile_size))
-          return Usage("--tile-size '" + v + "': expected an integer");
-      } else if (a == "--tiles") {
-        auto part = vox::ParsePartSpec(v);
-        if (!part.ok()) return Usage(part.status().message());
-        o.part = *part;
-      } else if (a == "--layers") {
-        for (const std::string& item : vox::SplitList(v)) {
-          if (item == "normal")
-            o.layers.normal = true;
-          else if (item == "voxel")
-            o.layers.voxel = true;
-          else
-            return Usage("--layers: unknown layer '" + item + "' (normal, voxel)");
-        }
-      } else if (a == "--size") {
-        size_t x = v.find('x');
-        if (x == std::string::npos ||
-            !vox::ParseInt(v.substr(0, x), 1, vox::kMaxImageSide, &o.default_width) ||
-            !vox::ParseInt(v.substr(x + 1), 1, vox::kMaxImageSide, &o.default_height))
-          return Usage("--size '" + v + "': expected WxH");
-      }
     } else if (flags.IsFlag()) {
-      return Usage("unknown flag " + a);
+      const vox::FlagArity arity = vox::RenderFlagArity(a);
+      if (arity == vox::FlagArity::kUnknown) return Usage("unknown flag " + a);
+      std::optional<std::string> value;
+      if (arity == vox::FlagArity::kValue && !(value = flags.Value()))
+        return Usage(a + " needs a value");
+      vox::Status s = vox::ApplyRenderFlag(&o, a, value.value_or(""));
+      if (!s.ok()) return Usage(s.message());
     } else if (o.store_dir.empty()) {
       o.store_dir = a;
     } else {

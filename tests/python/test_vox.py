@@ -1,0 +1,275 @@
+"""The vox module against the command-line tools: the same pixels bit for
+bit, the same first hits, the same refusals with the same messages, and
+long calls that let other Python threads run."""
+import json
+import math
+import re
+import threading
+import time
+
+import pytest
+
+from conftest import cli_message, run, tool
+
+np = pytest.importorskip("numpy", reason="numpy (python3-numpy) is not installed")
+vox = pytest.importorskip("vox", reason="the vox module is not built (PYTHONPATH=build/python)")
+
+LAYERS = {"rgba": ["R", "G", "B", "A"], "z": ["Z"], "normal": ["N.x", "N.y", "N.z"],
+          "voxel": ["voxel.i", "voxel.j", "voxel.k"]}
+
+
+def assert_same_bits(result, exr):
+    """Every channel of the module's result equals the EXR's, bit for bit."""
+    h, w = exr["height"], exr["width"]
+    for key, names in LAYERS.items():
+        arr = result[key].reshape(h, w, len(names))
+        for c, name in enumerate(names):
+            ours = np.ascontiguousarray(arr[:, :, c]).view(np.uint32)
+            theirs = exr["channels"][name].view(np.uint32)
+            assert np.array_equal(ours, theirs), "channel %s differs" % name
+
+
+@pytest.mark.parametrize("camera", ["camera", "ortho"])
+def test_render_equals_vox_render(store, files, workdir, camera):
+    exr_path = workdir / ("cli_%s.exr" % camera)
+    code, _, err = run([tool("render"), store, "--cam", files[camera + "_path"], "--scene",
+                        files["scene_path"], "-o", exr_path, "--layers", "normal,voxel",
+                        "--threads", "2", "--tile-size", "16", "--quiet"])
+    assert code == 0, err
+    exr = vox.read_exr(exr_path)
+    # Paths, and the same camera and scene as dicts.
+    by_path = vox.render(store, files[camera + "_path"], files["scene_path"],
+                         layers="normal,voxel", threads=2, tile_size=16)
+    by_dict = vox.render(vox.Store(store), files[camera], files["scene"],
+                         layers=["normal", "voxel"], threads=1)
+    assert by_path["rgba"].shape == (exr["height"], exr["width"], 4)
+    assert by_path["rgba"].dtype == np.float32
+    assert_same_bits(by_path, exr)
+    assert_same_bits(by_dict, exr)
+    hit = by_path["rgba"][:, :, 3] > 0
+    assert 0.05 < hit.mean() < 0.95  # the sphere is in the picture, not all of it
+    assert np.all(np.isinf(by_path["z"][~hit]))
+
+
+def test_render_stats_and_options(store, files, workdir):
+    r = vox.render(store, files["camera"], threads=2, memory_mb=256, split="2+4",
+                   o=str(workdir / "py.exr"))
+    s = r["stats"]
+    assert s["threads"] == 2
+    assert s["split"] == {"n1": 2, "n2": 4}
+    assert s["image"]["width"] == 96 and s["image"]["height"] == 72
+    assert s["memory"]["total"] == 256 << 20
+    assert s["rays"]["primary"] == 96 * 72
+    assert s["image"]["hit_pixels"] == int((r["rgba"][:, :, 3] > 0).sum())
+    assert "normal" not in r and "voxel" not in r
+    # o= also writes the EXR, with the same pixels.
+    exr = vox.read_exr(workdir / "py.exr")
+    assert np.array_equal(exr["channels"]["Z"].view(np.uint32), r["z"].view(np.uint32))
+    # Without a camera, the default camera at --size.
+    d = vox.render(store, size=(40, 30))
+    assert d["rgba"].shape == (30, 40, 4)
+
+
+def test_store_info_is_vox_info(store):
+    code, out, err = run([tool("info"), store])
+    assert code == 0, err
+    s = vox.Store(store)
+    assert str(s) == out
+    info = s.info
+    assert info["levels"] == 6 and info["brick_level"] == 3
+    assert info["grid_class"] == "level set"
+    assert "voxels:          %d occupied" % info["voxels"] in out
+    assert "bricks:          %d " % info["bricks"] in out
+    assert info["origin"] == [-32, -32, -32]
+    assert sum(info["stored_size_histogram"].values()) == info["bricks"]
+
+
+def probe_cli(args, rays):
+    text = "".join(" ".join(float(x).hex() for x in row) + "\n" for row in rays)
+    code, out, err = run([tool("probe")] + args, stdin=text)
+    assert code == 0, err
+    voxels, ts, hits = [], [], []
+    for line in out.splitlines():
+        f = line.split()
+        hits.append(f[0] == "hit")
+        voxels.append([int(v) for v in f[1:4]] if f[0] == "hit" else [0, 0, 0])
+        ts.append(float(f[4]) if f[0] == "hit" else math.inf)
+    return np.array(voxels, dtype=np.int64), np.array(ts), np.array(hits)
+
+
+def random_rays(n, seed):
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    origin = 70 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    target = rng.uniform(-40, 40, size=(n, 3))
+    return np.hstack([origin, target - origin])
+
+
+@pytest.mark.parametrize("options,args", [({}, []),
+                                          ({"split": "2+4", "fixed": 128}, ["--split", "2+4", "--fixed", "128"]),
+                                          ({"single_step": True}, ["--single-step"])])
+def test_probe_equals_vox_probe(store, options, args):
+    rays = random_rays(2000, 7)
+    voxels, t, hit = vox.probe(store, rays, **options)
+    cv, ct, ch = probe_cli([store] + args, rays)
+    assert hit.dtype == np.bool_ and voxels.shape == (2000, 3)
+    assert 200 < hit.sum() < 1900
+    assert np.array_equal(hit, ch)
+    assert np.array_equal(voxels[hit], cv[ch])
+    assert np.array_equal(t[hit], ct[ch])  # 17 significant digits round-trip a double
+    assert np.all(np.isinf(t[~hit]))
+
+
+def test_probe_generated_shape_equals_vox_probe():
+    rays = random_rays(500, 3)
+    voxels, t, hit = vox.probe(None, rays.tolist(), generate="sphere:64")
+    cv, ct, ch = probe_cli(["--generate", "sphere:64"], rays)
+    assert np.array_equal(hit, ch) and np.array_equal(voxels[hit], cv[ch])
+    assert np.array_equal(t[hit], ct[ch])
+
+
+# (tool, command-line arguments, call, exception): every one of these the
+# tool refuses; the module raises with the line the tool printed.
+def bad_inputs(store, files, workdir):
+    bad_cam = workdir / "bad_cam.json"
+    bad_cam.write_text(json.dumps(dict(files["camera"], width=-4)))
+    far_cam = dict(files["camera"], position=[1e9, 0, 0])
+    far_path = workdir / "far_cam.json"
+    far_path.write_text(json.dumps(far_cam))
+    missing = str(workdir / "no_such.store")
+    cam = files["camera_path"]
+    R, P = "render", "probe"
+    return [
+        (R, [store, "--threads", "-1"], lambda: vox.render(store, threads=-1), ValueError),
+        (R, [store, "--tiles", "3/2"], lambda: vox.render(store, tiles="3/2"), ValueError),
+        (R, [store, "--layers", "normal,depth"], lambda: vox.render(store, layers="normal,depth"), ValueError),
+        (R, [store, "--size", "64"], lambda: vox.render(store, size="64"), ValueError),
+        (R, [store, "--cache-mb", "0"], lambda: vox.render(store, cache_mb=0), ValueError),
+        (R, [store, "--memory-mb", "lots"], lambda: vox.render(store, memory_mb="lots"), ValueError),
+        (R, [store, "--cam", cam, "--split", "9+9", "-o", workdir / "x.exr"],
+         lambda: vox.render(store, cam, split="9+9"), ValueError),
+        (R, [store, "--cam", cam, "--tile-size", "3", "-o", workdir / "x.exr"],
+         lambda: vox.render(store, cam, tile_size=3), ValueError),
+        (R, [store, "--cam", bad_cam, "-o", workdir / "x.exr"], lambda: vox.render(store, bad_cam), ValueError),
+        (R, [store, "--cam", far_path, "-o", workdir / "x.exr"], lambda: vox.render(store, far_path), ValueError),
+        (R, [store, "--cam", cam, "--memory-mb", "1", "-o", workdir / "x.exr"],
+         lambda: vox.render(store, cam, memory_mb=1), RuntimeError),
+        (R, [missing, "--cam", cam, "-o", workdir / "x.exr"], lambda: vox.render(missing, cam), OSError),
+        (P, [store, "--fixed", "32"], lambda: vox.probe(store, np.zeros((1, 6)), fixed=32), ValueError),
+        (P, [store, "--split", "x"], lambda: vox.probe(store, np.zeros((1, 6)), split="x"), ValueError),
+        (P, [store, "--cache-mb", "-1"], lambda: vox.probe(store, np.zeros((1, 6)), cache_mb=-1), ValueError),
+        (P, [missing], lambda: vox.probe(missing, np.zeros((1, 6))), OSError),
+        (P, ["--generate", "cube:7"], lambda: vox.probe(None, np.zeros((1, 6)), generate="cube:7"), ValueError),
+        (P, [store, "--single-step", "--split", "3"],
+         lambda: vox.probe(store, np.zeros((1, 6)), single_step=True, split="3"), ValueError),
+    ]
+
+
+def test_bad_inputs_raise_the_cli_message(store, files, workdir):
+    for name, args, call, exc in bad_inputs(store, files, workdir):
+        if name == "render":
+            args = args + ["--quiet"]  # no memory report before the error
+        code, _, err = run([tool(name)] + args, stdin="")
+        assert code != 0, (name, args)
+        expected = cli_message(err, "vox-" + name)
+        with pytest.raises(exc) as info:
+            call()
+        if "--memory-mb" in args and exc is RuntimeError:
+            # The module holds the image, which the budget charges to the
+            # process: the same message, with that much more needed.
+            number = r"[0-9]+(\.[0-9]+)?"
+            assert re.sub(number, "N", str(info.value)) == re.sub(number, "N", expected)
+            image_mib = 96 * 72 * 5 * 4 / 2**20
+            ours = float(re.search(r"process (" + number + ")", str(info.value)).group(1))
+            theirs = float(re.search(r"process (" + number + ")", expected).group(1))
+            assert abs(ours - theirs - image_mib) < 0.06, (ours, theirs)
+            continue
+        assert str(info.value) == expected, (name, args)
+
+
+def test_bad_ray_raises_the_cli_message(store):
+    rays = random_rays(3, 1)
+    rays[1, 3:] = 0  # no direction
+    code, out, err = run([tool("probe"), store], stdin="".join(
+        " ".join(repr(float(x)) for x in r) + "\n" for r in rays))
+    assert code == 1 and out.splitlines()[1] == "error"
+    line = cli_message(err, "vox-probe")  # "stdin line 2: MESSAGE: ox oy ..."
+    message = line[len("stdin line 2: "):].rsplit(": ", 1)[0]
+    with pytest.raises(ValueError) as info:
+        vox.probe(store, rays)
+    assert str(info.value) == "rays[1]: " + message
+    with pytest.raises(ValueError, match=r"\(N, 6\)"):
+        vox.probe(store, np.zeros((4, 5)))
+
+
+def test_unknown_option_is_a_type_error(store):
+    with pytest.raises(TypeError, match="colour"):
+        vox.render(store, colour="red")
+    with pytest.raises(TypeError, match="takes a value"):
+        vox.render(store, threads=True)
+
+
+def test_ingest_equals_vox_ingest(vdb, workdir):
+    cli_store = workdir / "cli.store"
+    code, _, err = run([tool("ingest"), vdb, cli_store, "--zstd-level", "5", "--normal-bits", "12",
+                        "--threads", "2", "--quiet"])
+    assert code == 0, err
+    calls = []
+    stats = vox.ingest(vdb, workdir / "py.store", progress=lambda *a: calls.append(a),
+                       zstd_level=5, normal_bits=12, threads=2)
+    assert stats["threads"] == 2 and stats["bricks"] > 0
+    assert calls and calls[-1][0] == calls[-1][1] and calls[-1][2] == stats["occupied_voxels"]
+    ours, theirs = vox.Store(workdir / "py.store").info, vox.Store(cli_store).info
+    # The index records the command line: vox.ingest's differs from vox-ingest's.
+    assert (ours["index_file_bytes"] - theirs["index_file_bytes"] ==
+            len(ours["build_options"]) - len(theirs["build_options"]))
+    assert ours["build_options"].startswith("vox.ingest ")
+    for key in ("dir", "build_options", "index_file_bytes"):
+        ours.pop(key), theirs.pop(key)
+    assert ours == theirs
+    assert stats["occupied_voxels"] == ours["voxels"]
+    # Refusals, as the tool prints them.
+    for args, kwargs, exc in [(["--zstd-level", "30"], {"zstd_level": 30}, ValueError),
+                              (["--normal-bits", "20"], {"normal_bits": 20}, ValueError),
+                              (["--levels", "7+"], {"levels": "7+"}, ValueError),
+                              (["--threads", "-2"], {"threads": -2}, ValueError),
+                              (["--isovalue", "abc"], {"isovalue": "abc"}, ValueError),
+                              (["--grid", "nope"], {"grid": "nope"}, None),
+                              ([], {}, "missing")]:
+        src = vdb if exc != "missing" else str(workdir / "none.vdb")
+        code, _, err = run([tool("ingest"), src, workdir / "bad.store", "--force"] + args)
+        assert code != 0, args
+        expected = cli_message(err, "vox-ingest")
+        with pytest.raises((ValueError, OSError)) as info:
+            vox.ingest(src, workdir / "bad.store", force=True, **kwargs)
+        assert str(info.value) == expected, args
+
+
+def test_ingest_progress_exception_is_raised(vdb, workdir):
+    def progress(done, total, voxels):
+        raise KeyError("stop")
+    with pytest.raises(KeyError):
+        vox.ingest(vdb, workdir / "p.store", progress=progress, force=True)
+
+
+def test_render_in_a_thread_does_not_block_python(store, files):
+    camera = dict(files["camera"], width=640, height=480)
+    result = {}
+    worker = threading.Thread(target=lambda: result.update(
+        vox.render(store, camera, files["scene"], threads=1)))
+    start = time.perf_counter()
+    worker.start()
+    ticks, last, worst = 0, start, 0.0
+    while worker.is_alive():
+        now = time.perf_counter()
+        worst = max(worst, now - last)
+        last = now
+        ticks += 1
+        time.sleep(0.001)
+    worker.join()
+    elapsed = time.perf_counter() - start
+    assert result["rgba"].shape == (480, 640, 4)
+    assert elapsed > 0.2, "the render was too short to tell"
+    # Python ran all along: no gap near the render's length.
+    assert worst < 0.25 * elapsed, (worst, elapsed)
+    assert ticks > 20

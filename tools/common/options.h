@@ -1,0 +1,75 @@
+// The options of vox-ingest, vox-render and vox-probe, applied one flag at a
+// time from (flag, text value) pairs, and vox-probe's store opening and ray
+// tracing (vox::Prober). The tools' flag loops and the Python module
+// (tools/python) both use them, so the two accept the same options and
+// refuse bad ones with the same messages. Flags are spelled as on the
+// command line ("--zstd-level", "-o"); a switch's value is ignored.
+//
+// Thread safety: the Apply and Check functions are pure; a Prober is
+// immutable once opened and Trace is thread-compatible (one thread at a
+// time: vox-probe traces on one thread).
+#ifndef VOX_TOOLS_COMMON_OPTIONS_H_
+#define VOX_TOOLS_COMMON_OPTIONS_H_
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "core/core.h"
+#include "core/status.h"
+#include "ingest/ingest.h"
+#include "render/job.h"
+
+namespace vox {
+
+enum class FlagArity { kUnknown, kSwitch, kValue };
+
+// vox-ingest: IngestOptions plus --quiet.
+struct IngestCommand {
+  IngestOptions options;
+  bool quiet = false;
+};
+FlagArity IngestFlagArity(std::string_view flag);
+// InvalidArgumentError with vox-ingest's usage message for a bad value.
+Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::string& value);
+// The checks vox-ingest makes once all flags are read (threads, zstd level, levels).
+Status CheckIngestCommand(const IngestCommand& c);
+
+// vox-render: RenderJobOptions.
+FlagArity RenderFlagArity(std::string_view flag);
+Status ApplyRenderFlag(RenderJobOptions* o, const std::string& flag, const std::string& value);
+
+// vox-probe.
+struct ProbeOptions {
+  std::string generate, store, split;  // a generated shape (--generate) or a store
+  bool single_step = false, stats = false;
+  int brick_level = -1;
+  size_t cache_mb = 0;        // 0: from the memory budget
+  uint64_t memory_bytes = 0;  // 0: detected
+  int fixed = 0;              // 0: auto, else 64 or 128
+};
+FlagArity ProbeFlagArity(std::string_view flag);
+Status ApplyProbeFlag(ProbeOptions* o, const std::string& flag, const std::string& value);
+
+// vox-probe's volume (a store under the memory budget, or a generated shape)
+// and tracer (split, fixed-point word), ready to trace index-space rays.
+class Prober {
+ public:
+  // Errors carry, as their message, the line vox-probe prints.
+  static StatusOr<std::unique_ptr<Prober>> Open(const ProbeOptions& options);
+  ~Prober();
+  // The first hit of an index-space ray (voxel in index coordinates, t along
+  // the ray); nullopt on a miss. Errors: the ray is invalid (ValidateRay).
+  StatusOr<std::optional<Hit>> Trace(const Ray& index_ray, TraceCounters* counters) const;
+
+ private:
+  struct Impl;
+  explicit Prober(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace vox
+
+#endif  // VOX_TOOLS_COMMON_OPTIONS_H_

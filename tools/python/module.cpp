@@ -1,0 +1,471 @@
+// The Python module `vox`: bindings over the libraries the command-line
+// tools use, with the tools' options as keyword arguments (applied by
+// tools/common/options.h, so values are checked, and refused with the
+// messages, exactly as on the command line). Long calls release the GIL.
+//
+//   vox.ingest(vdb_path, store_path, progress=None, **options) -> dict
+//   vox.Store(path)                  .info: vox-info's metadata as a dict
+//   vox.render(store, camera=None, scene=None, **options) -> dict of numpy
+//       arrays (rgba, z, normal, voxel) and "stats" (the --stats document)
+//   vox.probe(store, rays, **options) -> (voxels, t, hit)
+//   vox.read_exr(path) -> dict (channels as numpy arrays, string attributes)
+//
+// A Status becomes ValueError (InvalidArgument, Unsupported), OSError
+// (NotFound, IoError, Corruption) or RuntimeError (ResourceExhausted,
+// Internal), with the text the tool prints after its name; an allocation
+// failure becomes MemoryError.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "render/exr.h"
+#include "render/job.h"
+#include "storage/store_info.h"
+#include "tools/common/options.h"
+
+namespace py = pybind11;
+
+namespace {
+
+[[noreturn]] void Raise(vox::StatusCode code, const std::string& text) {
+  PyObject* type = PyExc_RuntimeError;
+  switch (code) {
+    case vox::StatusCode::kInvalidArgument:
+    case vox::StatusCode::kUnsupported:
+      type = PyExc_ValueError;
+      break;
+    case vox::StatusCode::kNotFound:
+    case vox::StatusCode::kIoError:
+    case vox::StatusCode::kCorruption:
+      type = PyExc_OSError;
+      break;
+    default:
+      break;
+  }
+  PyErr_SetString(type, text.c_str());
+  throw py::error_already_set();
+}
+
+// A refused option: the tool prints the message alone.
+void CheckUsage(const vox::Status& s) {
+  if (!s.ok()) Raise(s.code(), s.message());
+}
+// A failed run: the tool prints "Code: message".
+void CheckRun(const vox::Status& s) {
+  if (!s.ok()) Raise(s.code(), s.ToString());
+}
+
+// str, os.PathLike or vox.Store -> a path.
+std::string PathOf(const py::handle& h) {
+  if (py::hasattr(h, "path") && !py::isinstance<py::str>(h)) return py::str(h.attr("path"));
+  return py::str(py::module_::import("os").attr("fspath")(h));
+}
+
+// A keyword argument -> the tool's flag and its text value (None: not given,
+// bool: a switch). "o" is -o; "zstd_level" is --zstd-level.
+struct KwFlag {
+  std::string flag;
+  std::optional<std::string> value;  // nullopt: a switch set to False, or None
+  bool is_bool = false;
+};
+
+KwFlag ToFlag(const std::string& key, const py::handle& v) {
+  KwFlag f;
+  std::string name = key;
+  for (char& c : name)
+    if (c == '_') c = '-';
+  f.flag = (name.size() == 1 ? "-" : "--") + name;
+  if (v.is_none()) return f;
+  if (py::isinstance<py::bool_>(v)) {
+    f.is_bool = true;
+    if (v.cast<bool>()) f.value = "";
+    return f;
+  }
+  if (py::isinstance<py::str>(v)) {
+    f.value = v.cast<std::string>();
+  } else if (py::isinstance<py::float_>(v)) {
+    f.value = py::repr(py::float_(py::reinterpret_borrow<py::object>(v))).cast<std::string>();  // round-trips the double exactly
+  } else if (key == "layers" && (py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v))) {
+    std::string s;
+    for (const py::handle& item : v) s += (s.empty() ? "" : ",") + py::str(item).cast<std::string>();
+    f.value = s;
+  } else if ((key == "size" || key == "tiles") && py::isinstance<py::tuple>(v) && py::len(v) == 2) {
+    const py::tuple t = v.cast<py::tuple>();
+    f.value = py::str(t[0]).cast<std::string>() + (key == "size" ? "x" : "/") +
+              py::str(t[1]).cast<std::string>();
+  } else if (py::hasattr(v, "__fspath__")) {
+    f.value = PathOf(v);
+  } else {
+    f.value = py::str(v).cast<std::string>();
+  }
+  return f;
+}
+
+// Applies keyword arguments through a tool's flag table.
+template <class Arity, class Apply>
+void ApplyKwargs(const py::kwargs& kwargs, const char* fn, Arity arity, Apply apply) {
+  for (const auto& [k, v] : kwargs) {
+    const std::string key = py::str(k);
+    const KwFlag f = ToFlag(key, v);
+    const vox::FlagArity a = arity(f.flag);
+    if (a == vox::FlagArity::kUnknown)
+      throw py::type_error(std::string(fn) + "() got an unexpected keyword argument '" + key +
+                           "' (no flag " + f.flag + ")");
+    if (a == vox::FlagArity::kSwitch && !f.is_bool && f.value)
+      throw py::type_error(std::string(fn) + "(): " + key + " takes True or False");
+    if (a == vox::FlagArity::kValue && f.is_bool)
+      throw py::type_error(std::string(fn) + "(): " + key + " takes a value, not a bool");
+    if (f.value) CheckUsage(apply(f.flag, *f.value));
+  }
+}
+
+template <class T>
+py::array_t<T> Owned(std::vector<T>&& v, std::vector<py::ssize_t> shape) {
+  auto* heap = new std::vector<T>(std::move(v));
+  py::capsule owner(heap, [](void* p) { delete static_cast<std::vector<T>*>(p); });
+  return py::array_t<T>(shape, heap->data(), owner);
+}
+
+py::object JsonToPython(const std::string& text) {
+  return py::module_::import("json").attr("loads")(text);
+}
+
+// --- ingest -----------------------------------------------------------------
+
+// Calls a Python progress(bricks_done, bricks_total, voxels_done) from the
+// ingest's thread; after it raises, it is not called again and the exception
+// is raised when the ingest returns.
+class PythonProgress : public vox::ProgressSink {
+ public:
+  explicit PythonProgress(py::object fn) : fn_(std::move(fn)) {}
+  ~PythonProgress() override {
+    py::gil_scoped_acquire gil;
+    fn_ = py::object();
+  }
+  void Message(std::string_view) override {}
+  void Progress(uint64_t done, uint64_t total, uint64_t voxels) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (error_) return;
+    py::gil_scoped_acquire gil;
+    try {
+      fn_(done, total, voxels);
+    } catch (py::error_already_set& e) {
+      error_ = std::make_unique<py::error_already_set>(std::move(e));
+    }
+  }
+  void Done() override {}
+  void Rethrow() {
+    if (error_) {
+      error_->restore();
+      error_.reset();
+      throw py::error_already_set();
+    }
+  }
+
+ private:
+  std::mutex mu_;
+  py::object fn_;
+  std::unique_ptr<py::error_already_set> error_;
+};
+
+py::dict Ingest(const py::object& vdb, const py::object& store, const py::object& progress,
+                const py::kwargs& kwargs) {
+  vox::IngestCommand c;
+  c.quiet = true;  // Python: no stderr output unless quiet=False
+  if (kwargs.contains("quiet") && !kwargs["quiet"].is_none())
+    c.quiet = kwargs["quiet"].cast<bool>();
+  py::kwargs rest;
+  for (const auto& [k, v] : kwargs)
+    if (py::str(k).cast<std::string>() != "quiet") rest[k] = v;
+  c.options.input = PathOf(vdb);
+  c.options.output = PathOf(store);
+  // Recorded in the store's build_options, as the tool records its command line.
+  std::string line = "vox.ingest " + c.options.input + " " + c.options.output;
+  ApplyKwargs(rest, "ingest", vox::IngestFlagArity, [&](const std::string& f, const std::string& v) {
+    line += " " + f;
+    if (vox::IngestFlagArity(f) == vox::FlagArity::kValue) line += " " + v;
+    return vox::ApplyIngestFlag(&c, f, v);
+  });
+  c.options.command_line = line;
+  CheckUsage(vox::CheckIngestCommand(c));
+  std::unique_ptr<PythonProgress> py_progress;
+  std::unique_ptr<vox::ProgressSink> stderr_progress;
+  vox::ProgressSink* sink = nullptr;
+  if (!progress.is_none()) {
+    py_progress = std::make_unique<PythonProgress>(progress);
+    sink = py_progress.get();
+  } else if (!c.quiet) {
+    stderr_progress = vox::MakeStderrProgress(false);
+    sink = stderr_progress.get();
+  }
+  std::optional<vox::StatusOr<vox::IngestStats>> result;
+  {
+    py::gil_scoped_release release;
+    result.emplace(vox::Ingest(c.options, sink));
+  }
+  if (py_progress) py_progress->Rethrow();
+  CheckRun(result->status());
+  const vox::IngestStats& s = **result;
+  py::dict d;
+  d["store"] = c.options.output;
+  d["levels"] = s.meta.levels;
+  d["brick_level"] = s.meta.brick_level;
+  d["input_bytes"] = s.input_bytes;
+  d["active_voxels"] = s.active_voxels;
+  d["leaf_nodes"] = s.leaf_nodes;
+  d["active_tiles"] = s.active_tiles;
+  d["occupied_voxels"] = s.occupied_voxels;
+  d["occupied_tile_voxels"] = s.occupied_tile_voxels;
+  d["bricks"] = s.bricks;
+  d["bbox_leaves_read"] = s.bbox_leaves_read;
+  d["topology_bytes"] = s.topology_bytes;
+  d["memory_budget"] = s.memory_budget;
+  d["threads"] = s.threads;
+  d["seconds"] = py::dict(py::arg("open") = s.seconds_open, py::arg("bbox") = s.seconds_bbox,
+                          py::arg("bricks") = s.seconds_bricks,
+                          py::arg("finish") = s.seconds_finish, py::arg("total") = s.seconds_total);
+  return d;
+}
+
+// --- Store ------------------------------------------------------------------
+
+py::list Vec3(const glm::i64vec3& v) { return py::cast(std::vector<int64_t>{v.x, v.y, v.z}); }
+
+// vox-info's report as a dict: the same quantities, in bytes and counts.
+py::dict InfoDict(const vox::StoreInfo& i) {
+  const vox::StoreMeta& m = i.meta;
+  py::dict d;
+  d["dir"] = i.dir;
+  d["format"] = std::to_string(i.format_major) + "." + std::to_string(i.format_minor);
+  d["source"] = m.source_file;
+  d["grid"] = m.grid_name;
+  d["grid_class"] = m.grid_class == vox::GridClass::kLevelSet ? "level set" : "fog volume";
+  if (m.grid_class == vox::GridClass::kLevelSet)
+    d["isovalue"] = m.isovalue;
+  else
+    d["threshold"] = m.threshold;
+  py::list attrs;
+  if (m.has_normal) attrs.append("normal");
+  if (m.has_density) attrs.append("density");
+  if (m.has_color) attrs.append("colour");
+  d["attributes"] = attrs;
+  d["build_options"] = m.build_options;
+  d["bbox_min"] = Vec3(m.bbox_min);
+  d["bbox_max"] = Vec3(m.bbox_max);
+  d["bbox_dimensions"] = Vec3(m.voxel_count ? m.bbox_max - m.bbox_min + glm::i64vec3(1)
+                                            : glm::i64vec3(0));
+  d["origin"] = Vec3(m.origin);
+  d["voxel_size"] = m.voxel_size;
+  py::list rows;  // index -> world, row-major 3x4 as vox-info prints it
+  for (int r = 0; r < 3; ++r)
+    rows.append(py::cast(std::vector<double>{m.index_to_world[0][r], m.index_to_world[1][r],
+                                             m.index_to_world[2][r], m.index_to_world[3][r]}));
+  d["index_to_world"] = rows;
+  d["levels"] = m.levels;
+  d["brick_level"] = m.brick_level;
+  d["voxels"] = m.voxel_count;
+  d["cells"] = m.top_cells + i.brick_cells;
+  d["top_cells"] = m.top_cells;
+  d["brick_cells"] = i.brick_cells;
+  d["bricks"] = m.brick_count;
+  d["brick_voxels"] = py::dict(
+      py::arg("min") = i.min_brick_voxels,
+      py::arg("mean") = m.brick_count ? double(m.voxel_count) / double(m.brick_count) : 0.0,
+      py::arg("max") = i.max_brick_voxels);
+  d["index_file_bytes"] = i.index_file_bytes;
+  d["brick_file_bytes"] = i.brick_file_bytes;
+  d["top_bytes"] = i.top_bytes;
+  d["resident_bytes"] = i.resident_bytes;
+  d["stored_bytes"] = i.stored_bytes;
+  d["raw_bytes"] = i.raw_bytes;
+  d["decoded_bytes"] = i.decoded_bytes;
+  py::dict hist;  // [2^k, 2^(k+1)) bytes -> bricks
+  for (size_t k = 0; k < i.stored_size_histogram.size(); ++k)
+    if (i.stored_size_histogram[k]) hist[py::int_(uint64_t(1) << k)] = i.stored_size_histogram[k];
+  d["stored_size_histogram"] = hist;
+  d["verified"] = i.verified;
+  return d;
+}
+
+class PyStore {
+ public:
+  explicit PyStore(const py::object& path) : path_(PathOf(path)) {
+    std::optional<vox::StatusOr<vox::StoreInfo>> info;
+    {
+      py::gil_scoped_release release;
+      info.emplace(vox::InspectStore(path_, false));
+    }
+    CheckRun(info->status());
+    info_ = **info;
+  }
+  const std::string& path() const { return path_; }
+  py::dict info() const { return InfoDict(info_); }
+  std::string report() const { return vox::FormatStoreInfo(info_); }
+
+ private:
+  std::string path_;
+  vox::StoreInfo info_;
+};
+
+// --- render -----------------------------------------------------------------
+
+py::dict Render(const py::object& store, const py::object& camera, const py::object& scene,
+                const py::kwargs& kwargs) {
+  vox::RenderJobOptions o;
+  o.store_dir = PathOf(store);
+  o.exr_path.clear();  // no EXR unless o="out.exr"
+  o.quiet = true;      // no stderr output unless quiet=False
+  o.keep_image = true;
+  auto dumps = py::module_::import("json").attr("dumps");
+  if (py::isinstance<py::dict>(camera))
+    o.camera_json = dumps(camera).cast<std::string>();
+  else if (!camera.is_none())
+    o.camera_path = PathOf(camera);
+  if (py::isinstance<py::dict>(scene))
+    o.scene_json = dumps(scene).cast<std::string>();
+  else if (!scene.is_none())
+    o.scene_path = PathOf(scene);
+  py::kwargs rest;
+  for (const auto& [k, v] : kwargs) {
+    if (py::str(k).cast<std::string>() == "quiet" && !v.is_none())
+      o.quiet = v.cast<bool>();
+    else
+      rest[k] = v;
+  }
+  ApplyKwargs(rest, "render", vox::RenderFlagArity,
+              [&](const std::string& f, const std::string& v) { return vox::ApplyRenderFlag(&o, f, v); });
+  vox::RenderJobOutput out;
+  vox::Status s;
+  {
+    py::gil_scoped_release release;
+    s = vox::RunRenderJob(o, &out);
+  }
+  CheckRun(s);
+  const py::ssize_t h = out.height, w = out.width;
+  py::dict d;
+  d["rgba"] = Owned(std::move(out.rgba), {h, w, 4});
+  d["z"] = Owned(std::move(out.z), {h, w});
+  if (o.layers.normal) d["normal"] = Owned(std::move(out.normal), {h, w, 3});
+  if (o.layers.voxel) d["voxel"] = Owned(std::move(out.voxel), {h, w, 3});
+  d["stats"] = JsonToPython(out.stats_json);
+  return d;
+}
+
+// --- probe ------------------------------------------------------------------
+
+py::tuple Probe(const py::object& store, const py::object& rays_in, const py::kwargs& kwargs) {
+  vox::ProbeOptions opt;
+  if (!store.is_none()) opt.store = PathOf(store);
+  ApplyKwargs(kwargs, "probe", vox::ProbeFlagArity,
+              [&](const std::string& f, const std::string& v) { return vox::ApplyProbeFlag(&opt, f, v); });
+  auto rays = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(rays_in);
+  if (!rays || rays.ndim() != 2 || rays.shape(1) != 6)
+    throw py::value_error("rays must be an (N, 6) array (ox oy oz dx dy dz per row, index space)");
+  const py::ssize_t n = rays.shape(0);
+  std::vector<int64_t> voxels(size_t(n) * 3, 0);
+  std::vector<double> t(size_t(n), std::numeric_limits<double>::infinity());
+  std::vector<uint8_t> hit(size_t(n), 0);
+  std::unique_ptr<vox::Prober> prober;
+  vox::Status status;
+  py::ssize_t bad_row = -1;
+  vox::TraceCounters counters;
+  {
+    py::gil_scoped_release release;
+    auto opened = vox::Prober::Open(opt);
+    status = opened.status();
+    if (status.ok()) {
+      prober = std::move(opened).value();
+      const double* r = rays.data();
+      for (py::ssize_t i = 0; i < n; ++i) {
+        vox::Ray ray;
+        ray.origin = {r[i * 6 + 0], r[i * 6 + 1], r[i * 6 + 2]};
+        ray.dir = {r[i * 6 + 3], r[i * 6 + 4], r[i * 6 + 5]};
+        auto h = prober->Trace(ray, &counters);
+        if (!h.ok()) {
+          status = h.status();
+          bad_row = i;
+          break;
+        }
+        if (*h) {
+          const vox::Hit& x = **h;
+          voxels[size_t(i) * 3 + 0] = x.voxel.x;
+          voxels[size_t(i) * 3 + 1] = x.voxel.y;
+          voxels[size_t(i) * 3 + 2] = x.voxel.z;
+          t[size_t(i)] = x.t;
+          hit[size_t(i)] = 1;
+        }
+      }
+    }
+  }
+  if (bad_row >= 0) Raise(status.code(), "rays[" + std::to_string(bad_row) + "]: " + status.message());
+  if (!status.ok()) Raise(status.code(), status.message());  // as vox-probe prints it
+  if (opt.stats) py::print("vox-probe:", counters.ToString(), py::arg("file") = py::module_::import("sys").attr("stderr"));
+  auto hit_array = Owned(std::move(hit), {n}).attr("astype")("bool");
+  return py::make_tuple(Owned(std::move(voxels), {n, 3}), Owned(std::move(t), {n}), hit_array);
+}
+
+// --- EXR --------------------------------------------------------------------
+
+py::dict ReadExr(const py::object& path) {
+  const std::string p = PathOf(path);
+  std::optional<vox::StatusOr<vox::ExrImage>> img;
+  {
+    py::gil_scoped_release release;
+    img.emplace(vox::ReadExr(p));
+  }
+  CheckRun(img->status());
+  vox::ExrImage& im = **img;
+  py::dict channels;
+  for (auto& [name, v] : im.pixels)
+    channels[py::str(name)] = Owned(std::move(v), {im.info.height, im.info.width});
+  py::dict d;
+  d["width"] = im.info.width;
+  d["height"] = im.info.height;
+  d["channels"] = channels;
+  d["attributes"] = im.info.attrs;
+  return d;
+}
+
+}  // namespace
+
+PYBIND11_MODULE(vox, m) {
+  m.doc() =
+      "vox: out-of-core discrete ray tracing of huge sparse voxel volumes (ingest OpenVDB, "
+      "render, probe). Options are the command-line tools' flags as keyword arguments.";
+  m.def("ingest", &Ingest, py::arg("vdb_path"), py::arg("store_path"),
+        py::arg("progress") = py::none(),
+        "Ingests an OpenVDB grid into a vox store, as vox-ingest; options are its flags "
+        "(grid, levels, isovalue, threshold, color, zstd_level, normal_bits, threads, memory_mb, "
+        "force, quiet). progress(bricks_done, bricks_total, voxels_done) is called as bricks are "
+        "written. Returns the ingest's statistics.");
+  py::class_<PyStore>(m, "Store", "A vox store: its metadata as vox-info prints it.")
+      .def(py::init<const py::object&>(), py::arg("path"))
+      .def_property_readonly("path", &PyStore::path)
+      .def_property_readonly("info", &PyStore::info, "vox-info's metadata and statistics")
+      .def("__str__", &PyStore::report)
+      .def("__repr__", [](const PyStore& s) { return "vox.Store('" + s.path() + "')"; });
+  m.def("render", &Render, py::arg("store"), py::arg("camera") = py::none(),
+        py::arg("scene") = py::none(),
+        "Renders a store as vox-render. camera and scene are dicts in the cam.json and "
+        "scene.json schema, or paths; options are vox-render's flags (split, single_step, "
+        "memory_mb, cache_mb, threads, tile_size, tiles, layers, size, prefetch, o, preview, "
+        "stats, quiet). Returns {'rgba': (H, W, 4) float32, 'z': (H, W), 'normal' and 'voxel': "
+        "(H, W, 3) when layers asks for them, 'stats': the --stats document}.");
+  m.def("probe", &Probe, py::arg("store"), py::arg("rays"),
+        "First hits of index-space rays, as vox-probe: rays is (N, 6) (ox oy oz dx dy dz). "
+        "store is a store path, or None with generate='sphere:64'; options are vox-probe's "
+        "flags (split, single_step, memory_mb, cache_mb, fixed, generate, brick_level, stats). "
+        "Returns (voxels (N, 3) int64, t (N,) float64, hit (N,) bool); misses have t = inf.");
+  m.def("read_exr", &ReadExr, py::arg("path"),
+        "Reads a complete EXR written by vox: {'width', 'height', 'channels': {name: (H, W) "
+        "float32}, 'attributes': the string attributes}.");
+}
