@@ -124,7 +124,13 @@ void ApplyKwargs(const py::kwargs& kwargs, const char* fn, Arity arity, Apply ap
       throw py::type_error(std::string(fn) + "(): " + key + " takes True or False");
     if (a == vox::FlagArity::kValue && f.is_bool)
       throw py::type_error(std::string(fn) + "(): " + key + " takes a value, not a bool");
-    if (f.value) CheckUsage(apply(f.flag, *f.value));
+    if (f.value) {
+      CheckUsage(apply(f.flag, *f.value));
+    } else if (f.is_bool && f.flag.rfind("--", 0) == 0) {
+      // False for a switch that is on by default: its "--no-" form (prefetch=False).
+      const std::string off = "--no-" + f.flag.substr(2);
+      if (arity(off) == vox::FlagArity::kSwitch) CheckUsage(apply(off, ""));
+    }
   }
 }
 
