@@ -37,6 +37,8 @@ struct RenderJobOptions {
   // and its reads and buffers add to the process's memory.
   bool prefetch = false;
   int tile_size = 64;
+  // --lod F: level of detail over the store's pyramid (render/lod.h); 0: off.
+  double lod = 0.0;
   PartSpec part;
   ImageLayers layers;
   bool quiet = false;
