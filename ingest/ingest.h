@@ -52,6 +52,9 @@ struct IngestOptions {
   // to it; a grid whose tables alone exceed half of it is refused.
   uint64_t memory_bytes = 0;
   bool force = false;       // replace an existing store
+  // Also write the level-of-detail pyramid (storage/lod.h) before the store
+  // is published (vox-ingest --no-lod: false).
+  bool lod = true;
   std::string command_line; // recorded in the store's build_options
 };
 
@@ -70,6 +73,8 @@ struct IngestStats {
   int threads = 0;
   double seconds_open = 0, seconds_bbox = 0, seconds_bricks = 0, seconds_finish = 0;
   double seconds_total = 0;
+  int lod_levels = 0;               // coarse levels of the pyramid written (0: none)
+  double seconds_lod = 0;           // building the pyramid (part of seconds_finish)
 };
 
 // Receives progress: phase messages and brick counts. Implementations need

@@ -13,11 +13,28 @@ using render_internal::kInf;
 using render_internal::kMinTransmittance;
 using render_internal::kScatterStepVoxels;
 
-double Renderer::Transmittance(const Ray& gr, double t_max, Ctx& cx) const {
+double Renderer::Transmittance(const Ray& gr, double t_max, Ctx& cx, const Cone* cone) const {
   ++cx.c->rays[kRayVolume];
   const double sigma_t = scene_.volume.absorption + scene_.volume.scattering;
   const bool has_density = volume_->meta().has_density;
   double tau = 0.0;
+  if (cone != nullptr && !lod_->Exact(gr, *cone)) {
+    // Level of detail: each coarse cell's mean density over its segment.
+    Status s = lod_->Traverse(
+        *cx.tracer, gr, *cone,
+        [&](const LodSegment& seg) {
+          if (seg.t0 >= t_max) return false;
+          const double t1 = std::min(seg.t1, t_max);
+          double rho = 1.0;
+          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume))
+            return false;
+          tau += sigma_t * rho * std::max(0.0, t1 - seg.t0);
+          return std::exp(-tau) >= kMinTransmittance;
+        },
+        &cx.c->trace);
+    if (!s.ok()) cx.Fail(s);
+    return std::exp(-tau);
+  }
   Status s = cx.tracer->Traverse(
       gr,
       [&](const Hit& h) {
@@ -34,9 +51,9 @@ double Renderer::Transmittance(const Ray& gr, double t_max, Ctx& cx) const {
 }
 
 // The density of fog voxel `h` (stops the frame with the error on failure).
-bool Renderer::Density(const Hit& h, Ctx& cx, double* rho) const {
+bool Renderer::Density(const Hit& h, Ctx& cx, double* rho, Volume* volume) const {
   ++cx.c->attribute_lookups;
-  auto a = volume_->HitAttributes(h);  // called by visitors: h's brick is pinned
+  auto a = (volume != nullptr ? volume : volume_)->HitAttributes(h);  // called by visitors: h's brick is pinned
   if (!a.ok()) {
     cx.Fail(a.status());
     return false;
@@ -45,7 +62,8 @@ bool Renderer::Density(const Hit& h, Ctx& cx, double* rho) const {
   return true;
 }
 
-glm::dvec3 Renderer::Fog(const Ray& gr, Ctx& cx, double* transmittance, double* first_t) const {
+glm::dvec3 Renderer::Fog(const Ray& gr, Ctx& cx, double* transmittance, double* first_t,
+                         const Cone* cone) const {
   const VolumeMedium& v = scene_.volume;
   const double sigma_t = v.absorption + v.scattering;
   const bool has_density = volume_->meta().has_density;
@@ -55,42 +73,62 @@ glm::dvec3 Renderer::Fog(const Ray& gr, Ctx& cx, double* transmittance, double* 
   // Ray parameter per voxel along this ray (t is in world units).
   const double scatter_step = kScatterStepVoxels * volume_->meta().voxel_size;
   *first_t = kInf;
-  Status s = cx.tracer->Traverse(
-      gr,
-      [&](const Hit& h) {
-        if (*first_t == kInf) *first_t = h.t;
-        const double t1 = VoxelExitT(gr, h.voxel);
-        const double len = std::max(0.0, t1 - h.t);
-        double rho = 1.0;
-        if (has_density && !Density(h, cx, &rho)) return false;
-        const double st = sigma_t * rho;
-        if (st <= 0) return true;
-        const double seg_tau = st * len;
-        if (passes_.scattering) {
-          // Light scattered towards the camera in this segment, with the
-          // light's transmittance from the segment's midpoint, re-evaluated
-          // once the ray has moved kScatterStepVoxels voxels from the last
-          // evaluation (as vdb_render's shadow step).
-          const double mid = h.t + 0.5 * len;
-          if (mid >= next_light_t) {
-            const glm::dvec3 p_g = gr.origin + mid * gr.dir;
-            const glm::dvec3 p_w = xf_.GridToWorld(p_g);
-            light_in = glm::dvec3(0.0);
-            next_light_t = mid + scatter_step;
-            ForEachLight(scene_.lights, p_w,
-                         [&](const Light& l, const glm::dvec3& to_light, double dist) {
-                           double tl =
-                               l.shadows ? Transmittance(SpawnRay(p_g, to_light), dist, cx) : 1.0;
-                           light_in += l.color * l.intensity * tl;
-                         });
-          }
-          scattered += std::exp(-tau) * (1.0 - std::exp(-seg_tau)) * (v.scattering / sigma_t) *
-                       v.color * light_in;
-        }
-        tau += seg_tau;
-        return !cx.failed() && std::exp(-tau) >= kMinTransmittance;
-      },
-      &cx.c->trace);
+  // One occupied cell [t0, t1] of density rho (Cone: `level` > 0 for coarse cells).
+  auto cell = [&](double t0, double t1, double rho) {
+    if (*first_t == kInf) *first_t = t0;
+    const double len = std::max(0.0, t1 - t0);
+    const double st = sigma_t * rho;
+    if (st <= 0) return true;
+    const double seg_tau = st * len;
+    if (passes_.scattering) {
+      // Light scattered towards the camera in this segment, with the
+      // light's transmittance from the segment's midpoint, re-evaluated
+      // once the ray has moved kScatterStepVoxels voxels from the last
+      // evaluation (as vdb_render's shadow step).
+      const double mid = t0 + 0.5 * len;
+      if (mid >= next_light_t) {
+        const glm::dvec3 p_g = gr.origin + mid * gr.dir;
+        const glm::dvec3 p_w = xf_.GridToWorld(p_g);
+        light_in = glm::dvec3(0.0);
+        // With LOD, the step grows with the cone, and the light's rays carry it on.
+        const double width = cone != nullptr ? std::max(1.0, cone->Width(mid)) : 1.0;
+        next_light_t = mid + scatter_step * width;
+        const Cone light_cone = cone != nullptr ? SecondaryCone(*cone, mid) : Cone{};
+        ForEachLight(scene_.lights, p_w,
+                     [&](const Light& l, const glm::dvec3& to_light, double dist) {
+                       double tl = l.shadows ? Transmittance(SpawnRay(p_g, to_light), dist, cx,
+                                                             cone != nullptr ? &light_cone : nullptr)
+                                             : 1.0;
+                       light_in += l.color * l.intensity * tl;
+                     });
+      }
+      scattered += std::exp(-tau) * (1.0 - std::exp(-seg_tau)) * (v.scattering / sigma_t) *
+                   v.color * light_in;
+    }
+    tau += seg_tau;
+    return !cx.failed() && std::exp(-tau) >= kMinTransmittance;
+  };
+  Status s;
+  if (cone != nullptr && !lod_->Exact(gr, *cone)) {
+    s = lod_->Traverse(
+        *cx.tracer, gr, *cone,
+        [&](const LodSegment& seg) {
+          double rho = 1.0;
+          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume))
+            return false;
+          return cell(seg.t0, seg.t1, rho);
+        },
+        &cx.c->trace);
+  } else {
+    s = cx.tracer->Traverse(
+        gr,
+        [&](const Hit& h) {
+          double rho = 1.0;
+          if (has_density && !Density(h, cx, &rho)) return false;
+          return cell(h.t, VoxelExitT(gr, h.voxel), rho);
+        },
+        &cx.c->trace);
+  }
   if (!s.ok()) cx.Fail(s);
   *transmittance = std::exp(-tau);
   return scattered;

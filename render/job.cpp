@@ -1,6 +1,7 @@
 #include "render/job.h"
 
 #include <algorithm>
+#include <cmath>
 #include <charconv>
 #include <malloc.h>
 #include <fstream>
@@ -12,13 +13,90 @@
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "render/frame.h"
+#include "render/volume.h"
 #include "render/internal/atomic_file.h"
 #include "render/renderer.h"
 #include "render/scene.h"
+#include "storage/lod.h"
 #include "storage/store.h"
 #include "storage/store_budget.h"
 
 namespace vox {
+namespace {
+
+// --stats "lod": the factor, stops by level, and per level the bricks paged
+// in and bytes read (level 0: the base store, as in "cache" and "io").
+nlohmann::json LodStatsJson(const Renderer& r, const FrameStats& st,
+                            const std::vector<Store*>& levels,
+                            const std::vector<CacheStats>& start) {
+  nlohmann::json j;
+  j["factor"] = r.lod()->factor();
+  j["levels"] = r.lod()->max_level();
+  j["exact_rays"] = st.counters.lod.exact_rays;
+  nlohmann::json stops = nlohmann::json::object(), paged = nlohmann::json::array(),
+                 bytes = nlohmann::json::array();
+  for (int l = 0; l <= kMaxLevels; ++l)
+    if (st.counters.lod.stops[l] > 0) stops[std::to_string(l)] = st.counters.lod.stops[l];
+  uint64_t total_paged = st.cache_end.misses - st.cache_start.misses;
+  uint64_t total_bytes = st.cache_end.bytes_read - st.cache_start.bytes_read;
+  paged.push_back(total_paged);
+  bytes.push_back(total_bytes);
+  for (size_t i = 0; i < levels.size(); ++i) {
+    const CacheStats e = levels[i]->cache_stats();
+    paged.push_back(e.misses - start[i].misses);
+    bytes.push_back(e.bytes_read - start[i].bytes_read);
+    total_paged += e.misses - start[i].misses;
+    total_bytes += e.bytes_read - start[i].bytes_read;
+  }
+  j["stops_by_level"] = stops;
+  j["bricks_paged_by_level"] = paged;
+  j["brick_bytes_read_by_level"] = bytes;
+  j["bricks_paged_total"] = total_paged;
+  j["brick_bytes_read_total"] = total_bytes;
+  return j;
+}
+
+// Without --lod: when the voxels at the volume's centre are much smaller
+// than a pixel of the central ray, says once that --lod 1 would read about
+// N times fewer bricks (N from the pyramid's brick counts at the level the
+// central pixel's cone picks there).
+void LodHint(const std::string& dir, Store& base, const Camera& cam, FILE* log) {
+  const StoreMeta& m = base.meta();
+  if (m.voxel_count == 0 || !(m.voxel_size > 0)) return;
+  glm::dvec3 lo, hi;
+  WorldBounds(m, &lo, &hi);
+  double pixel;  // world size of the central pixel at the volume's centre
+  if (cam.projection == Projection::kPerspective)
+    pixel = glm::length(0.5 * (lo + hi) - cam.position) * 2.0 *
+            std::tan(cam.fov_deg * (3.14159265358979323846 / 360.0)) / cam.width;
+  else
+    pixel = cam.ortho_width / cam.width;
+  const double voxels = pixel / m.voxel_size;
+  if (!(voxels >= 4.0)) return;  // "much smaller": at least level 2
+  const int want = std::min(std::ilogb(voxels), LodMaxLevel(m.levels));
+  if (want < 1) return;
+  std::string estimate = "fewer";
+  if (HasLod(dir)) {
+    OpenOptions oo;
+    oo.cache_bytes = 4 << 20;
+    auto p = LodPyramid::Open(dir, base, oo);
+    if (p.ok() && (*p)->max_level() >= want) {
+      const std::vector<uint64_t> n = (*p)->brick_counts();
+      if (n[size_t(want)] > 0) {
+        char b[64];
+        snprintf(b, sizeof b, "about %.0fx fewer", double(n[0]) / double(n[size_t(want)]));
+        estimate = b;
+      }
+    }
+  }
+  fprintf(log,
+          "vox-render: about %.1f voxels fall across a pixel; --lod 1 would read %s bricks%s\n",
+          voxels, estimate.c_str(),
+          HasLod(dir) ? "" : (" (add the pyramid first: vox-ingest --add-lod " + dir + ")").c_str());
+}
+
+}  // namespace
+
 Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
   const Stopwatch total;
   Stopwatch phase;
@@ -49,7 +127,18 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
                                                                uint64_t(o.io_threads)))
                                     : 0;
   open.io_threads = std::max(io_threads, 1);
+  if (o.lod != 0.0 && !(o.lod > 0 && std::isfinite(o.lod)))
+    return InvalidArgumentError("--lod " + std::to_string(o.lod) + ": must be finite and > 0");
   VOX_ASSIGN_OR_RETURN(auto volume, Store::Open(o.store_dir, open));
+  std::unique_ptr<LodPyramid> pyramid;
+  std::vector<Store*> lod_stores;
+  if (o.lod > 0) {
+    OpenOptions lo = open;
+    auto p = LodPyramid::Open(o.store_dir, *volume, lo);
+    if (!p.ok()) return p.status().WithContext("--lod");
+    pyramid = std::move(p).value();
+    for (int l = 1; l <= pyramid->max_level(); ++l) lod_stores.push_back(pyramid->level(l));
+  }
   // Open's scratch (the index blocks, as large as the resident top) is
   // free but stays in the main heap, which the render threads' allocator
   // arenas do not reuse: give it back so the budget's estimate holds.
@@ -104,7 +193,8 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
   const bool keep = o.keep_image && out != nullptr;
   const size_t pixels = size_t(camera.width) * size_t(camera.height);
   if (keep) bi.process_base += uint64_t(pixels) * uint64_t(bi.channels) * sizeof(float);
-  VOX_ASSIGN_OR_RETURN(const MemoryBudget budget, BudgetStore(volume.get(), process.bytes, bi));
+  VOX_ASSIGN_OR_RETURN(const MemoryBudget budget,
+                       BudgetStores(volume.get(), lod_stores, process.bytes, bi));
   int slot_bits = 0;
   while ((2 << slot_bits) <= budget.pins_per_thread) ++slot_bits;
   ro.table_slot_bits = slot_bits;
@@ -115,8 +205,13 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
     Store* store = volume.get();
     ro.read_ahead = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
   }
+  ro.lod = o.lod;
+  for (Store* s : lod_stores) ro.lod_levels.push_back(s);
   VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(volume.get(), camera, scene, ro));
+  if (o.lod == 0.0 && !o.quiet) LodHint(o.store_dir, *volume, camera, o.log);
   const double setup_seconds = phase.Lap();
+  std::vector<CacheStats> lod_start;
+  for (Store* s : lod_stores) lod_start.push_back(s->cache_stats());
 
   FrameOptions fo;
   fo.exr_path = o.exr_path;
@@ -183,6 +278,7 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
     memory["io_threads"] = io_threads;
     memory["max_brick_bytes"] = volume->brick_sizes().max_decoded;
     json["memory"] = memory;
+    if (renderer->lod() != nullptr) json["lod"] = LodStatsJson(*renderer, stats, lod_stores, lod_start);
     if (out) out->stats_json = json.dump(2);
     if (!o.stats_path.empty())
       VOX_RETURN_IF_ERROR(WriteFileAtomically(o.stats_path, json.dump(2) + "\n"));

@@ -49,6 +49,8 @@ struct RenderJobOptions {
   bool prefetch = true;
   int io_threads = OpenOptions::kDefaultIoThreads;
   int tile_size = 64;
+  // --lod F: level of detail over the store's pyramid (render/lod.h); 0: off.
+  double lod = 0.0;
   PartSpec part;
   ImageLayers layers;
   bool quiet = false;

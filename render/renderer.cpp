@@ -59,6 +59,7 @@ void RenderCounters::Add(const RenderCounters& o) {
   hit_pixels += o.hit_pixels;
   attribute_lookups += o.attribute_lookups;
   deferred_pixels += o.deferred_pixels;
+  lod.Add(o.lod);
 }
 
 std::string RenderPasses::ToString() const {
@@ -153,6 +154,19 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
   r->needs_attributes_ =
       meta.has_color || any_light || p.reflection || p.refraction || options.layers.normal;
   r->eps_t_ = 1e-7 * std::max(meta.voxel_size, 1e-300);
+  if (options.lod != 0.0) {
+    VOX_ASSIGN_OR_RETURN(LodTracer lt, LodTracer::Create(volume, options.lod_levels, options.lod));
+    r->lod_ = std::move(lt);
+    // One pixel at the image plane, in base voxels: a perspective cone
+    // grows with the distance along the ray (world units: camera rays are
+    // unit length), an orthographic one does not.
+    const double vs = std::max(meta.voxel_size, 1e-300);
+    if (cam.projection == Projection::kPerspective)
+      r->primary_cone_.spread =
+          2.0 * std::tan(cam.fov_deg * (3.14159265358979323846 / 360.0)) / cam.width / vs;
+    else
+      r->primary_cone_.w0 = cam.ortho_width / cam.width / vs;
+  }
   return r;
 }
 
@@ -170,9 +184,10 @@ void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out) const {
   const WorldRay wr = camera_.PixelRay(x, y);
   const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
   ++cx.c->rays[kRayPrimary];
+  const bool lod = lod_.has_value();
   if (fog_) {
     double T = 1.0, first_t = kInf;
-    glm::dvec3 l = Fog(gr, cx, &T, &first_t);
+    glm::dvec3 l = Fog(gr, cx, &T, &first_t, lod ? &primary_cone_ : nullptr);
     out->color = l + T * Background(wr.dir);
     out->alpha = 1.0 - T;
     out->z = first_t;
@@ -181,15 +196,20 @@ void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out) const {
   }
   Hit h;
   VoxelAttributes a;
-  if (!FindHit(gr, /*skip_start_run=*/false, cx, &h, SurfaceAttrs(&a))) {
+  int level = 0;
+  if (!(lod ? FindHitLod(gr, primary_cone_, /*skip_start_run=*/false, cx, &h, &level,
+                         SurfaceAttrs(&a))
+            : FindHit(gr, /*skip_start_run=*/false, cx, &h, SurfaceAttrs(&a)))) {
     if (!cx.failed()) out->color = Background(wr.dir);
     return;
   }
   out->hit = true;
   out->alpha = 1.0;
   out->z = h.t;
-  out->voxel = h.voxel + volume_->meta().origin;
-  out->color = ShadeSurface(gr, wr.dir, h, a, 0, cx, &out->normal);
+  // A coarse cell's voxel layer names its first base voxel.
+  out->voxel = (h.voxel << int64_t(level)) + volume_->meta().origin;
+  const LodRay lr{primary_cone_, level};
+  out->color = ShadeSurface(gr, wr.dir, h, a, 0, cx, &out->normal, lod ? &lr : nullptr);
 }
 
 void Renderer::FirstBricks(const TileRect& rect, int stride, std::vector<uint32_t>* ids) const {

@@ -40,6 +40,7 @@
 #include <functional>
 #include <memory>
 #include <span>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,7 @@
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "render/exr.h"
+#include "render/lod.h"
 #include "render/scene.h"
 #include "render/tiles.h"
 #include "render/volume.h"
@@ -68,6 +70,7 @@ struct RenderCounters {
   // read_ahead), once per time; their rays' other counters count only the
   // shading that completed.
   uint64_t deferred_pixels = 0;
+  LodCounters lod;  // --lod: stops by level
   void Add(const RenderCounters& o);
 };
 
@@ -97,6 +100,10 @@ struct RenderOptions {
   // come out bit-identical either way (shading is a pure function of the
   // pixel). Needs a ThreadState per thread (RenderTile's `ts`).
   std::function<void(std::span<const uint32_t>)> read_ahead;
+  // Level of detail (render/lod.h, docs/lod.md): factor F > 0 turns it on;
+  // lod_levels[l - 1] is level l of the volume's pyramid (not owned).
+  double lod = 0.0;
+  std::vector<Volume*> lod_levels;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -140,12 +147,22 @@ class Renderer {
   const Camera& camera() const { return camera_; }
   const ImageLayers& layers() const { return options_.layers; }
   int n1() const { return tracer_.n1(); }
+  // --lod: the pyramid's tracer (nullptr when LOD is off), and the cone of
+  // the primary ray through the image centre at ray parameter t.
+  const LodTracer* lod() const { return lod_ ? &*lod_ : nullptr; }
+  Cone PrimaryCone() const { return primary_cone_; }
   int n2() const { return tracer_.n2(); }
   std::string SplitString() const;
 
  private:
   struct Ctx;
   struct Sample;
+  // The cone a ray carries and the level of the cell it stopped at; for
+  // secondary rays of a coarse hit (a level-0 hit's are traced exactly).
+  struct LodRay {
+    Cone cone;
+    int level = 0;
+  };
   Renderer(Volume* volume, const Camera& camera, const Scene& scene, const RenderOptions& o,
            RenderTracer tracer, GridTransform xf)
       : volume_(volume), camera_(camera), scene_(scene), options_(o), tracer_(tracer), xf_(xf) {}
@@ -159,7 +176,7 @@ class Renderer {
   // world direction dir_w; with `lift_normal` (a world unit normal), the
   // origin moves kSurfaceOffsetVoxels voxels along it first.
   Ray SpawnRay(const glm::dvec3& p_g, const glm::dvec3& dir_w,
-               const glm::dvec3* lift_normal = nullptr) const;
+               const glm::dvec3* lift_normal = nullptr, double lift_scale = 1.0) const;
   // The first hit along gr (after the run of voxels the ray starts in, if
   // skip_start_run); with `attrs`, also its attributes, read while the
   // traversal pins the brick. False on a miss or an error (cx.failed()).
@@ -168,12 +185,14 @@ class Renderer {
   // Where surface shading wants the hit's attributes: `a`, or nullptr when
   // the scene needs none.
   VoxelAttributes* SurfaceAttrs(VoxelAttributes* a) const { return needs_attributes_ ? a : nullptr; }
-  glm::dvec3 WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a) const;
+  // `level`: the hit is a cell of that LOD level (its voxel in that grid).
+  glm::dvec3 WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a,
+                         int level = 0) const;
   // `attrs`: the hit voxel's attributes (default ones when the scene needs
   // none: unlit, no stored colour, no normal layer).
   glm::dvec3 ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
                           const VoxelAttributes& attrs, int depth, Ctx& cx,
-                          glm::dvec3* normal_out) const;
+                          glm::dvec3* normal_out, const LodRay* lod = nullptr) const;
   // The colour seen along secondary ray gr (world direction dir_w).
   glm::dvec3 Radiance(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
                       Ctx& cx) const;
@@ -183,10 +202,22 @@ class Renderer {
                      int depth, Ctx& cx) const;
   bool Occluded(const Ray& gr, double t_max, Ctx& cx) const;
 
+  // lod.cpp hooks (render/lod_render.cpp): LOD versions of the above.
+  // The first hit along gr with the cone; *level its LOD level.
+  bool FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, Ctx& cx, Hit* hit,
+                  int* level, VoxelAttributes* attrs) const;
+  bool OccludedLod(const Ray& gr, double t_max, const Cone& cone, Ctx& cx) const;
+  glm::dvec3 RadianceLod(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
+                         const Cone& cone, Ctx& cx) const;
+  // The cone of a secondary ray leaving a hit at ray parameter t of a ray with `cone`.
+  static Cone SecondaryCone(const Cone& cone, double t) { return Cone{cone.Width(t), cone.spread}; }
+
   // fog.cpp: volumes.
-  glm::dvec3 Fog(const Ray& gr, Ctx& cx, double* transmittance, double* first_t) const;
-  bool Density(const Hit& h, Ctx& cx, double* rho) const;
-  double Transmittance(const Ray& gr, double t_max, Ctx& cx) const;
+  // `cone`: trace with LOD (nullptr: exactly).
+  glm::dvec3 Fog(const Ray& gr, Ctx& cx, double* transmittance, double* first_t,
+                 const Cone* cone = nullptr) const;
+  bool Density(const Hit& h, Ctx& cx, double* rho, Volume* volume = nullptr) const;
+  double Transmittance(const Ray& gr, double t_max, Ctx& cx, const Cone* cone = nullptr) const;
 
   Volume* volume_;
   Camera camera_;
@@ -198,6 +229,8 @@ class Renderer {
   bool fog_ = false;
   bool needs_attributes_ = true;  // surfaces: shading reads normals or colours
   double eps_t_ = 1e-9;           // t tolerance for "touching" voxels, in world units
+  std::optional<LodTracer> lod_;  // --lod
+  Cone primary_cone_;             // the primary rays' cone (pixel width), when lod_
 };
 
 }  // namespace vox

@@ -15,11 +15,12 @@ using render_internal::kSurfaceOffsetVoxels;
 using render_internal::OccupiedRun;
 
 Ray Renderer::SpawnRay(const glm::dvec3& p_g, const glm::dvec3& dir_w,
-                       const glm::dvec3* lift_normal) const {
+                       const glm::dvec3* lift_normal, double lift_scale) const {
   glm::dvec3 origin = p_g;
   if (lift_normal != nullptr)
     origin = p_g + xf_.world_to_grid_linear *
-                       (*lift_normal * (kSurfaceOffsetVoxels * volume_->meta().voxel_size));
+                       (*lift_normal *
+                        (kSurfaceOffsetVoxels * lift_scale * volume_->meta().voxel_size));
   return Ray{origin, xf_.world_to_grid_linear * dir_w};
 }
 
@@ -65,7 +66,8 @@ bool Renderer::Occluded(const Ray& gr, double t_max, Ctx& cx) const {
   return h.t < t_max;
 }
 
-glm::dvec3 Renderer::WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a) const {
+glm::dvec3 Renderer::WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a,
+                                 int level) const {
   glm::dvec3 n(a.normal);
   if (!(glm::dot(n, n) > 0)) {
     // No stored normal: the face the ray entered through.
@@ -73,7 +75,7 @@ glm::dvec3 Renderer::WorldNormal(const Ray& gr, const Hit& h, const VoxelAttribu
     double best = -kInf;
     for (int ax = 0; ax < 3; ++ax) {
       if (gr.dir[ax] == 0) continue;
-      double face = double(h.voxel[ax]) + (gr.dir[ax] > 0 ? 0.0 : 1.0);
+      double face = std::ldexp(double(h.voxel[ax]) + (gr.dir[ax] > 0 ? 0.0 : 1.0), level);
       double t = (face - gr.origin[ax]) / gr.dir[ax];
       if (t > best) {
         best = t;
@@ -90,11 +92,15 @@ glm::dvec3 Renderer::WorldNormal(const Ray& gr, const Hit& h, const VoxelAttribu
 
 glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
                                   const VoxelAttributes& attrs, int depth, Ctx& cx,
-                                  glm::dvec3* normal_out) const {
+                                  glm::dvec3* normal_out, const LodRay* lod) const {
   const glm::dvec3 origin_w = xf_.GridToWorld(gr.origin);
   const glm::dvec3 p_w = origin_w + h.t * dir_w;
   const glm::dvec3 p_g = gr.origin + h.t * gr.dir;
-  const glm::dvec3 n_out = WorldNormal(gr, h, attrs);
+  // A coarse cell's secondary rays carry the cone on, lifted by its size.
+  if (lod != nullptr && lod->level == 0) lod = nullptr;
+  const double lift = lod != nullptr ? std::ldexp(1.0, lod->level) : 1.0;
+  const Cone cone = lod != nullptr ? SecondaryCone(lod->cone, h.t) : Cone{};
+  const glm::dvec3 n_out = WorldNormal(gr, h, attrs, lod != nullptr ? lod->level : 0);
   const glm::dvec3 n = glm::dot(n_out, dir_w) > 0 ? -n_out : n_out;  // facing the viewer
   if (normal_out) *normal_out = n;
   const Material& m = scene_.MaterialAt(p_w);
@@ -106,7 +112,10 @@ glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const 
     ForEachLight(scene_.lights, p_w, [&](const Light& l, const glm::dvec3& to_light, double dist) {
       double ndl = glm::dot(n, to_light);
       if (ndl <= 0) return;
-      if (passes_.shadows && l.shadows && Occluded(SpawnRay(p_g, to_light, &n), dist, cx)) return;
+      if (passes_.shadows && l.shadows &&
+          (lod != nullptr ? OccludedLod(SpawnRay(p_g, to_light, &n, lift), dist, cone, cx)
+                          : Occluded(SpawnRay(p_g, to_light, &n), dist, cx)))
+        return;
       glm::dvec3 li = l.color * l.intensity;
       glm::dvec3 hv = to_light - dir_w;
       double hl = glm::length(hv);
@@ -120,7 +129,10 @@ glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const 
   if (depth < scene_.max_depth) {
     if (passes_.reflection && m.reflect > 0) {
       glm::dvec3 r = glm::reflect(dir_w, n);
-      color += m.reflect * Radiance(SpawnRay(p_g, r, &n), r, depth + 1, kRayReflection, cx);
+      color += m.reflect *
+               (lod != nullptr
+                    ? RadianceLod(SpawnRay(p_g, r, &n, lift), r, depth + 1, kRayReflection, cone, cx)
+                    : Radiance(SpawnRay(p_g, r, &n), r, depth + 1, kRayReflection, cx));
     }
     if (passes_.refraction && m.transmit > 0) {
       glm::dvec3 t = glm::refract(dir_w, n, 1.0 / m.ior);

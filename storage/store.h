@@ -26,6 +26,7 @@
 #define VOX_STORAGE_STORE_H_
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -59,17 +60,25 @@ struct StoreMeta {
   bool has_normal = false;   // level sets: a quantised normal per voxel
   bool has_density = false;  // fog volumes: the density per voxel
   bool has_color = false;    // an RGB colour per voxel (from a vec3 grid)
+  bool has_coverage = false; // level-of-detail stores: the fraction of a cell's voxels occupied
   double isovalue = 0.0;     // level sets: occupied when active and value <= isovalue
   double threshold = 0.0;    // fog volumes: occupied when active and density > threshold
   std::string build_options; // the ingest command's options, for the record
+  // Level of detail (format 1.1, storage/lod.h): a coarse store of a
+  // pyramid is the base store downsampled by 2^lod_level; it names the base
+  // store's store_id and levels. 0 / 0 / 0 in a base store.
+  int lod_level = 0;
+  uint64_t lod_base_store_id = 0;
+  int lod_base_levels = 0;
 };
 
 // What a brick keeps per occupied voxel. Fields the store does not have are
-// zero (normal), 1 (density) or 1,1,1 (colour).
+// zero (normal), 1 (density), 1,1,1 (colour) or 1 (coverage).
 struct VoxelAttributes {
   glm::vec3 normal{0.0f};    // unit, in index space (the gradient of the distance field)
   float density = 1.0f;
   glm::vec3 color{1.0f};
+  float coverage = 1.0f;     // level-of-detail cells: fraction of their voxels occupied
 };
 
 // One occupied voxel handed to the writer, in brick-local coordinates
@@ -89,6 +98,11 @@ struct WriteOptions {
   // The id both files carry (FORMAT.md); 0: random. A fixed id (with bricks
   // added in a fixed order, one at a time) makes the store byte-reproducible.
   uint64_t store_id = 0;
+  // Called by Finish with the temporary directory once the store in it is
+  // complete and synced, before it is renamed into place: what it adds to
+  // the directory (e.g. the level-of-detail pyramid, storage/lod.h) is
+  // published with the store, and an error leaves no store at the target.
+  std::function<Status(const std::string& temp_dir)> before_publish;
 };
 
 class StoreWriter {

@@ -41,6 +41,40 @@ StatusOr<MemoryBudget> BudgetStore(Store* store, uint64_t total, BudgetInputs in
   return b;
 }
 
+StatusOr<MemoryBudget> BudgetStores(Store* base, const std::vector<Store*>& levels,
+                                    uint64_t total, BudgetInputs in) {
+  if (levels.empty()) return BudgetStore(base, total, in);
+  std::vector<Store*> all{base};
+  all.insert(all.end(), levels.begin(), levels.end());
+  in.resident_bytes = 0;
+  in.max_brick_bytes = in.max_stored_brick_bytes = 0;
+  std::vector<double> weight;
+  double sum = 0;
+  for (Store* s : all) {
+    const Store::BrickSizes sizes = s->brick_sizes();
+    in.resident_bytes += s->resident_bytes();
+    in.max_brick_bytes = std::max(in.max_brick_bytes, sizes.max_decoded);
+    in.max_stored_brick_bytes = std::max(in.max_stored_brick_bytes, sizes.max_stored);
+    weight.push_back(double(s->meta().brick_count) * double(sizes.mean_decoded) + 1.0);
+    sum += weight.back();
+  }
+  auto b = SplitMemoryBudget(total, in);
+  if (!b.ok()) return b.status().WithContext("store '" + base->description() + "' and its pyramid");
+  constexpr uint64_t kMinShare = 4 * kMiB;
+  const uint64_t n = all.size();
+  if (b->brick_cache < n * kMinShare)
+    return ResourceExhaustedError("store '" + base->description() + "' with its " +
+                                  std::to_string(levels.size()) +
+                                  "-level pyramid needs a brick cache of at least " +
+                                  std::to_string(n * kMinShare / kMiB) + " MiB; the budget leaves " +
+                                  std::to_string(b->brick_cache / kMiB) + " MiB");
+  // Each store its minimum, the rest in proportion: the shares sum to at most the cache.
+  const uint64_t rest = b->brick_cache - n * kMinShare;
+  for (size_t i = 0; i < all.size(); ++i)
+    all[i]->SetCacheCapacity(kMinShare + uint64_t(double(rest) * (weight[i] / sum)));
+  return b;
+}
+
 StatusOr<MemoryBudget> BudgetReader(Store* store, uint64_t total, uint64_t cache_override) {
   BudgetInputs in;
   in.image_width = in.image_height = 1;

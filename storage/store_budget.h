@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/status.h"
 #include "storage/memory_budget.h"
@@ -40,6 +41,14 @@ StatusOr<ProcessBudget> ChooseProcessBudget(uint64_t explicit_bytes);
 // to the split's brick cache. ResourceExhaustedError naming the store and
 // the MiB it needs when its resident top and minimal cache do not fit.
 StatusOr<MemoryBudget> BudgetStore(Store* store, uint64_t total, BudgetInputs in);
+
+// The same for a base store and the coarse stores of its level-of-detail
+// pyramid (storage/lod.h), which share one budget: resident tops add up,
+// the largest brick of any sizes the pins, and the brick cache is divided
+// among the stores in proportion to their decoded bricks (each at least 4
+// MiB), never more than the split's cache in all.
+StatusOr<MemoryBudget> BudgetStores(Store* base, const std::vector<Store*>& levels,
+                                    uint64_t total, BudgetInputs in);
 
 // The same for a reader that renders no image, on one thread (vox-probe,
 // vox-info --verify); `cache_override` as BudgetInputs::cache_override.

@@ -8,6 +8,7 @@
 #include <cstdio>
 
 #include "storage/file.h"
+#include "storage/lod.h"
 #include "storage/internal/coding.h"
 #include "storage/internal/format.h"
 #include "storage/internal/store_impl.h"
@@ -97,7 +98,15 @@ std::string FormatStoreInfo(const StoreInfo& i) {
   if (m.has_normal) attrs += " normal";
   if (m.has_density) attrs += " density";
   if (m.has_color) attrs += " colour";
+  if (m.has_coverage) attrs += " coverage";
   add("  attributes:     %s\n", attrs.empty() ? " none" : attrs.c_str());
+  if (m.lod_level > 0)
+    add("  level of detail: level %d of a %d-level store (store id %016llx), cells of %lld^3 voxels\n",
+        m.lod_level, m.lod_base_levels, (unsigned long long)m.lod_base_store_id,
+        (long long)1 << m.lod_level);
+  else if (HasLod(i.dir))
+    add("  level of detail: %s/lod/ (levels 1..%d; vox-render --lod)\n", i.dir.c_str(),
+        LodMaxLevel(m.levels));
   add("  build options:   %s\n", m.build_options.empty() ? "-" : m.build_options.c_str());
   add("  index bbox:      %s -> %s\n", Vec(m.bbox_min).c_str(), Vec(m.bbox_max).c_str());
   glm::i64vec3 dim = m.bbox_max - m.bbox_min + glm::i64vec3(1);

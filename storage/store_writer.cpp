@@ -79,12 +79,13 @@ bool ReadBytes(const fs::path& path, bool from_end, size_t n, uint8_t* out) {
 }
 
 // Why `dir` is not a complete vox store that --force may replace, or "" when
-// it is one: exactly index.vxi and bricks.vxb, regular files, with valid
+// it is one: exactly index.vxi and bricks.vxb, regular files (beside a lod/ pyramid), with valid
 // headers (and index footer) carrying one store_id (FORMAT.md).
 std::string NotAStoreReason(const fs::path& dir) {
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();
+    if (name == kLodDirName && e.is_directory(ec) && !e.is_symlink(ec)) continue;  // its pyramid
     if (name != kIndexFileName && name != kBrickFileName)
       return "it holds '" + name + "', which is not a store file";
     if (!e.is_regular_file(ec)) return "'" + name + "' is not a regular file";
@@ -376,6 +377,10 @@ class StoreWriterImpl : public StoreWriter {
     VOX_RETURN_IF_ERROR(index->Sync());
     VOX_RETURN_IF_ERROR(index->Close());
     VOX_RETURN_IF_ERROR(SyncDir(temp_));
+    if (options_.before_publish) {
+      VOX_RETURN_IF_ERROR(options_.before_publish(temp_));
+      VOX_RETURN_IF_ERROR(SyncDir(temp_));
+    }
 
     // Into place: swap atomically with an existing store, or rename.
     std::error_code ec;

@@ -38,6 +38,7 @@
 #include "core/octree.h"
 #include "ingest/internal/vdb_topology.h"
 #include "ingest/internal/voxel_builder.h"
+#include "storage/lod.h"
 
 namespace vox::ingest_internal {
 namespace {
@@ -127,6 +128,21 @@ class GridIngest {
     wo.zstd_level = cx_.options.zstd_level;
     wo.normal_bits = cx_.options.normal_bits;
     wo.force = cx_.options.force;
+    if (cx_.options.lod) {
+      // The level-of-detail pyramid, built from the finished base store
+      // inside the temporary directory: published with it, or not at all.
+      wo.before_publish = [this](const std::string& temp_dir) -> Status {
+        Message("building the level-of-detail pyramid");
+        Stopwatch lod_time;
+        LodBuildOptions lo;
+        lo.zstd_level = cx_.options.zstd_level;
+        lo.normal_bits = cx_.options.normal_bits;
+        VOX_ASSIGN_OR_RETURN(LodBuildStats ls, BuildLod(temp_dir, lo));
+        cx_.stats->lod_levels = ls.levels;
+        cx_.stats->seconds_lod = lod_time.Seconds();
+        return OkStatus();
+      };
+    }
     auto writer_or = cx_.factory(cx_.options.output, meta, wo);
     if (!writer_or.ok()) return writer_or.status();
     std::unique_ptr<StoreWriter> writer = std::move(writer_or).value();

@@ -32,12 +32,12 @@ Status VersionCheck(uint16_t major, uint16_t minor, const std::string& path) {
 
 uint8_t AttrFlags(const StoreMeta& m) {
   return uint8_t((m.has_normal ? kAttrNormal : 0) | (m.has_density ? kAttrDensity : 0) |
-                 (m.has_color ? kAttrColor : 0));
+                 (m.has_color ? kAttrColor : 0) | (m.has_coverage ? kAttrCoverage : 0));
 }
 
 size_t AttrBytesPerVoxel(uint8_t flags) {
   return ((flags & kAttrNormal) ? 4 : 0) + ((flags & kAttrDensity) ? 4 : 0) +
-         ((flags & kAttrColor) ? 6 : 0);
+         ((flags & kAttrColor) ? 6 : 0) + ((flags & kAttrCoverage) ? 2 : 0);
 }
 
 std::string EncodeFileHeader(uint64_t magic, uint64_t store_id) {
@@ -141,6 +141,10 @@ std::string EncodeMeta(const StoreMeta& m) {
   PutDouble(&s, m.isovalue);
   PutDouble(&s, m.threshold);
   PutString(&s, m.build_options);
+  // 1.1: the level-of-detail fields (FORMAT.md, "Level of detail").
+  s.push_back(char(m.lod_level));
+  PutFixed64(&s, m.lod_base_store_id);
+  s.push_back(char(m.lod_base_levels));
   return s;
 }
 
@@ -165,8 +169,14 @@ StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& pa
   m.isovalue = r.F64();
   m.threshold = r.F64();
   m.build_options = r.String();
-  // Fields a newer minor version appends are ignored.
   if (!r.ok()) return CorruptionError("'" + path + "': metadata block too short");
+  // 1.1 fields (a 1.0 store has none: a base store); fields a newer minor
+  // version appends after them are ignored.
+  if (r.remaining() >= 10) {
+    m.lod_level = r.U8();
+    m.lod_base_store_id = r.U64();
+    m.lod_base_levels = r.U8();
+  }
   auto bad = [&](const std::string& what) {
     return CorruptionError("'" + path + "': metadata has " + what);
   };
@@ -177,11 +187,16 @@ StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& pa
   if (m.brick_level < 1 || m.brick_level > m.levels)
     return bad("brick level " + std::to_string(m.brick_level) + " outside 1.." +
                std::to_string(m.levels));
-  if (flags & ~(kAttrNormal | kAttrDensity | kAttrColor))
-    return bad("unknown attribute flags " + std::to_string(flags));
+  if (flags & ~kAttrAll) return bad("unknown attribute flags " + std::to_string(flags));
+  if (m.lod_level < 0 || m.lod_level > kMaxLevels ||
+      (m.lod_level == 0) != (m.lod_base_store_id == 0 && m.lod_base_levels == 0) ||
+      (m.lod_level > 0 && m.lod_base_levels != m.levels + m.lod_level))
+    return bad("inconsistent level-of-detail fields (level " + std::to_string(m.lod_level) +
+               ", base levels " + std::to_string(m.lod_base_levels) + ")");
   m.has_normal = flags & kAttrNormal;
   m.has_density = flags & kAttrDensity;
   m.has_color = flags & kAttrColor;
+  m.has_coverage = flags & kAttrCoverage;
   if (m.top_cells == 0 || m.top_cells >= kBrickBit)
     return bad("top cell count " + std::to_string(m.top_cells));
   if (m.brick_count >= kBrickBit) return bad("brick count " + std::to_string(m.brick_count));
@@ -285,6 +300,7 @@ int Components(uint8_t flags, int* widths) {
   if (flags & kAttrNormal) widths[k++] = 2, widths[k++] = 2;
   if (flags & kAttrDensity) widths[k++] = 4;
   if (flags & kAttrColor) widths[k++] = 2, widths[k++] = 2, widths[k++] = 2;
+  if (flags & kAttrCoverage) widths[k++] = 2;
   return k;
 }
 
@@ -331,7 +347,10 @@ VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t fl
   if (flags & kAttrColor) {
     uint64_t c = GatherPlanes(planes, count, index, 6);
     for (int k = 0; k < 3; ++k) a.color[k] = glm::unpackHalf1x16(uint16_t(c >> (16 * k)));
+    planes += size_t(6) * count;
   }
+  if (flags & kAttrCoverage)
+    a.coverage = DecodeCoverage(uint16_t(GatherPlanes(planes, count, index, 2)));
   return a;
 }
 
@@ -357,8 +376,20 @@ void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std:
       for (int k = 0; k < 3; ++k) c |= uint64_t(glm::packHalf1x16(attrs[i].color[k])) << (16 * k);
       ScatterPlanes(planes, count, i, 6, c);
     }
+    planes += size_t(6) * count;
   }
+  if (flags & kAttrCoverage)
+    for (uint32_t i = 0; i < count; ++i)
+      ScatterPlanes(planes, count, i, 2, EncodeCoverage(attrs[i].coverage));
 }
+
+uint16_t EncodeCoverage(float c) {
+  if (!(c > 0)) return 1;  // an occupied cell has some coverage
+  if (c >= 1) return 65535;
+  return uint16_t(std::clamp(std::lround(double(c) * 65535.0), 1L, 65535L));
+}
+
+float DecodeCoverage(uint16_t q) { return float(q) / 65535.0f; }
 
 std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
                            int depth, uint8_t flags, int normal_bits) {

@@ -20,9 +20,10 @@ namespace vox::storage_internal {
 inline constexpr uint64_t kIndexMagic = 0x5845444e49584f56ull;
 inline constexpr uint64_t kBrickMagic = 0x4b43495242584f56ull;
 inline constexpr uint16_t kFormatMajor = 1;
-inline constexpr uint16_t kFormatMinor = 0;
+inline constexpr uint16_t kFormatMinor = 1;
 inline constexpr char kIndexFileName[] = "index.vxi";
 inline constexpr char kBrickFileName[] = "bricks.vxb";
+inline constexpr char kLodDirName[] = "lod";  // the level-of-detail pyramid (storage/lod.h)
 
 inline constexpr size_t kFileHeaderSize = 32;  // both files
 inline constexpr size_t kFooterSize = 96;      // index file
@@ -35,7 +36,8 @@ inline constexpr uint64_t kMaxBrickRawBytes = uint64_t(1) << 30;
 enum Codec : uint8_t { kCodecRaw = 0, kCodecZstd = 1 };
 
 // Attribute flags (brick header byte 9 and meta block).
-inline constexpr uint8_t kAttrNormal = 1, kAttrDensity = 2, kAttrColor = 4;
+inline constexpr uint8_t kAttrNormal = 1, kAttrDensity = 2, kAttrColor = 4, kAttrCoverage = 8;
+inline constexpr uint8_t kAttrAll = kAttrNormal | kAttrDensity | kAttrColor | kAttrCoverage;
 uint8_t AttrFlags(const StoreMeta& meta);
 // Bytes per voxel of the attributes `flags` selects.
 size_t AttrBytesPerVoxel(uint8_t flags);
@@ -96,6 +98,11 @@ uint64_t MaxCells(int depth, uint64_t voxels);
 // 2^(16 - bits). A zero or non-finite vector encodes as +z.
 uint32_t EncodeOctNormal(const glm::vec3& n, int bits = 16);
 glm::vec3 DecodeOctNormal(uint32_t code);
+
+// Coverage as a 16-bit fraction: round(c * 65535), at least 1 (an occupied
+// cell is never empty); decoded as q / 65535.
+uint16_t EncodeCoverage(float c);
+float DecodeCoverage(uint16_t q);
 
 // A voxel's attributes from planar attribute bytes (`count` voxels).
 VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,

@@ -5,6 +5,8 @@
 
 #include "core/shapes.h"
 #include "render/camera.h"
+#include "render/lod.h"
+#include "storage/lod.h"
 #include "storage/memory_budget.h"
 #include "storage/store.h"
 #include "storage/store_budget.h"
@@ -22,9 +24,9 @@ bool OneOf(std::string_view flag, std::initializer_list<std::string_view> names)
 }  // namespace
 
 FlagArity IngestFlagArity(std::string_view flag) {
-  if (OneOf(flag, {"--force", "--quiet"})) return FlagArity::kSwitch;
+  if (OneOf(flag, {"--force", "--quiet", "--no-lod"})) return FlagArity::kSwitch;
   if (OneOf(flag, {"--grid", "--levels", "--isovalue", "--threshold", "--color", "--zstd-level",
-                   "--normal-bits", "--threads", "--memory-mb"}))
+                   "--normal-bits", "--threads", "--memory-mb", "--add-lod"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -35,6 +37,10 @@ Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::str
     o.force = true;
   } else if (flag == "--quiet") {
     c->quiet = true;
+  } else if (flag == "--no-lod") {
+    o.lod = false;
+  } else if (flag == "--add-lod") {
+    c->add_lod = v;
   } else if (flag == "--memory-mb") {
     VOX_ASSIGN_OR_RETURN(o.memory_bytes, ParseMemorySize("--memory-mb", v));
   } else if (flag == "--grid") {
@@ -73,7 +79,7 @@ FlagArity RenderFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch"})) return FlagArity::kSwitch;
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
-                   "--io-threads"}))
+                   "--io-threads", "--lod"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -85,6 +91,8 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->quiet = true;
   } else if (a == "--prefetch" || a == "--no-prefetch") {  // --prefetch: the default, kept for scripts
     o->prefetch = a == "--prefetch";
+  } else if (a == "--lod") {
+    VOX_ASSIGN_OR_RETURN(o->lod, ParseLodFactor("--lod", v));
   } else if (a == "--io-threads") {
     if (!ParseInt(v, 1, kMaxIoThreads, &o->io_threads))
       return InvalidArgumentError("--io-threads '" + v + "': expected 1.." + std::to_string(kMaxIoThreads));
@@ -138,7 +146,7 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
 FlagArity ProbeFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--single-step", "--stats"})) return FlagArity::kSwitch;
   if (OneOf(flag, {"--generate", "--split", "--memory-mb", "--brick-level", "--cache-mb",
-                   "--fixed"}))
+                   "--fixed", "--lod", "--cone-rad", "--cone-width"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -154,6 +162,13 @@ Status ApplyProbeFlag(ProbeOptions* o, const std::string& a, const std::string& 
     o->split = v;
   } else if (a == "--memory-mb") {
     VOX_ASSIGN_OR_RETURN(o->memory_bytes, ParseMemorySize("--memory-mb", v));
+  } else if (a == "--lod") {
+    VOX_ASSIGN_OR_RETURN(o->lod, ParseLodFactor(a, v));
+  } else if (a == "--cone-rad" || a == "--cone-width") {
+    double d = 0;
+    if (!ParseDouble(v, &d) || d < 0)
+      return InvalidArgumentError(a + " '" + v + "': expected a finite number >= 0");
+    (a == "--cone-rad" ? o->cone_rad : o->cone_width) = d;
   } else if (a == "--brick-level" || a == "--cache-mb" || a == "--fixed") {
     int64_t n = 0;
     if (a == "--fixed" && v == "auto") {
@@ -178,6 +193,11 @@ struct Prober::Impl {
   std::unique_ptr<Store> store;
   glm::i64vec3 origin{0};
   std::variant<Tracer<Fixed128, long double>, DefaultTracer, AutoTracer<long double>> tracer;
+  // --lod
+  std::unique_ptr<LodPyramid> pyramid;
+  std::optional<LodTracer> lod;
+  std::optional<LodLevelTracer> lod_base;
+  double cone_rad = 0, cone_width = 0;
 };
 
 Prober::Prober(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -192,6 +212,12 @@ StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
     return InvalidArgumentError("give either --generate SHAPE or a store directory");
   if (opt.fixed != 0 && opt.fixed != 64 && opt.fixed != 128)
     return InvalidArgumentError("--fixed takes auto, 64 or 128");
+  if ((opt.cone_rad >= 0 || opt.cone_width > 0) && opt.lod == 0)
+    return InvalidArgumentError("--cone-rad and --cone-width need --lod F");
+  if (opt.lod > 0) {
+    if (opt.store.empty()) return InvalidArgumentError("--lod needs a store with a level-of-detail pyramid");
+    if (opt.cone_rad < 0) return InvalidArgumentError("--lod needs --cone-rad R (the cone's spread, radians)");
+  }
   auto impl = std::make_unique<Impl>();
   OctreeView view;
   if (!opt.generate.empty()) {
@@ -214,6 +240,23 @@ StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
     if (!split.ok()) return fail(split.status(), true);
     view = impl->store->view();
     impl->origin = impl->store->meta().origin;
+  }
+  if (opt.lod > 0) {
+    OpenOptions oo;
+    oo.cache_bytes = opt.cache_mb > 0 ? opt.cache_mb << 20 : size_t(256) << 20;
+    auto p = LodPyramid::Open(opt.store, *impl->store, oo);
+    if (!p.ok()) return Status(p.status().code(), "--lod: " + p.status().ToString());
+    impl->pyramid = std::move(p).value();
+    std::vector<Volume*> levels;
+    for (int l = 1; l <= impl->pyramid->max_level(); ++l) levels.push_back(impl->pyramid->level(l));
+    auto lt = LodTracer::Create(impl->store.get(), levels, opt.lod);
+    if (!lt.ok()) return fail(lt.status(), false);
+    impl->lod = *lt;
+    auto bt = LodLevelTracer::Create(view, DefaultFirstStepLevels(view.levels));
+    if (!bt.ok()) return fail(bt.status(), false);
+    impl->lod_base = *bt;
+    impl->cone_rad = opt.cone_rad;
+    impl->cone_width = opt.cone_width;
   }
   int n1 = DefaultFirstStepLevels(view.levels);
   if (opt.single_step) {
@@ -247,6 +290,35 @@ StatusOr<std::optional<Hit>> Prober::Trace(const Ray& index_ray, TraceCounters* 
   auto hit = std::visit([&](const auto& t) { return t.FirstHit(r, counters); }, impl_->tracer);
   if (hit.ok() && *hit) (*hit)->voxel += impl_->origin;
   return hit;
+}
+
+bool Prober::lod() const { return impl_->lod.has_value(); }
+
+StatusOr<std::optional<Hit>> Prober::TraceLod(const Ray& index_ray, TraceCounters* counters,
+                                              LodCounters* lc, int* level) const {
+  *level = 0;
+  Ray r = index_ray;
+  r.origin -= glm::dvec3(impl_->origin);
+  const Cone cone{impl_->cone_width, impl_->cone_rad * std::sqrt(glm::dot(r.dir, r.dir))};
+  if (impl_->lod->Exact(r, cone)) {
+    ++lc->exact_rays;
+    auto h = std::visit([&](const auto& t) { return t.FirstHit(r, counters); }, impl_->tracer);
+    if (h.ok() && *h) {
+      (*h)->voxel += impl_->origin;
+      ++lc->stops[0];
+    }
+    return h;
+  }
+  LodSegment seg;
+  auto f = impl_->lod->FirstHit(*impl_->lod_base, r, cone, false, 0.0, &seg, nullptr, counters);
+  if (!f.ok()) return f.status();
+  if (!*f) return std::optional<Hit>();
+  Hit hit = seg.hit;
+  hit.t = seg.t0;
+  *level = seg.level;
+  ++lc->stops[seg.level];
+  hit.voxel = (hit.voxel << int64_t(seg.level)) + impl_->origin;
+  return std::optional<Hit>(hit);
 }
 
 }  // namespace vox

@@ -21,6 +21,7 @@
 #include "core/status.h"
 #include "ingest/ingest.h"
 #include "render/job.h"
+#include "render/lod.h"
 
 namespace vox {
 
@@ -30,6 +31,7 @@ enum class FlagArity { kUnknown, kSwitch, kValue };
 struct IngestCommand {
   IngestOptions options;
   bool quiet = false;
+  std::string add_lod;  // --add-lod STORE: build the pyramid of an existing store instead
 };
 FlagArity IngestFlagArity(std::string_view flag);
 // InvalidArgumentError with vox-ingest's usage message for a bad value.
@@ -49,6 +51,8 @@ struct ProbeOptions {
   size_t cache_mb = 0;        // 0: from the memory budget
   uint64_t memory_bytes = 0;  // 0: detected
   int fixed = 0;              // 0: auto, else 64 or 128
+  double lod = 0.0;           // --lod F over the store's pyramid; 0: off
+  double cone_rad = -1.0, cone_width = 0.0;  // the cone per ray: W + R t |dir| voxels at t
 };
 FlagArity ProbeFlagArity(std::string_view flag);
 Status ApplyProbeFlag(ProbeOptions* o, const std::string& flag, const std::string& value);
@@ -63,6 +67,12 @@ class Prober {
   // The first hit of an index-space ray (voxel in index coordinates, t along
   // the ray); nullopt on a miss. Errors: the ray is invalid (ValidateRay).
   StatusOr<std::optional<Hit>> Trace(const Ray& index_ray, TraceCounters* counters) const;
+  // With --lod: the ray's first stop over the pyramid (render/lod.h). A stop
+  // at a coarse cell of level *level > 0 has voxel = the cell's first voxel
+  // (index coordinates); rays the cone keeps at level 0 answer as Trace.
+  bool lod() const;
+  StatusOr<std::optional<Hit>> TraceLod(const Ray& index_ray, TraceCounters* counters,
+                                        LodCounters* lod_counters, int* level) const;
 
  private:
   struct Impl;

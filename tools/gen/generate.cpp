@@ -12,6 +12,7 @@
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
 
+#include "storage/lod.h"
 #include "tools/gen/shapes.h"
 
 namespace vox::gen {
@@ -235,6 +236,21 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   wo.normal_bits = o.normal_bits;
   wo.force = o.force;
   wo.store_id = HashId(meta.build_options);
+  if (o.lod) {
+    // The pyramid is built from the finished store in its temporary
+    // directory and published with it (deterministic: ids derive from the store's).
+    wo.before_publish = [&o, &stats](const std::string& temp_dir) -> Status {
+      const double t = Now();
+      LodBuildOptions lo;
+      lo.zstd_level = o.zstd_level;
+      lo.normal_bits = o.normal_bits;
+      lo.cancel = o.cancel;
+      VOX_ASSIGN_OR_RETURN(LodBuildStats ls, BuildLod(temp_dir, lo));
+      stats.lod_levels = ls.levels;
+      stats.seconds_lod = Now() - t;
+      return OkStatus();
+    };
+  }
   VOX_ASSIGN_OR_RETURN(std::unique_ptr<StoreWriter> writer,
                        StoreWriter::Create(o.output, meta, wo));
 

@@ -46,6 +46,7 @@ struct GenerateOptions {
   int zstd_level = 3;
   int normal_bits = 16;
   bool force = false;          // replace an existing store
+  bool lod = true;             // also write the level-of-detail pyramid (storage/lod.h)
   // Polled between bricks: when it turns true, Generate stops and writes no store.
   const std::atomic<bool>* cancel = nullptr;
 };
@@ -72,6 +73,8 @@ struct GenerateStats {
   uint64_t candidate_bricks = 0;   // bricks enumerated (some turn out empty)
   int threads = 0;
   double seconds_bricks = 0, seconds_finish = 0, seconds_total = 0;
+  int lod_levels = 0;          // coarse levels written (0: none)
+  double seconds_lod = 0;      // building them (part of seconds_finish)
 };
 
 // Called from one thread at a time, after each brick in order.

@@ -1,7 +1,7 @@
 // vox-gen: writes a procedural level-set shape as a vox store, brick by brick,
 // in memory independent of the store's size (tools/gen/generate.h).
 //   vox-gen SHAPE store/ --size N [--levels N1+N2|auto] [--band W] [--threads T]
-//           [--zstd-level L] [--normal-bits B] [--force] [--quiet]
+//           [--zstd-level L] [--normal-bits B] [--no-lod] [--force] [--quiet]
 // Exit codes: 0 done, 1 the generation failed or was interrupted, 2 bad command line.
 #include <signal.h>
 
@@ -21,7 +21,7 @@ namespace {
 
 constexpr char kUsage[] =
     "usage: vox-gen SHAPE store/ --size N [--levels N1+N2|auto] [--band W] [--threads T]\n"
-    "               [--zstd-level L] [--normal-bits B] [--force] [--quiet]\n"
+    "               [--zstd-level L] [--normal-bits B] [--no-lod] [--force] [--quiet]\n"
     "  SHAPE            sphere: a level-set sphere shell (like vdb_tool -sphere)\n"
     "                   bumpy: that sphere displaced by fixed multi-octave noise (fine detail)\n"
     "                   Both are the unit sphere, 15/16 of the grid across, centred on index 0\n"
@@ -33,6 +33,7 @@ constexpr char kUsage[] =
     "  --threads T      worker threads (default: all cores)\n"
     "  --zstd-level L   brick compression level, 1..22 (default 3)\n"
     "  --normal-bits B  bits per octahedral normal component, 8..16 (default 16)\n"
+    "  --no-lod         skip the level-of-detail pyramid (store/lod/, for vox-render --lod)\n"
     "  --force          replace an existing store\n"
     "  --quiet          no progress output\n";
 
@@ -72,6 +73,8 @@ int main(int argc, char** argv) {
       o.force = true;
     } else if (a == "--quiet") {
       quiet = true;
+    } else if (a == "--no-lod") {
+      o.lod = false;
     } else if (a == "--size" || a == "--levels" || a == "--band" || a == "--threads" ||
                a == "--zstd-level" || a == "--normal-bits") {
       if (i + 1 >= argc) return UsageError(a + " needs a value");
@@ -141,12 +144,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "wrote %s: %s %llu^3, %llu occupied voxels in %llu bricks (levels %d+%d; %llu "
                  "candidate bricks) in %.2f s (%.2f M voxels/s, %d threads; bricks %.2f s, "
-                 "finish %.2f s)\n",
+                 "finish %.2f s; level of detail %d levels, %.2f s)\n",
                  o.output.c_str(), o.shape.c_str(), (unsigned long long)o.size,
                  (unsigned long long)s.voxels, (unsigned long long)s.bricks, s.meta.brick_level,
                  s.meta.levels - s.meta.brick_level, (unsigned long long)s.candidate_bricks,
                  s.seconds_total, s.seconds_total > 0 ? double(s.voxels) / s.seconds_total / 1e6 : 0,
-                 s.threads, s.seconds_bricks, s.seconds_finish);
+                 s.threads, s.seconds_bricks, s.seconds_finish, s.lod_levels, s.seconds_lod);
   }
   return 0;
 }

@@ -1,7 +1,8 @@
 // vox-ingest: reads an OpenVDB grid and writes a vox store.
 //   vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]
 //              [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B] [--threads N]
-//              [--memory-mb N] [--force] [--quiet]
+//              [--memory-mb N] [--no-lod] [--force] [--quiet]
+//   vox-ingest --add-lod store/ [--force] [--quiet]
 // Exit codes: 0 done, 1 the ingest failed, 2 bad command line, 128+N killed
 // by signal N (SIGINT, SIGTERM: the temporary store directory is removed).
 #include <pthread.h>
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "ingest/ingest.h"
+#include "storage/lod.h"
 #include "storage/memory_budget.h"
 #include "tools/common/flags.h"
 #include "tools/common/options.h"
@@ -27,7 +29,8 @@ namespace {
 constexpr char kUsage[] =
     "usage: vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]\n"
     "                  [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B]\n"
-    "                  [--threads N] [--memory-mb N] [--force] [--quiet]\n"
+    "                  [--threads N] [--memory-mb N] [--no-lod] [--force] [--quiet]\n"
+    "       vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]\n"
     "  --grid NAME      the grid to ingest (default: the first float or double grid)\n"
     "  --levels         auto (32^3 bricks) or N1+N2: N1 resident levels above bricks of\n"
     "                   N2 levels (2^N2 voxels per axis); each at most 20, N1+N2 at most 40\n"
@@ -40,6 +43,10 @@ constexpr char kUsage[] =
     "  --threads N      worker threads (default: all cores)\n"
     "  --memory-mb N    memory the ingest may hold, MiB or with a unit (512, 2G; default: the\n"
     "                   process's memory cgroup limit or available memory)\n"
+    "  --no-lod         skip the level-of-detail pyramid (store/lod/, for vox-render --lod;\n"
+    "                   written by default)\n"
+    "  --add-lod STORE  add the level-of-detail pyramid to an existing store (--force\n"
+    "                   replaces one it has)\n"
     "  --force          replace an existing store\n"
     "  --quiet          no progress output\n";
 
@@ -137,6 +144,31 @@ static int RunTool(int argc, char** argv) {
     }
   }
   const bool quiet = command.quiet;
+  const std::string& add_lod = command.add_lod;
+  if (!add_lod.empty()) {
+    if (!positional.empty())
+      return UsageError("--add-lod takes one store and no other input or output");
+    if (!o.lod) return UsageError("--add-lod and --no-lod exclude each other");
+    if (o.zstd_level < 1 || o.zstd_level > 22) return UsageError("--zstd-level must be in 1..22");
+    vox::LodBuildOptions lo;
+    lo.zstd_level = o.zstd_level;
+    lo.normal_bits = o.normal_bits;
+    lo.force = o.force;
+    auto st = vox::BuildLod(add_lod, lo);
+    if (!st.ok()) {
+      std::fprintf(stderr, "vox-ingest: --add-lod: %s\n", st.status().ToString().c_str());
+      return 1;
+    }
+    if (!quiet) {
+      uint64_t bricks = 0;
+      for (uint64_t b : st->bricks) bricks += b;
+      std::fprintf(stderr,
+                   "added %s/lod: %d levels, %llu bricks, from %llu base bricks in %.2f s\n",
+                   add_lod.c_str(), st->levels, (unsigned long long)bricks,
+                   (unsigned long long)st->base_bricks_read, st->seconds);
+    }
+    return 0;
+  }
   if (positional.size() != 2)
     return UsageError("expected an input .vdb file and an output store directory, got " +
                       std::to_string(positional.size()) + " arguments");
@@ -161,12 +193,12 @@ static int RunTool(int argc, char** argv) {
     std::fprintf(stderr,
                  "wrote %s: %llu occupied voxels in %llu bricks (levels %d+%d), %llu active "
                  "voxels read in %.2f s (%.1f M active voxels/s, %d threads; open %.2f s, bbox "
-                 "%.2f s, bricks %.2f s, finish %.2f s)\n",
+                 "%.2f s, bricks %.2f s, finish %.2f s; level of detail: %d levels, %.2f s)\n",
                  o.output.c_str(), (unsigned long long)s.occupied_voxels,
                  (unsigned long long)s.bricks, s.meta.brick_level,
                  s.meta.levels - s.meta.brick_level, (unsigned long long)s.active_voxels,
                  s.seconds_total, rate / 1e6, s.threads, s.seconds_open, s.seconds_bbox,
-                 s.seconds_bricks, s.seconds_finish);
+                 s.seconds_bricks, s.seconds_finish, s.lod_levels, s.seconds_lod);
   }
   return 0;
 }

@@ -5,7 +5,11 @@
 //   vox-probe --generate sphere:1024 [--brick-level L] [options] < rays.txt
 //   vox-probe store/ [options] < rays.txt
 // Options: --split N1+N2|N1, --single-step, --memory-mb M, --cache-mb M, --stats,
-//   --fixed auto|64|128 (fixed-point word; auto: 64 up to 2^26 grids, else 128)
+//   --fixed auto|64|128 (fixed-point word; auto: 64 up to 2^26 grids, else 128),
+//   --lod F --cone-rad R [--cone-width W]: level of detail over the store's
+//   pyramid (render/lod.h) with a cone per ray of width W + R * t |dir|
+//   voxels at ray parameter t; a stop at a coarse cell of level L prints
+//   "lod L i j k t" (i j k: the cell's first voxel), a voxel "hit i j k t".
 #include <cstdint>
 #include <cstdio>
 #include <iostream>
@@ -24,7 +28,10 @@ namespace {
 constexpr const char* kUsage =
     "usage: vox-probe (--generate SHAPE | STORE_DIR) [--split N1+N2|N1] [--single-step]\n"
     "                 [--brick-level L] [--memory-mb M] [--cache-mb M] [--fixed auto|64|128]\n"
-    "                 [--stats] < rays.txt\n"
+    "                 [--stats] [--lod F --cone-rad R [--cone-width W]] < rays.txt\n"
+    "  --lod F: stop at the first occupied cell of the store's level-of-detail pyramid whose\n"
+    "  size is at most F times the ray's cone width (W + R t |dir| voxels at t); prints\n"
+    "  'lod L i j k t' for a cell of level L > 0\n"
     "  --memory-mb: memory the process may use, in MiB (or 2G); default: the memory\n"
     "  cgroup's limit, or 3/4 of MemAvailable. --cache-mb: the brick cache inside it\n"
     "  (default: what the budget leaves)\n"
@@ -38,6 +45,7 @@ int Fail(const std::string& msg) {
 
 int Run(const vox::Prober& prober, bool stats) {
   vox::TraceCounters counters;
+  vox::LodCounters lc;
   std::string line;
   long lineno = 0;
   int bad = 0;
@@ -46,8 +54,9 @@ int Run(const vox::Prober& prober, bool stats) {
     auto ray = vox::ParseRayLine(line);
     vox::Status st = ray.status();
     std::optional<vox::Hit> hit;
+    int level = 0;
     if (st.ok()) {
-      auto h = prober.Trace(*ray, &counters);
+      auto h = prober.lod() ? prober.TraceLod(*ray, &counters, &lc, &level) : prober.Trace(*ray, &counters);
       st = h.status();
       if (st.ok()) hit = *h;
     }
@@ -58,13 +67,23 @@ int Run(const vox::Prober& prober, bool stats) {
       ++bad;
       continue;
     }
-    if (hit) {
-      std::puts(vox::FormatHitLine(&hit->voxel, hit->t).c_str());
-    } else {
+    if (!hit) {
       std::puts("miss");
+    } else if (level == 0) {
+      std::puts(vox::FormatHitLine(&hit->voxel, hit->t).c_str());
+    } else {  // a stop at a coarse cell: "lod L i j k t"
+      std::printf("lod %d %s\n", level, vox::FormatHitLine(&hit->voxel, hit->t).substr(4).c_str());
     }
   }
-  if (stats) std::fprintf(stderr, "vox-probe: %s\n", counters.ToString().c_str());
+  if (stats) {
+    std::fprintf(stderr, "vox-probe: %s\n", counters.ToString().c_str());
+    if (prober.lod()) {
+      std::fprintf(stderr, "vox-probe: lod stops by level:");
+      for (int l = 0; l <= vox::kMaxLevels; ++l)
+        if (lc.stops[l] > 0) std::fprintf(stderr, " %d:%llu", l, (unsigned long long)lc.stops[l]);
+      std::fprintf(stderr, " (exact rays %llu)\n", (unsigned long long)lc.exact_rays);
+    }
+  }
   if (bad) std::fprintf(stderr, "vox-probe: %d of %ld lines refused\n", bad, lineno);
   return bad ? 1 : 0;
 }

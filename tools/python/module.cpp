@@ -202,6 +202,8 @@ py::dict Ingest(const py::object& vdb, const py::object& store, const py::object
     return vox::ApplyIngestFlag(&c, f, v);
   });
   c.options.command_line = line;
+  if (!c.add_lod.empty())
+    throw py::type_error("ingest(): add_lod is vox-ingest --add-lod STORE; not available here");
   CheckUsage(vox::CheckIngestCommand(c));
   std::unique_ptr<PythonProgress> py_progress;
   std::unique_ptr<vox::ProgressSink> stderr_progress;

@@ -8,6 +8,7 @@
 
 #include "render/camera.h"
 #include "render/job.h"
+#include "render/lod.h"
 #include "storage/memory_budget.h"
 #include "tools/common/flags.h"
 #include "tools/common/options.h"
@@ -18,7 +19,7 @@ const char kUsage[] =
     "usage: vox-render STORE_DIR [--cam cam.json] [--scene scene.json] [-o out.exr]\n"
     "                  [--preview out.png] [--split N1+N2|N1] [--single-step] [--memory-mb M]\n"
     "                  [--cache-mb M] [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
-    "                  [--layers normal,voxel] [--size WxH]\n"
+    "                  [--layers normal,voxel] [--size WxH] [--lod F]\n"
     "  --cam        camera JSON (world space of the source VDB); without it a default\n"
     "               camera frames the whole volume (--size sets its image size, default "
     "1024x1024)\n"
@@ -40,6 +41,9 @@ const char kUsage[] =
     "  --threads    render threads (default: all cores)\n"
     "  --tile-size  tile side in pixels (default 64)\n"
     "  --tiles I/N  render only part I (1-based) of N; assemble the parts with vox-merge\n"
+    "  --lod F      level of detail (off by default): a ray stops at the first occupied cell\n"
+    "               of the store's pyramid (store/lod/) whose size is at most F times the\n"
+    "               pixel's cone width there (F > 0; 1: about a pixel); see docs/lod.md\n"
     "  --stats      write counters and timings as JSON\n"
     "  --quiet      no progress output\n";
 

@@ -1,0 +1,54 @@
+// The Renderer's level-of-detail rays (render/lod.h, docs/lod.md): first
+// hits of a ray cone over the pyramid, and the shadow and reflection rays
+// of a coarse hit, which carry the cone on.
+#include "render/internal/tracing.h"
+#include "render/renderer.h"
+
+namespace vox {
+
+bool Renderer::FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, Ctx& cx,
+                          Hit* hit, int* level, VoxelAttributes* attrs) const {
+  if (lod_->Exact(gr, cone)) {
+    ++cx.c->lod.exact_rays;
+    *level = 0;
+    const bool found = FindHit(gr, skip_start_run, cx, hit, attrs);
+    if (found) ++cx.c->lod.stops[0];
+    return found;
+  }
+  LodSegment seg;
+  if (attrs != nullptr) ++cx.c->attribute_lookups;
+  StatusOr<bool> found =
+      lod_->FirstHit(*cx.tracer, gr, cone, skip_start_run, eps_t_, &seg, attrs, &cx.c->trace);
+  if (!found.ok()) {
+    cx.Fail(found.status());
+    return false;
+  }
+  if (!*found) return false;
+  *hit = seg.hit;
+  hit->t = seg.t0;  // the unscaled ray's parameter; the voxel stays in its level's grid
+  *level = seg.level;
+  ++cx.c->lod.stops[seg.level];
+  return true;
+}
+
+bool Renderer::OccludedLod(const Ray& gr, double t_max, const Cone& cone, Ctx& cx) const {
+  ++cx.c->rays[kRayShadow];
+  Hit h;
+  int level = 0;
+  if (!FindHitLod(gr, cone, /*skip_start_run=*/true, cx, &h, &level, nullptr)) return false;
+  return h.t < t_max;
+}
+
+glm::dvec3 Renderer::RadianceLod(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
+                                 const Cone& cone, Ctx& cx) const {
+  ++cx.c->rays[kind];
+  Hit h;
+  VoxelAttributes a;
+  int level = 0;
+  if (!FindHitLod(gr, cone, /*skip_start_run=*/true, cx, &h, &level, SurfaceAttrs(&a)))
+    return cx.failed() ? glm::dvec3(0.0) : Background(dir_w);
+  const LodRay lr{cone, level};
+  return ShadeSurface(gr, dir_w, h, a, depth, cx, nullptr, &lr);
+}
+
+}  // namespace vox

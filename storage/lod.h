@@ -1,0 +1,101 @@
+// vox::BuildLod and vox::LodPyramid: the level-of-detail pyramid of a store
+// (storage/FORMAT.md, "Level of detail"; docs/lod.md).
+//
+// The pyramid is a set of coarse stores in `STORE/lod/<l>/` for l = 1 ..
+// LodMaxLevel(levels), each an ordinary vox store of the volume downsampled
+// by 2^l, so the paper's traversal runs on it unchanged: voxel v of level l
+// is the cell of 2^l base voxels per axis at v << l, present when one of
+// them is occupied, with the aggregates of that cell as attributes:
+//   coverage: the fraction of the cell's 8^l voxels that are occupied;
+//   normal:   the mean of the occupied voxels' normals, renormalised;
+//   colour:   the mean colour of the occupied voxels;
+//   density:  the mean density over the whole cell (empty voxels count 0,
+//             a voxel of a fog store without densities counts 1), so a fog's
+//             optical depth through the cell is kept.
+// Each coarse store names the base store's store_id and levels; a pyramid
+// of another store is refused at open.
+//
+// BuildLod reads the base store once, brick by brick in Morton order (brick
+// ids are Morton order, and so are the voxels inside a brick), and feeds a
+// cascade of run reducers: a cell's voxels are consecutive in Morton order,
+// so each level's voxels come out in Morton order too and each level's
+// coarse bricks are consecutive. Memory: the base store's brick cache plus
+// one coarse brick per level, never the volume. The pyramid is written into
+// a temporary directory and renamed to lod/ at the end, so a failure never
+// leaves a partial pyramid that opens.
+//
+// Thread safety: BuildLod may run on any thread (it reads and writes its
+// own stores); a LodPyramid is thread-safe like the Stores it holds.
+#ifndef VOX_STORAGE_LOD_H_
+#define VOX_STORAGE_LOD_H_
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+#include "storage/store.h"
+
+namespace vox {
+
+// The coarsest level a pyramid of a `levels`-level store has: each coarse
+// store keeps at least 2 levels (a 4^3 grid). 0: no pyramid (levels < 3).
+int LodMaxLevel(int base_levels);
+
+// The brick depth (levels inside a brick) of level l's coarse store: the
+// base's brick depth while the grid allows, so coarse bricks hold about as
+// many voxels as base bricks.
+int LodBrickDepth(int base_levels, int base_brick_depth, int level);
+
+struct LodBuildOptions {
+  int zstd_level = 3;
+  int normal_bits = 16;
+  bool force = false;  // replace an existing lod/ pyramid
+  // Decompressed-brick cache for reading the base store.
+  size_t cache_bytes = size_t(64) << 20;
+  // Polled between bricks: when it turns true, the build stops and writes no pyramid.
+  const std::atomic<bool>* cancel = nullptr;
+  // Called after each base brick (from the calling thread).
+  std::function<void(uint64_t bricks_done, uint64_t bricks_total)> progress;
+};
+
+struct LodBuildStats {
+  int levels = 0;                       // coarse levels written (1 .. levels)
+  std::vector<uint64_t> voxels, bricks; // per level, index 0 = level 1
+  uint64_t base_bricks_read = 0;
+  double seconds = 0;
+};
+
+// Builds the pyramid of the store at `store_dir` into `store_dir`/lod.
+// Refuses an existing lod/ unless options.force.
+StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOptions& options);
+
+// Whether `store_dir` has a lod/ directory (not whether it opens).
+bool HasLod(const std::string& store_dir);
+
+// The coarse stores of a base store, opened and checked against it.
+class LodPyramid {
+ public:
+  // Opens `store_dir`/lod/1 .. with `options` each. NotFound when there is
+  // no pyramid (the message says to re-ingest or add one with
+  // `vox-ingest --add-lod`); InvalidArgument when a level belongs to another
+  // store or does not fit the base (levels, grid class).
+  static StatusOr<std::unique_ptr<LodPyramid>> Open(const std::string& store_dir,
+                                                    Store& base, const OpenOptions& options);
+  int max_level() const { return int(levels_.size()); }
+  // Level l's store, 1 <= l <= max_level().
+  Store* level(int l) const { return levels_[size_t(l - 1)].get(); }
+  // Bricks per level (index 0: the base store), for estimates.
+  std::vector<uint64_t> brick_counts() const;
+
+ private:
+  uint64_t base_bricks_ = 0;
+  std::vector<std::unique_ptr<Store>> levels_;
+};
+
+}  // namespace vox
+
+#endif  // VOX_STORAGE_LOD_H_

@@ -1,0 +1,189 @@
+// The level-of-detail pyramid (storage/lod.h): every coarse cell's
+// aggregates against a brute-force computation from the voxels, pyramids of
+// another store refused, stores without one, replacing a store with one.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <map>
+#include <random>
+#include <tuple>
+
+#include <glm/geometric.hpp>
+
+#include "storage/lod.h"
+#include "tests/storage/test_util.h"
+
+namespace vox::storage_test {
+namespace {
+
+namespace fs = std::filesystem;
+using Key = std::tuple<uint64_t, uint64_t, uint64_t>;
+
+// Clustered random voxels (a few dense blobs and scattered ones) in a 2^levels grid.
+std::vector<LeafPoint> RandomVoxels(int levels, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  const uint64_t n = uint64_t(1) << levels;
+  std::map<Key, bool> set;
+  std::uniform_int_distribution<uint64_t> any(0, n - 1);
+  for (int i = 0; i < 600; ++i) set[{any(rng), any(rng), any(rng)}] = true;
+  for (int b = 0; b < 4; ++b) {
+    const uint64_t cx = any(rng), cy = any(rng), cz = any(rng);
+    for (uint64_t z = 0; z < 9; ++z)
+      for (uint64_t y = 0; y < 9; ++y)
+        for (uint64_t x = 0; x < 9; ++x)
+          if ((x + y + z + b) % 3 != 0 && cx + x < n && cy + y < n && cz + z < n)
+            set[{cx + x, cy + y, cz + z}] = true;
+  }
+  std::vector<LeafPoint> out;
+  for (const auto& [k, v] : set) out.push_back({std::get<0>(k), std::get<1>(k), std::get<2>(k)});
+  return out;
+}
+
+struct Expected {
+  uint64_t count = 0;
+  glm::dvec3 normal{0.0}, color{0.0};
+  double density = 0;
+};
+
+// Checks every cell of every level against the voxels, brute force.
+void CheckPyramid(const std::string& dir, const std::vector<LeafPoint>& voxels,
+                  const StoreMeta& meta) {
+  OpenOptions oo;
+  auto base = Store::Open(dir, oo);
+  ASSERT_TRUE(base.ok()) << base.status().ToString();
+  auto pyr = LodPyramid::Open(dir, **base, oo);
+  ASSERT_TRUE(pyr.ok()) << pyr.status().ToString();
+  ASSERT_EQ((*pyr)->max_level(), LodMaxLevel(meta.levels));
+  for (int l = 1; l <= (*pyr)->max_level(); ++l) {
+    SCOPED_TRACE("level " + std::to_string(l));
+    std::map<Key, Expected> cells;
+    for (const LeafPoint& p : voxels) {
+      Expected& e = cells[{p.x >> l, p.y >> l, p.z >> l}];
+      const VoxelAttributes a = AttrFor(p.x, p.y, p.z, meta);
+      ++e.count;
+      e.normal += glm::dvec3(a.normal);
+      e.color += glm::dvec3(a.color);
+      e.density += meta.has_density ? a.density : 1.0;
+    }
+    Store& s = *(*pyr)->level(l);
+    const StoreMeta& m = s.meta();
+    EXPECT_EQ(m.levels, meta.levels - l);
+    EXPECT_EQ(m.lod_level, l);
+    EXPECT_EQ(m.lod_base_store_id, (*base)->store_id());
+    EXPECT_TRUE(m.has_coverage);
+    ASSERT_EQ(m.voxel_count, cells.size());  // no cell more, none less (all found below)
+    const double cell_voxels = std::ldexp(1.0, 3 * l);
+    for (const auto& [k, e] : cells) {
+      auto loc = Locate(s, std::get<0>(k), std::get<1>(k), std::get<2>(k));
+      ASSERT_TRUE(loc.ok()) << loc.status().ToString();
+      ASSERT_TRUE(loc->has_value()) << "cell missing at level " << l;
+      auto a = s.Attributes((*loc)->brick, (*loc)->payload);
+      ASSERT_TRUE(a.ok());
+      EXPECT_NEAR(a->coverage, double(e.count) / cell_voxels, 0.6 / 65535 + 1e-7);
+      if (meta.has_normal) {
+        const double len = glm::length(e.normal);
+        if (len > 1e-3 * double(e.count)) {
+          const glm::dvec3 want = e.normal / len;
+          EXPECT_GT(glm::dot(glm::dvec3(a->normal), want), 1.0 - 1e-6)  // 0.08 degrees: two quantisations
+              << "normal of a cell of " << e.count << " voxels";
+        }
+      }
+      if (meta.has_color)
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(a->color[c], e.color[c] / double(e.count), 2e-3);
+      if (meta.has_density || meta.grid_class == GridClass::kFogVolume)
+        EXPECT_NEAR(a->density, e.density / cell_voxels, 1e-6 * (1 + e.density / cell_voxels));
+    }
+  }
+}
+
+TEST(Lod, AggregatesEqualBruteForceLevelSetWithColour) {
+  TempDir tmp;
+  const StoreMeta meta = MetaFor(7, 4, GridClass::kLevelSet, /*color=*/true);  // bricks of 8^3
+  const auto voxels = RandomVoxels(7, 11);
+  const std::string dir = tmp / "s";
+  ASSERT_TRUE(WriteVoxels(dir, voxels, meta).ok());
+  LodBuildOptions lo;
+  auto st = BuildLod(dir, lo);
+  ASSERT_TRUE(st.ok()) << st.status().ToString();
+  EXPECT_EQ(st->levels, 5);
+  CheckPyramid(dir, voxels, meta);
+}
+
+TEST(Lod, AggregatesEqualBruteForceFog) {
+  TempDir tmp;
+  for (bool density : {true, false}) {
+    StoreMeta meta = MetaFor(6, 2, GridClass::kFogVolume, false);  // deep bricks: levels share them
+    meta.has_density = density;
+    const auto voxels = RandomVoxels(6, 5);
+    const std::string dir = tmp / (density ? "d" : "n");
+    ASSERT_TRUE(WriteVoxels(dir, voxels, meta).ok());
+    ASSERT_TRUE(BuildLod(dir, LodBuildOptions{}).ok());
+    CheckPyramid(dir, voxels, meta);
+  }
+}
+
+TEST(Lod, WriterHookPublishesThePyramidWithTheStore) {
+  TempDir tmp;
+  const StoreMeta meta = MetaFor(6, 3, GridClass::kLevelSet, false);
+  const auto voxels = RandomVoxels(6, 3);
+  WriteOptions wo;
+  wo.before_publish = [](const std::string& temp) { return BuildLod(temp, {}).status(); };
+  ASSERT_TRUE(WriteVoxels(tmp / "s", voxels, meta, wo).ok());
+  CheckPyramid(tmp / "s", voxels, meta);
+  // A failing hook leaves no store at all.
+  wo.before_publish = [](const std::string&) { return IoError("injected"); };
+  EXPECT_FALSE(WriteVoxels(tmp / "t", voxels, meta, wo).ok());
+  EXPECT_FALSE(fs::exists(tmp / "t"));
+  // --force replaces a store that has a pyramid (and the new one has none).
+  wo.before_publish = nullptr;
+  wo.force = true;
+  ASSERT_TRUE(WriteVoxels(tmp / "s", voxels, meta, wo).ok());
+  EXPECT_FALSE(HasLod(tmp / "s"));
+}
+
+TEST(Lod, PyramidOfAnotherStoreIsRefused) {
+  TempDir tmp;
+  const StoreMeta meta = MetaFor(6, 3, GridClass::kLevelSet, false);
+  const auto voxels = RandomVoxels(6, 7);
+  ASSERT_TRUE(WriteVoxels(tmp / "a", voxels, meta).ok());
+  ASSERT_TRUE(WriteVoxels(tmp / "b", voxels, meta).ok());
+  ASSERT_TRUE(BuildLod(tmp / "a", {}).ok());
+  // Building again needs force.
+  auto again = BuildLod(tmp / "a", {});
+  EXPECT_EQ(again.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(again.status().message().find("--force"), std::string::npos);
+  fs::copy(tmp / "a/lod", tmp / "b/lod", fs::copy_options::recursive);
+  OpenOptions oo;
+  auto b = Store::Open(tmp / "b", oo);
+  ASSERT_TRUE(b.ok());
+  auto p = LodPyramid::Open(tmp / "b", **b, oo);
+  ASSERT_FALSE(p.ok());
+  EXPECT_EQ(p.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(p.status().message().find("another store"), std::string::npos)
+      << p.status().ToString();
+  // Rebuilt with force, it belongs to b.
+  LodBuildOptions lo;
+  lo.force = true;
+  ASSERT_TRUE(BuildLod(tmp / "b", lo).ok());
+  EXPECT_TRUE(LodPyramid::Open(tmp / "b", **b, oo).ok());
+}
+
+TEST(Lod, StoreWithoutPyramidOpensAndSaysHowToAddOne) {
+  TempDir tmp;
+  const StoreMeta meta = MetaFor(5, 2, GridClass::kLevelSet, false);
+  ASSERT_TRUE(WriteVoxels(tmp / "s", RandomVoxels(5, 1), meta).ok());
+  OpenOptions oo;
+  auto s = Store::Open(tmp / "s", oo);
+  ASSERT_TRUE(s.ok());
+  EXPECT_EQ((*s)->meta().lod_level, 0);
+  auto p = LodPyramid::Open(tmp / "s", **s, oo);
+  EXPECT_EQ(p.status().code(), StatusCode::kNotFound);
+  EXPECT_NE(p.status().message().find("--add-lod"), std::string::npos);
+  // A coarse store is not a base store.
+  ASSERT_TRUE(BuildLod(tmp / "s", {}).ok());
+  auto c = BuildLod(tmp / "s/lod/1", {});
+  EXPECT_FALSE(c.ok());
+}
+
+}  // namespace
+}  // namespace vox::storage_test
