@@ -9,6 +9,7 @@
 
 #include <cstddef>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include "core/status.h"
@@ -38,7 +39,8 @@ struct RenderJobOptions {
   bool prefetch = false;
   int tile_size = 64;
   PartSpec part;
-  ImageLayers layers;
+  ImageLayers layers;  // layers.float_color: --float
+  std::optional<ExrCompression> compression;  // --compression; default: FrameOptions'
   bool quiet = false;
   int default_width = 1024, default_height = 1024;  // for the default camera
   FILE* log = stderr;

@@ -17,12 +17,15 @@ const char kUsage[] =
     "usage: vox-render STORE_DIR [--cam cam.json] [--scene scene.json] [-o out.exr]\n"
     "                  [--preview out.png] [--split N1+N2|N1] [--single-step] [--memory-mb M]\n"
     "                  [--cache-mb M] [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
-    "                  [--layers normal,voxel] [--size WxH]\n"
+    "                  [--layers normal,voxel] [--size WxH] [--float] [--compression C]\n"
     "  --cam        camera JSON (world space of the source VDB); without it a default\n"
     "               camera frames the whole volume (--size sets its image size, default "
     "1024x1024)\n"
     "  --scene      lights, materials, background, volume, max_depth, samples_per_pixel\n"
-    "  -o           output EXR (default render.exr); channels R G B A Z\n"
+    "  -o           output EXR (default render.exr); channels R G B A (half float) and Z (float)\n"
+    "  --float      write R G B A as 32-bit float\n"
+    "  --compression  EXR tile compression: zip (default), zips, piz, rle or none (default\n"
+    "               for --tiles parts, which vox-merge recompresses)\n"
     "  --layers     extra EXR layers: normal (N.x N.y N.z), voxel (voxel.i voxel.j voxel.k)\n"
     "  --preview    also write an 8-bit sRGB PNG\n"
     "  --split      first-step levels of the two-step traversal (N1, or N1+N2 = levels)\n"
@@ -62,9 +65,11 @@ static int RunTool(int argc, char** argv) {
       o.quiet = true;
     } else if (a == "--prefetch") {
       o.prefetch = true;
+    } else if (a == "--float") {
+      o.layers.float_color = true;
     } else if (a == "--cam" || a == "--scene" || a == "-o" || a == "--preview" || a == "--split" ||
                a == "--cache-mb" || a == "--memory-mb" || a == "--threads" || a == "--tile-size" || a == "--tiles" ||
-               a == "--stats" || a == "--layers" || a == "--size") {
+               a == "--stats" || a == "--layers" || a == "--size" || a == "--compression") {
       const std::optional<std::string> value = flags.Value();
       if (!value) return Usage(a + " needs a value");
       const std::string& v = *value;
@@ -80,6 +85,11 @@ static int RunTool(int argc, char** argv) {
         o.split = v;
       else if (a == "--stats")
         o.stats_path = v;
+      else if (a == "--compression") {
+        auto c = vox::ParseExrCompression(v);
+        if (!c.ok()) return Usage(c.status().message());
+        o.compression = *c;
+      }
       else if (a == "--cache-mb") {
         int mb = 0;
         if (!vox::ParseInt(v, 1, 1 << 22, &mb))
