@@ -82,6 +82,10 @@ struct RenderOptions {
   // from the volume's cache capacity (LendingBrickTable::SlotBits). A memory
   // budget sets it so the pins stay within their share (SlotBitsForBytes).
   int table_slot_bits = -1;
+  // Misses first: rays that pass outside the volume's occupied bbox (widened
+  // by a voxel) are misses without a walk (Tracer::SetOccupiedBox); the hits
+  // are the same either way.
+  bool clip_to_occupied = true;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -171,6 +175,9 @@ class Renderer {
   glm::dvec3 Fog(const Ray& gr, Ctx& cx, double* transmittance, double* first_t) const;
   bool Density(const Hit& h, Ctx& cx, double* rho) const;
   double Transmittance(const Ray& gr, double t_max, Ctx& cx) const;
+
+  // tracer_'s occupied box (options_.clip_to_occupied), on `t` too.
+  void ApplyOccupiedBox(RenderTracer* t) const;
 
   Volume* volume_;
   Camera camera_;

@@ -329,7 +329,7 @@ int main(int argc, char** argv) {
   vox::Scene scene;
   scene.default_lights = false;  // "lights": [] -- primary rays only
   vox::RenderOptions ro;
-  (void)clip;
+  ro.clip_to_occupied = clip;
   auto renderer = vox::Renderer::Create(store->get(), cam, scene, ro);
   if (!renderer.ok()) return Fail(renderer.status().ToString());
   if (!(*renderer)->passes().ToString().starts_with("primary") || (*renderer)->passes().shadows)
@@ -374,6 +374,7 @@ int main(int argc, char** argv) {
   out["threads"] = threads;
   out["tile_size"] = tile;
   out["split"] = (*renderer)->SplitString();
+  out["clip_to_occupied"] = clip;
   out["vox_seconds"] = vox_s;
   out["nano_seconds"] = nano_s;
   out["vox_median_seconds"] = vm;
