@@ -76,6 +76,24 @@ class Tracer {
     return t;
   }
 
+  // Misses first: grid voxels [lo, hi] (inclusive) hold every occupied voxel
+  // of the tree (a store's exact occupied bbox). A ray that passes outside
+  // that box, widened by kBoxMargin voxels on every side, is a miss at once,
+  // without a walk. The widened test is conservative (its rounding errors are
+  // far below a voxel for any ray the tracer accepts), so it drops only rays
+  // that meet no occupied voxel: every hit stays as the walk finds it (rays
+  // from far origins, IsFarOrigin, are always walked).
+  void SetOccupiedBox(const int64_t lo[3], const int64_t hi[3]) {
+    has_box_ = true;
+    for (int a = 0; a < 3; ++a) {
+      box_lo_[a] = double(lo[a]) - kBoxMargin;
+      box_hi_[a] = double(hi[a]) + 1.0 + kBoxMargin;
+    }
+  }
+  void ClearOccupiedBox() { has_box_ = false; }
+  bool has_occupied_box() const { return has_box_; }
+  static constexpr double kBoxMargin = 1.0;
+
   int levels() const { return tree_.levels; }
   int n1() const { return n1_; }
   int n2() const { return n2_; }
@@ -174,6 +192,7 @@ class Tracer {
     using std::fabs;
     double D[3];
     internal::ScaleDirection(ray.dir, D);
+    if (has_box_ && !MeetsBox(ray.origin, D)) return false;
     for (int a = 0; a < 3; ++a) {
       cx->D[a] = Real(D[a]);
       cx->s[a] = internal::TravelSign(ray.dir[a]);
@@ -197,6 +216,26 @@ class Tracer {
                             : fabs(Real(D[d]) / Real(D[cx->i2]));
     Real t_start;
     return internal::ClipToGrid(ray.origin, cx->D, cx->s, grid_size_, cx->p, &t_start);
+  }
+
+  // Whether the ray from `o` along D meets the widened occupied box (t >= 0).
+  // Far origins (IsFarOrigin) are not tested: their slabs lose the box's
+  // extent next to |o| in double. A NaN slab (0 * inf) constrains nothing.
+  bool MeetsBox(const glm::dvec3& o, const double D[3]) const {
+    if (IsFarOrigin(o, double(grid_size_))) return true;
+    double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 3; ++a) {
+      if (D[a] == 0.0) {
+        if (o[a] < box_lo_[a] || o[a] > box_hi_[a]) return false;
+        continue;
+      }
+      const double inv = 1.0 / D[a];
+      double ta = (box_lo_[a] - o[a]) * inv, tb = (box_hi_[a] - o[a]) * inv;
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    return t0 <= t1;
   }
 
   // Distance from p to the next boundary of voxel v in the direction of travel.
@@ -324,6 +363,8 @@ class Tracer {
   Real sat_real_ = 0;
   Real down2_ = 1, up2_ = 1;  // 2^-n2, 2^n2: first-step <-> second-step units
   Real grid_size_ = 0;        // 2^levels
+  bool has_box_ = false;      // SetOccupiedBox: the widened occupied box
+  double box_lo_[3] = {}, box_hi_[3] = {};
 };
 
 // The first-step levels vox uses unless told otherwise: the paper's best
@@ -373,6 +414,12 @@ class AutoTracer {
   int n2() const { return std::visit([](const auto& t) { return t.n2(); }, t_); }
   bool single_step() const { return n2() == 0; }
   int word_bits() const { return t_.index() == 0 ? 64 : 128; }
+  void SetOccupiedBox(const int64_t lo[3], const int64_t hi[3]) {
+    std::visit([&](auto& t) { t.SetOccupiedBox(lo, hi); }, t_);
+  }
+  bool has_occupied_box() const {
+    return std::visit([](const auto& t) { return t.has_occupied_box(); }, t_);
+  }
 
   template <class Visitor>
   Status Traverse(const Ray& ray, Visitor&& visit, TraceCounters* counters = nullptr) const {

@@ -6,10 +6,12 @@
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfStandardAttributes.h>
 #include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfThreading.h>
 #include <OpenEXR/ImfTileDescription.h>
 #include <OpenEXR/ImfTiledInputFile.h>
 #include <OpenEXR/ImfTiledOutputFile.h>
 #include <Imath/ImathMatrix.h>
+#include <Imath/half.h>
 #include <png.h>
 
 #include <algorithm>
@@ -77,9 +79,47 @@ void AddStandardCameraAttributes(const std::string& camera_json, Imf::Header* he
   header->screenWindowWidth() = float(2.0 * sx);
 }
 
+Imf::Slice HalfTileSlice(Imath::half* base, int stride) {
+  return Imf::Slice(Imf::HALF, reinterpret_cast<char*>(base), sizeof(Imath::half),
+                    sizeof(Imath::half) * size_t(stride), 1, 1, 0.0, /*xTileCoords=*/true,
+                    /*yTileCoords=*/true);
+}
+
+// R, G, B, A: HALF unless the layers ask for float colour.
+bool IsHalf(const ImageLayers& layers, int c) { return !layers.float_color && c <= kChA; }
+
+struct CompressionEntry {
+  const char* name;
+  ExrCompression c;
+  Imf::Compression imf;
+};
+constexpr CompressionEntry kCompressions[] = {
+    {"zip", ExrCompression::kZip, Imf::ZIP_COMPRESSION},
+    {"zips", ExrCompression::kZips, Imf::ZIPS_COMPRESSION},
+    {"piz", ExrCompression::kPiz, Imf::PIZ_COMPRESSION},
+    {"rle", ExrCompression::kRle, Imf::RLE_COMPRESSION},
+    {"none", ExrCompression::kNone, Imf::NO_COMPRESSION}};
+
 }  // namespace
 
 const char* ChannelName(int c) { return kChannelNames[c]; }
+
+StatusOr<ExrCompression> ParseExrCompression(const std::string& name) {
+  for (const CompressionEntry& e : kCompressions)
+    if (name == e.name) return e.c;
+  return InvalidArgumentError("EXR compression '" + name + "': expected zip, zips, piz, rle or none");
+}
+
+const char* ExrCompressionName(ExrCompression c) {
+  for (const CompressionEntry& e : kCompressions)
+    if (c == e.c) return e.name;
+  return "?";
+}
+
+void SetExrThreads(int threads) {
+  const int n = std::max(threads, 0);
+  if (Imf::globalThreadCount() != n) Imf::setGlobalThreadCount(n);
+}
 
 void TileBuffer::Allocate(int tile_size, const ImageLayers& layers) {
   size = tile_size;
@@ -96,7 +136,8 @@ TiledExrWriter::~TiledExrWriter() { Abandon(); }
 StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::string& path, int width,
                                                                  int height, int tile,
                                                                  const ImageLayers& layers,
-                                                                 const ExrAttributes& attrs) {
+                                                                 const ExrAttributes& attrs,
+                                                                 ExrCompression compression) {
   auto w = std::unique_ptr<TiledExrWriter>(new TiledExrWriter());
   w->path_ = path;
   w->layers_ = layers;
@@ -106,12 +147,16 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
     Imf::Header header(width, height);
     header.setTileDescription(Imf::TileDescription(tile, tile, Imf::ONE_LEVEL));
     header.lineOrder() = Imf::RANDOM_Y;
-    header.compression() = Imf::ZIP_COMPRESSION;
+    header.compression() = Imf::NO_COMPRESSION;
+    for (const CompressionEntry& e : kCompressions)
+      if (e.c == compression) header.compression() = e.imf;
     // Tiles are compressed under the writer's lock: zlib's fastest level
     // keeps that short (a few percent larger files than the default level).
     header.zipCompressionLevel() = 1;
     for (int c = 0; c < kNumChannels; ++c)
-      if (layers.Has(c)) header.channels().insert(kChannelNames[c], Imf::Channel(Imf::FLOAT));
+      if (layers.Has(c))
+        header.channels().insert(kChannelNames[c],
+                                 Imf::Channel(IsHalf(layers, c) ? Imf::HALF : Imf::FLOAT));
     for (const auto& [k, v] : attrs) header.insert(k, Imf::StringAttribute(v));
     if (auto cam = attrs.find("vox:camera"); cam != attrs.end())
       AddStandardCameraAttributes(cam->second, &header);
@@ -128,13 +173,28 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
 }
 
 Status TiledExrWriter::WriteTile(const TileRect& rect, const TileBuffer& buf) {
+  // The HALF channels' pixels, converted outside the lock (one buffer per
+  // thread, reused).
+  thread_local std::vector<Imath::half> halves;
+  const size_t n = size_t(buf.size) * size_t(buf.size);
+  if (!layers_.float_color) {
+    halves.resize(4 * n);
+    for (int c = 0; c <= kChA; ++c) {
+      const float* src = buf.ch[c].data();
+      Imath::half* dst = halves.data() + size_t(c) * n;
+      for (size_t i = 0; i < n; ++i) dst[i] = Imath::half(src[i]);
+    }
+  }
   std::lock_guard<std::mutex> lock(mu_);
   if (!file_) return InternalError(path_ + ": WriteTile after Finish");
   try {
     Imf::FrameBuffer fb;
     for (int c = 0; c < kNumChannels; ++c)
       if (layers_.Has(c))
-        fb.insert(kChannelNames[c], TileSlice(const_cast<float*>(buf.ch[c].data()), buf.size));
+        fb.insert(kChannelNames[c],
+                  IsHalf(layers_, c)
+                      ? HalfTileSlice(halves.data() + size_t(c) * n, buf.size)
+                      : TileSlice(const_cast<float*>(buf.ch[c].data()), buf.size));
     file_->setFrameBuffer(fb);
     file_->writeTile(rect.tx, rect.ty);
   } catch (const std::exception& e) {
@@ -249,8 +309,13 @@ ExrInfo InfoFromFile(const Imf::TiledInputFile& in) {
   info.width = dw.max.x - dw.min.x + 1;
   info.height = dw.max.y - dw.min.y + 1;
   info.tile = int(in.tileXSize());
-  for (auto it = h.channels().begin(); it != h.channels().end(); ++it)
+  for (auto it = h.channels().begin(); it != h.channels().end(); ++it) {
     info.channels.push_back(it.name());
+    if (std::strcmp(it.name(), "R") == 0) info.float_color = it.channel().type == Imf::FLOAT;
+  }
+  info.compression = "?";
+  for (const CompressionEntry& e : kCompressions)
+    if (e.imf == h.compression()) info.compression = e.name;
   for (auto it = h.begin(); it != h.end(); ++it) {
     if (auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute()))
       info.attrs[it.name()] = s->value();

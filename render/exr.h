@@ -7,7 +7,10 @@
 // 1 - transmittance for fog), Z (world distance from the camera along the
 // ray to the first hit, +inf on the background), and on request N.x N.y N.z
 // (world-space unit normal) and voxel.i voxel.j voxel.k (OpenVDB index
-// coordinates of the hit voxel; exact up to 2^24). All FLOAT.
+// coordinates of the hit voxel; exact up to 2^24). R, G, B and A are HALF
+// unless ImageLayers::float_color asks for FLOAT (vox-render --float); the
+// others are always FLOAT. Tiles are ZIP-compressed at zlib's fastest level
+// unless the writer is told otherwise (ExrCompression).
 // Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
 // vox:part ("I/N"), vox:tileOrder, vox:storeId (the store's store_id, hex),
 // plus renderTimeSeconds (float, as pbrt) and vox:timings (JSON), which are
@@ -64,6 +67,7 @@ const char* ChannelName(int c);
 struct ImageLayers {
   bool normal = false;
   bool voxel = false;
+  bool float_color = false;  // R G B A written as FLOAT; else HALF
   bool Has(int c) const {
     if (c >= kChNx && c <= kChNz) return normal;
     if (c >= kChVi) return voxel;
@@ -81,6 +85,20 @@ struct TileBuffer {
 
 using ExrAttributes = std::map<std::string, std::string>;
 
+// How tiles are compressed. kZip is zlib at its fastest level (a few percent
+// larger than its default level, at about half the time); kNone suits parts
+// that vox-merge recompresses. docs/benchmarks.md has the measured times.
+enum class ExrCompression { kZip, kZips, kPiz, kRle, kNone };
+// "zip", "zips", "piz", "rle", "none".
+StatusOr<ExrCompression> ParseExrCompression(const std::string& name);
+const char* ExrCompressionName(ExrCompression c);
+
+// Sizes OpenEXR's global thread pool: it compresses or decompresses the tiles
+// of one call in parallel (previews and ReadExr read several per call); a
+// call of one tile only moves its work to a pool thread and back, so
+// RenderFrame, which writes a tile per call, runs with none. 0 or less: none.
+void SetExrThreads(int threads);
+
 class AtomicFile;
 
 // OkStatus when `path` can be written as an output (EXR, PNG, JSON): its
@@ -90,15 +108,16 @@ Status CheckOutputPath(const std::string& path);
 
 class TiledExrWriter {
  public:
-  // Starts `path` (ZIP-compressed tiles of `tile` pixels, random tile order)
-  // with the given string attributes, and reserves renderTimeSeconds and
-  // vox:timings for Finish. The file is written to a temporary beside `path`.
-  static StatusOr<std::unique_ptr<TiledExrWriter>> Create(const std::string& path, int width,
-                                                          int height, int tile,
-                                                          const ImageLayers& layers,
-                                                          const ExrAttributes& attrs);
+  // Starts `path` (tiles of `tile` pixels compressed as `compression`,
+  // random tile order) with the given string attributes, and reserves
+  // renderTimeSeconds and vox:timings for Finish. The file is written to a
+  // temporary beside `path`.
+  static StatusOr<std::unique_ptr<TiledExrWriter>> Create(
+      const std::string& path, int width, int height, int tile, const ImageLayers& layers,
+      const ExrAttributes& attrs, ExrCompression compression = ExrCompression::kZip);
   ~TiledExrWriter();
-  // Writes one tile; thread-safe.
+  // Writes one tile; thread-safe (HALF channels are converted from the
+  // buffer's floats, rounding to nearest, before the writer's lock).
   Status WriteTile(const TileRect& rect, const TileBuffer& buf);
   // Finishes the file (tiles not written are left missing: a partial image),
   // records the timings (JSON, at most 1000 bytes) and renames it to `path`.
@@ -127,6 +146,8 @@ Status PatchTimings(const std::string& path, double render_seconds,
 struct ExrInfo {
   int width = 0, height = 0, tile = 0;
   std::vector<std::string> channels;
+  bool float_color = true;      // R is FLOAT (false: HALF)
+  std::string compression;      // OpenEXR's name of the tiles' compression
   ExrAttributes attrs;          // string attributes
   double render_seconds = 0.0;  // renderTimeSeconds, 0 when absent
   bool complete = false;

@@ -71,12 +71,19 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
 
   const ImageLayers& img_layers = renderer.layers();
   std::unique_ptr<TiledExrWriter> writer;
-  if (!options.exr_path.empty()) {
-    VOX_ASSIGN_OR_RETURN(writer, TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
-                                                        options.tile_size, img_layers, attrs));
-  }
   int threads = options.threads > 0 ? options.threads
                                     : int(std::max(1u, std::thread::hardware_concurrency()));
+  if (!options.exr_path.empty()) {
+    // Tiles are written one per call as they finish: OpenEXR's pool would
+    // hand each tile to a pool thread and back (measured: 2-3x the write
+    // time of compressing in the calling thread, docs/benchmarks.md).
+    SetExrThreads(0);
+    const ExrCompression compression = options.compression.value_or(
+        options.part.whole() ? ExrCompression::kZip : ExrCompression::kNone);
+    VOX_ASSIGN_OR_RETURN(writer,
+                         TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
+                                                options.tile_size, img_layers, attrs, compression));
+  }
   stats->threads = threads;
   stats->tiles_total = end - begin;
   stats->cache_start = volume->cache_stats();

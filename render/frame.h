@@ -14,6 +14,7 @@
 
 #include <cstdio>
 #include <functional>
+#include <optional>
 #include <span>
 #include <string>
 
@@ -47,6 +48,9 @@ struct FrameOptions {
   ProgressMode progress = ProgressMode::kQuiet;
   FILE* progress_out = stderr;
   ExrAttributes attrs;  // extra header attributes
+  // Tile compression; default zip, or none for a part of a split render
+  // (vox-merge recompresses the whole image).
+  std::optional<ExrCompression> compression;
   // Prefetch: when set, a scout thread hands it the bricks the next tiles'
   // primary rays enter first (Renderer::FirstBricks of every
   // prefetch_stride-th pixel) before those tiles render (e.g.

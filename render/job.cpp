@@ -226,6 +226,7 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
   }
   fo.tile_size = o.tile_size;
   fo.part = o.part;
+  fo.compression = o.compression;
   fo.progress = ChooseProgressMode(o.log, o.quiet);
   fo.progress_out = o.log;
   fo.attrs["vox:store"] = o.store_dir;
@@ -262,7 +263,10 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
   FrameStats stats;
   VOX_RETURN_IF_ERROR(RenderFrame(*renderer, fo, &stats));
   const double frame_seconds = phase.Lap();
-  if (!o.preview_path.empty()) VOX_RETURN_IF_ERROR(WritePngPreview(o.exr_path, o.preview_path));
+  if (!o.preview_path.empty()) {
+    SetExrThreads(threads);  // the preview reads a row of tiles per call: decoded in parallel
+    VOX_RETURN_IF_ERROR(WritePngPreview(o.exr_path, o.preview_path));
+  }
   const double preview_seconds = phase.Lap();
   if (!o.stats_path.empty() || out != nullptr) {
     nlohmann::json json = nlohmann::json::parse(

@@ -12,6 +12,7 @@
 
 #include <cstddef>
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -52,7 +53,8 @@ struct RenderJobOptions {
   // --lod F: level of detail over the store's pyramid (render/lod.h); 0: off.
   double lod = 0.0;
   PartSpec part;
-  ImageLayers layers;
+  ImageLayers layers;  // layers.float_color: --float
+  std::optional<ExrCompression> compression;  // --compression; default: FrameOptions'
   bool quiet = false;
   int default_width = 1024, default_height = 1024;  // for the default camera
   FILE* log = stderr;

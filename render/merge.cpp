@@ -54,6 +54,9 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
     if (o.tile != ref.tile)
       return differ("tile size", std::to_string(ref.tile), std::to_string(o.tile));
     if (o.channels != ref.channels) return differ("channel list", "", "");
+    if (o.float_color != ref.float_color)
+      return differ("colour pixel type", ref.float_color ? "float" : "half",
+                    o.float_color ? "float" : "half");
     {
       auto a = ref.attrs.find("vox:storeId"), b = o.attrs.find("vox:storeId");
       std::string va = a == ref.attrs.end() ? "<none>" : a->second;
@@ -87,6 +90,7 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
                                   std::to_string(n) + " parts given)");
 
   ImageLayers layers;
+  layers.float_color = ref.float_color;
   for (const std::string& c : ref.channels) {
     if (c == "N.x") layers.normal = true;
     if (c == "voxel.i") layers.voxel = true;

@@ -92,7 +92,19 @@ std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> Renderer::N
   }
   auto t = RenderTracer::Create(view, tracer_.n1());
   ts->tracer = t.ok() ? *t : tracer_;  // cannot fail: same tree and split as tracer_
+  ApplyOccupiedBox(&ts->tracer);
   return ts;
+}
+
+void Renderer::ApplyOccupiedBox(RenderTracer* t) const {
+  const StoreMeta& m = volume_->meta();
+  if (!options_.clip_to_occupied || m.voxel_count == 0) return;
+  const int64_t lo[3] = {m.bbox_min.x - m.origin.x, m.bbox_min.y - m.origin.y,
+                         m.bbox_min.z - m.origin.z};
+  const int64_t hi[3] = {m.bbox_max.x - m.origin.x, m.bbox_max.y - m.origin.y,
+                         m.bbox_max.z - m.origin.z};
+  if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) return;
+  t->SetOccupiedBox(lo, hi);
 }
 
 void Renderer::ThreadStateDeleter::operator()(ThreadState* ts) const { delete ts; }
@@ -118,6 +130,7 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
     return InvalidArgumentError("camera: not finalised (Camera::Finalize checks it and computes its frame)");
   const Camera& cam = camera;
   auto r = std::unique_ptr<Renderer>(new Renderer(volume, cam, scene, options, tracer, xf));
+  r->ApplyOccupiedBox(&r->tracer_);
   Scene& s = r->scene_;
   if (s.default_lights) {
     // A key light above, behind and to the left of the camera.

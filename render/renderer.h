@@ -104,6 +104,10 @@ struct RenderOptions {
   // lod_levels[l - 1] is level l of the volume's pyramid (not owned).
   double lod = 0.0;
   std::vector<Volume*> lod_levels;
+  // Misses first: rays that pass outside the volume's occupied bbox (widened
+  // by a voxel) are misses without a walk (Tracer::SetOccupiedBox); the hits
+  // are the same either way.
+  bool clip_to_occupied = true;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -218,6 +222,9 @@ class Renderer {
                  const Cone* cone = nullptr) const;
   bool Density(const Hit& h, Ctx& cx, double* rho, Volume* volume = nullptr) const;
   double Transmittance(const Ray& gr, double t_max, Ctx& cx, const Cone* cone = nullptr) const;
+
+  // tracer_'s occupied box (options_.clip_to_occupied), on `t` too.
+  void ApplyOccupiedBox(RenderTracer* t) const;
 
   Volume* volume_;
   Camera camera_;

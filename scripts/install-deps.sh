@@ -2,7 +2,7 @@
 # Installs vox's build and test dependencies from Debian's packages, when missing.
 set -euo pipefail
 pkgs=(build-essential cmake ninja-build pkg-config
-      libopenvdb-dev libopenvdb-tools libboost-dev libboost-iostreams-dev libimath-dev
+      libopenvdb-dev libopenvdb-tools libnanovdb-dev libboost-dev libboost-iostreams-dev libimath-dev
       libopenexr-dev libzstd-dev libglm-dev libtbb-dev nlohmann-json3-dev libpng-dev
       libgtest-dev libgmock-dev libbenchmark-dev libgmp-dev python3
       python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib)

@@ -107,6 +107,26 @@ TEST_F(CliTest, RendersExrPreviewAndStats) {
   EXPECT_EQ(stats["threads"], 2);
 }
 
+TEST_F(CliTest, FloatAndCompressionFlags) {
+  std::string cam = Write("cam.json", kCam);
+  RunResult r = Exec(Render("--cam " + cam + " -o " + Path("h.exr") + " --threads 2 --quiet"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = Exec(Render("--cam " + cam + " -o " + Path("f.exr") +
+                  " --float --compression none --threads 2 --quiet"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  auto h = ReadExrInfo(Path("h.exr"));
+  auto f = ReadExrInfo(Path("f.exr"));
+  ASSERT_TRUE(h.ok() && f.ok());
+  EXPECT_FALSE(h->float_color);
+  EXPECT_EQ(h->compression, "zip");
+  EXPECT_TRUE(f->float_color);
+  EXPECT_EQ(f->compression, "none");
+  r = Exec(Render("--cam " + cam + " -o " + Path("x.exr") + " --compression lzw"));
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("EXR compression 'lzw': expected zip"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(Path("x.exr")));
+}
+
 TEST_F(CliTest, DefaultCameraAndPlainProgress) {
   RunResult r = Exec(Render("-o " + Path("d.exr") + " --size 40x30 --single-step --threads 1"));
   ASSERT_EQ(r.code, 0) << r.output;

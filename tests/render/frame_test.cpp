@@ -3,11 +3,13 @@
 // together, the PNG preview and the progress line.
 #include "render/frame.h"
 
+#include <Imath/half.h>
 #include <gtest/gtest.h>
 #include <png.h>
 #include <unistd.h>
 
 #include <cstring>
+#include <map>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
@@ -72,9 +74,74 @@ class FrameTest : public ::testing::Test {
   Scene scene_;  // defaults: a shadow-casting key light
 };
 
+// Default output: R G B A as HALF (each the renderer's float rounded to the
+// nearest half), Z and the layers as FLOAT, ZIP-compressed.
+TEST_F(FrameTest, HalfColourIsTheRenderersFloatsRounded) {
+  ImageLayers layers;
+  layers.normal = layers.voxel = true;
+  auto r = MakeRenderer(cam_, layers);
+  ASSERT_TRUE(r);
+  ASSERT_TRUE(Frame(*r, Path("half.exr")).ok());
+  testing::Image mem;
+  RenderCounters counters;
+  ASSERT_TRUE(testing::RenderToMemory(*r, &mem, &counters, 16).ok());
+  auto img = ReadExr(Path("half.exr"));
+  ASSERT_TRUE(img.ok()) << img.status().ToString();
+  EXPECT_FALSE(img->info.float_color);
+  EXPECT_EQ(img->info.compression, "zip");
+  size_t inexact = 0;
+  for (const auto& [name, pixels] : mem.ch) {
+    ASSERT_TRUE(img->pixels.count(name)) << name;
+    const std::vector<float>& got = img->pixels[name];
+    const bool half = name == "R" || name == "G" || name == "B" || name == "A";
+    for (size_t i = 0; i < pixels.size(); ++i) {
+      const float want = half ? float(Imath::half(pixels[i])) : pixels[i];
+      ASSERT_EQ(std::memcmp(&want, &got[i], 4), 0) << name << " pixel " << i;
+      inexact += want != pixels[i];
+    }
+  }
+  EXPECT_GT(inexact, 0u);  // the colours do lose bits: the file is half
+  // Half colour is smaller on disk than float colour.
+  ImageLayers fl = layers;
+  fl.float_color = true;
+  auto rf = MakeRenderer(cam_, fl);
+  ASSERT_TRUE(rf);
+  ASSERT_TRUE(Frame(*rf, Path("float.exr")).ok());
+  EXPECT_LT(fs::file_size(Path("half.exr")), fs::file_size(Path("float.exr")));
+}
+
+// Every compression vox-render offers reads back to the same pixels.
+TEST_F(FrameTest, CompressionsKeepThePixels) {
+  EXPECT_FALSE(ParseExrCompression("b44").ok());
+  EXPECT_NE(ParseExrCompression("zip2").status().message().find("expected zip, zips"),
+            std::string::npos);
+  auto r = MakeRenderer(cam_);
+  ASSERT_TRUE(r);
+  std::map<std::string, std::vector<float>> first;
+  for (const char* name : {"zip", "zips", "piz", "rle", "none"}) {
+    auto c = ParseExrCompression(name);
+    ASSERT_TRUE(c.ok()) << name;
+    EXPECT_STREQ(ExrCompressionName(*c), name);
+    FrameOptions fo;
+    fo.exr_path = Path(std::string(name) + ".exr");
+    fo.threads = 2;
+    fo.tile_size = 16;
+    fo.compression = *c;
+    FrameStats stats;
+    ASSERT_TRUE(RenderFrame(*r, fo, &stats).ok()) << name;
+    auto img = ReadExr(fo.exr_path);
+    ASSERT_TRUE(img.ok()) << img.status().ToString();
+    EXPECT_EQ(img->info.compression, name);
+    if (first.empty()) first = img->pixels;
+    for (const auto& [ch, px] : first)
+      EXPECT_EQ(std::memcmp(px.data(), img->pixels[ch].data(), px.size() * 4), 0) << name << " " << ch;
+  }
+}
+
 TEST_F(FrameTest, ExrRoundTripMatchesTheRenderer) {
   ImageLayers layers;
   layers.normal = layers.voxel = true;
+  layers.float_color = true;  // --float: every channel bit for bit
   auto r = MakeRenderer(cam_, layers);
   ASSERT_TRUE(r);
   FrameStats stats;
@@ -150,6 +217,11 @@ TEST_F(FrameTest, PartsMergeBitForBitIntoTheFullRender) {
     EXPECT_EQ(std::memcmp(pixels.data(), merged->pixels[name].data(), pixels.size() * 4), 0)
         << name;
   EXPECT_EQ(merged->info.attrs["vox:camera"], full->info.attrs["vox:camera"]);
+  // Parts are written uncompressed; the merged image is ZIP-compressed, half
+  // colour like the parts.
+  EXPECT_EQ(ReadExrInfo(parts[0])->compression, "none");
+  EXPECT_EQ(merged->info.compression, "zip");
+  EXPECT_FALSE(merged->info.float_color);
 
   // Refusals, each naming the culprit.
   auto expect_error = [&](const std::vector<std::string>& list, const std::string& needle) {
@@ -171,6 +243,29 @@ TEST_F(FrameTest, PartsMergeBitForBitIntoTheFullRender) {
   // Another tile size.
   ASSERT_TRUE(Frame(*r, Path("tile32.exr"), PartSpec{2, 3}, 32).ok());
   expect_error({parts[0], Path("tile32.exr"), parts[2]}, "tile size");
+  // A part with float colour (--float) among half ones.
+  {
+    ImageLayers fl;
+    fl.float_color = true;
+    auto rf = MakeRenderer(cam_, fl);
+    ASSERT_TRUE(Frame(*rf, Path("float2.exr"), PartSpec{2, 3}).ok());
+    expect_error({parts[0], Path("float2.exr"), parts[2]}, "colour pixel type differs (float vs half)");
+    // Float parts merge into a float image, bit for bit.
+    std::vector<std::string> fparts;
+    for (int i = 1; i <= 3; ++i) {
+      fparts.push_back(Path("fpart" + std::to_string(i) + ".exr"));
+      ASSERT_TRUE(Frame(*rf, fparts.back(), PartSpec{i, 3}).ok());
+    }
+    ASSERT_TRUE(Frame(*rf, Path("ffull.exr")).ok());
+    ASSERT_TRUE(MergeParts(fparts, Path("fmerged.exr")).ok());
+    auto ff = ReadExr(Path("ffull.exr"));
+    auto fm = ReadExr(Path("fmerged.exr"));
+    ASSERT_TRUE(ff.ok() && fm.ok());
+    EXPECT_TRUE(fm->info.float_color);
+    for (const auto& [name, pixels] : ff->pixels)
+      EXPECT_EQ(std::memcmp(pixels.data(), fm->pixels[name].data(), pixels.size() * 4), 0)
+          << name;
+  }
   // A part whose render stopped early: same header, one tile only.
   {
     auto info = ReadExrInfo(parts[1]);

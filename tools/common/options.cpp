@@ -76,10 +76,11 @@ Status CheckIngestCommand(const IngestCommand& c) {
 }
 
 FlagArity RenderFlagArity(std::string_view flag) {
-  if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch"})) return FlagArity::kSwitch;
+  if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch", "--float"}))
+    return FlagArity::kSwitch;
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
-                   "--io-threads", "--lod"}))
+                   "--io-threads", "--lod", "--compression"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -93,6 +94,10 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->prefetch = a == "--prefetch";
   } else if (a == "--lod") {
     VOX_ASSIGN_OR_RETURN(o->lod, ParseLodFactor("--lod", v));
+  } else if (a == "--float") {
+    o->layers.float_color = true;
+  } else if (a == "--compression") {
+    VOX_ASSIGN_OR_RETURN(o->compression, ParseExrCompression(v));
   } else if (a == "--io-threads") {
     if (!ParseInt(v, 1, kMaxIoThreads, &o->io_threads))
       return InvalidArgumentError("--io-threads '" + v + "': expected 1.." + std::to_string(kMaxIoThreads));

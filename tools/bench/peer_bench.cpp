@@ -1,0 +1,446 @@
+// vox-peer-bench: vox's renderer against NanoVDB's CPU ray caster on the same
+// level set, camera, image and threads, in one process. The .vdb is read with
+// OpenVDB and converted to a NanoVDB float grid in process; vox opens its
+// store (ingesting the .vdb first when the store does not exist). Loading,
+// conversion, ingest and store open are timed apart and excluded from the
+// frame times.
+//
+// Both sides trace one primary ray per pixel centre of vox::Camera (so the
+// same camera convention) over the same tiles (render/tiles.h, Morton order,
+// threads pulling tiles from one cursor in a TBB arena of --threads):
+//   vox:  vox::RenderFrame of a Renderer with no lights (scene "lights": []),
+//         no EXR: the renderer's primary-ray path, hits shaded by the ambient
+//         term of the material, misses by the background gradient;
+//   nano: nanovdb::ZeroCrossing (HDDA over the tree's levels, then voxel by
+//         voxel through the narrow band to the first sign change) on the
+//         index-space ray, writing the same RGBAZ tile buffers. The index ray
+//         starts half a voxel up on each axis so that NanoVDB's voxel ijk, the
+//         cell [ijk, ijk + 1), is the cell OpenVDB's voxel ijk covers (centred
+//         on ijk), as vox's grid space has it (render/volume.h).
+// After one warm-up frame each, --rounds warm frames of each run alternately
+// (vox, nano, vox, nano, ...); the median of each gives rays/s and the ratio.
+//
+// Check: a frame of each is compared pixel by pixel. Hit masks may differ only
+// on the silhouette ring (a pixel one side calls a hit and the other a miss
+// must have a pixel within one pixel where the other side agrees with it),
+// and where both hit, the distances are compared in voxels. A failed check
+// (a pixel off the ring) exits 3: a peer that does less work is no peer.
+//
+//   vox-peer-bench IN.vdb [--store DIR] [--cam cam.json | --size WxH]
+//                  [--rounds N] [--threads N] [--tile-size T] [--grid NAME]
+//                  [--no-clip]
+#include <nanovdb/NanoVDB.h>
+#include <nanovdb/util/HDDA.h>
+#include <nanovdb/util/OpenToNanoVDB.h>
+#include <nanovdb/util/Ray.h>
+#include <openvdb/openvdb.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <glm/geometric.hpp>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/stopwatch.h"
+#include "ingest/ingest.h"
+#include "render/camera.h"
+#include "render/frame.h"
+#include "render/renderer.h"
+#include "render/scene.h"
+#include "render/tiles.h"
+#include "render/volume.h"
+#include "storage/store.h"
+#include "tools/common/flags.h"
+
+namespace {
+
+using vox::Status;
+using vox::TileBuffer;
+using vox::TileRect;
+
+constexpr char kUsage[] =
+    "usage: vox-peer-bench IN.vdb [--store DIR] [--cam cam.json | --size WxH] [--rounds N]\n"
+    "                      [--threads N] [--tile-size T] [--grid NAME] [--no-clip]\n"
+    "  --store      the vox store of IN.vdb (ingested there first when DIR does not exist;\n"
+    "               default: a temporary store, removed at the end)\n"
+    "  --cam        camera (default: vox-render's default camera, --size pixels, 1024x1024)\n"
+    "  --rounds     warm frames of each renderer, alternating (at least 5; default 7)\n"
+    "  --threads    threads of both renderers (default 2)\n"
+    "  --tile-size  tile side of both (default 64)\n"
+    "  --grid       the level-set grid (default: the file's first float grid)\n"
+    "  --no-clip    vox traces without clipping rays to the occupied box (A/B)\n";
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// Runs fn(rect, worker) over every tile of `layout` with `threads` workers
+// pulling tiles in render order from one cursor (as vox::RenderFrame does).
+template <class Worker, class Fn>
+void ForTiles(const vox::TileLayout& layout, int threads,
+              tbb::enumerable_thread_specific<Worker>& workers, Fn&& fn) {
+  std::atomic<size_t> cursor{0};
+  const auto& order = layout.order();
+  tbb::task_arena arena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(0, threads, [&](int) {
+      Worker& w = workers.local();
+      for (size_t i; (i = cursor.fetch_add(1)) < order.size();) fn(order[i], w);
+    });
+  });
+}
+
+// NanoVDB's side: the grid, the camera and the frame's tile loop.
+class NanoCaster {
+ public:
+  NanoCaster(const nanovdb::FloatGrid* grid, const vox::Camera& cam, const vox::Scene& scene)
+      : grid_(grid), cam_(cam), scene_(scene) {}
+
+  // Pixel (ix, iy)'s ray: hit flag, world distance to the hit voxel's entry.
+  bool Trace(nanovdb::FloatGrid::AccessorType& acc, int ix, int iy, double* t_world) const {
+    const vox::WorldRay wr = cam_.PixelRay(ix + 0.5, iy + 0.5);
+    const nanovdb::Vec3d eye =
+        grid_->worldToIndex(nanovdb::Vec3d(wr.origin.x, wr.origin.y, wr.origin.z));
+    nanovdb::Vec3d dir = grid_->worldToIndexDir(nanovdb::Vec3d(wr.dir.x, wr.dir.y, wr.dir.z));
+    const double len = dir.length();
+    dir *= 1.0 / len;
+    nanovdb::Ray<float> ray(nanovdb::Vec3f(float(eye[0] + 0.5), float(eye[1] + 0.5),
+                                           float(eye[2] + 0.5)),
+                            nanovdb::Vec3f(float(dir[0]), float(dir[1]), float(dir[2])));
+    nanovdb::Coord ijk;
+    float v = 0, t = 0;
+    if (!nanovdb::ZeroCrossing(ray, acc, ijk, v, t)) return false;
+    *t_world = double(t) / len;
+    return true;
+  }
+
+  // Renders `rect` into `buf` as vox does with no lights: R, G, B the ambient
+  // colour on a hit, the background gradient on a miss; A; Z.
+  void RenderTile(const TileRect& rect, TileBuffer* buf) const {
+    auto acc = grid_->getAccessor();
+    const glm::dvec3 surface = scene_.material.color * scene_.ambient;
+    const float inf = std::numeric_limits<float>::infinity();
+    for (int py = 0; py < rect.h; ++py)
+      for (int px = 0; px < rect.w; ++px) {
+        const int ix = rect.x0 + px, iy = rect.y0 + py;
+        double t = 0;
+        glm::dvec3 c;
+        const bool hit = Trace(acc, ix, iy, &t);
+        if (hit) {
+          c = surface;
+        } else {
+          const glm::dvec3 dir = cam_.PixelRay(ix + 0.5, iy + 0.5).dir;
+          const double u = 0.5 * (glm::dot(dir, cam_.true_up()) + 1.0);
+          c = glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
+        }
+        *buf->at(vox::kChR, px, py) = float(c.r);
+        *buf->at(vox::kChG, px, py) = float(c.g);
+        *buf->at(vox::kChB, px, py) = float(c.b);
+        *buf->at(vox::kChA, px, py) = hit ? 1.0f : 0.0f;
+        *buf->at(vox::kChZ, px, py) = hit ? float(t) : inf;
+      }
+  }
+
+ private:
+  const nanovdb::FloatGrid* grid_;
+  const vox::Camera& cam_;
+  const vox::Scene& scene_;
+};
+
+struct Image {
+  int w = 0, h = 0;
+  std::vector<uint8_t> hit;
+  std::vector<float> z;
+  void Resize(int width, int height) {
+    w = width;
+    h = height;
+    hit.assign(size_t(w) * h, 0);
+    z.assign(size_t(w) * h, 0.0f);
+  }
+  void Put(const TileRect& r, const TileBuffer& b) {
+    for (int y = 0; y < r.h; ++y)
+      for (int x = 0; x < r.w; ++x) {
+        const size_t i = size_t(r.y0 + y) * w + (r.x0 + x);
+        hit[i] = b.ch[vox::kChA][size_t(y) * b.size + x] > 0.5f;
+        z[i] = b.ch[vox::kChZ][size_t(y) * b.size + x];
+      }
+  }
+};
+
+struct Worker {
+  TileBuffer buf;
+  std::unique_ptr<vox::Renderer::ThreadState, vox::Renderer::ThreadStateDeleter> state;
+  vox::RenderCounters counters;
+};
+
+int Fail(const std::string& msg) {
+  fprintf(stderr, "vox-peer-bench: %s\n", msg.c_str());
+  return 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string vdb_path, store_path, cam_path, grid_name;
+  int rounds = 7, threads = 2, tile = 64, width = 1024, height = 1024;
+  bool clip = true;
+  vox::FlagReader flags(argc, argv);
+  auto usage = [](const std::string& error) {
+    if (!error.empty()) fprintf(stderr, "vox-peer-bench: %s\n", error.c_str());
+    fprintf(stderr, "%s", kUsage);
+    return 2;
+  };
+  while (flags.Next()) {
+    const std::string a = flags.arg();
+    if (flags.IsHelp()) {
+      printf("%s", kUsage);
+      return 0;
+    }
+    if (a == "--no-clip") {
+      clip = false;
+      continue;
+    }
+    if (!flags.IsFlag()) {
+      if (!vdb_path.empty()) return usage("more than one input: " + vdb_path + " and " + a);
+      vdb_path = a;
+      continue;
+    }
+    if (a != "--store" && a != "--cam" && a != "--size" && a != "--rounds" && a != "--threads" &&
+        a != "--tile-size" && a != "--grid")
+      return usage("unknown flag " + a);
+    const std::optional<std::string> v = flags.Value();
+    if (!v) return usage(a + " needs a value");
+    bool ok = true;
+    if (a == "--store") {
+      store_path = *v;
+    } else if (a == "--cam") {
+      cam_path = *v;
+    } else if (a == "--grid") {
+      grid_name = *v;
+    } else if (a == "--rounds") {
+      ok = vox::ParseInt(*v, 5, 1000, &rounds);
+    } else if (a == "--threads") {
+      ok = vox::ParseInt(*v, 1, 4096, &threads);
+    } else if (a == "--tile-size") {
+      ok = vox::ParseInt(*v, vox::kMinTileSize, vox::kMaxTileSize, &tile);
+    } else {
+      const size_t x = v->find('x');
+      ok = x != std::string::npos &&
+           vox::ParseInt(v->substr(0, x), 1, vox::kMaxImageSide, &width) &&
+           vox::ParseInt(v->substr(x + 1), 1, vox::kMaxImageSide, &height);
+    }
+    if (!ok) return usage(a + " '" + *v + "': out of range or not a number");
+  }
+  if (vdb_path.empty()) return usage("no input .vdb given");
+  namespace fs = std::filesystem;
+  nlohmann::json out;
+  out["vdb"] = vdb_path;
+
+  // NanoVDB: read the grid with OpenVDB and convert it.
+  openvdb::initialize();
+  vox::Stopwatch clock;
+  openvdb::FloatGrid::Ptr vdb_grid;
+  try {
+    openvdb::io::File file(vdb_path);
+    file.open();
+    openvdb::GridBase::Ptr base;
+    if (!grid_name.empty()) {
+      base = file.readGrid(grid_name);
+    } else {
+      for (auto it = file.beginName(); it != file.endName() && !base; ++it) {
+        openvdb::GridBase::Ptr g = file.readGrid(*it);
+        if (g->isType<openvdb::FloatGrid>()) base = g;
+      }
+    }
+    file.close();
+    if (!base) return Fail(vdb_path + ": no float grid");
+    vdb_grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
+    if (!vdb_grid) return Fail(vdb_path + ": grid '" + grid_name + "' is not a float grid");
+    if (vdb_grid->getGridClass() != openvdb::GRID_LEVEL_SET)
+      return Fail(vdb_path + ": grid '" + vdb_grid->getName() +
+                  "' is not a level set (NanoVDB's ZeroCrossing needs one)");
+  } catch (const std::exception& e) {
+    return Fail(vdb_path + ": cannot read: " + e.what());
+  }
+  out["vdb_load_seconds"] = clock.Lap();
+  auto handle = nanovdb::openToNanoVDB(*vdb_grid);
+  const nanovdb::FloatGrid* nano = handle.grid<float>();
+  if (nano == nullptr) return Fail(vdb_path + ": NanoVDB conversion failed");
+  out["nanovdb_convert_seconds"] = clock.Lap();
+  out["nanovdb_bytes"] = handle.size();
+  out["active_voxels"] = vdb_grid->activeVoxelCount();
+  vdb_grid.reset();
+
+  // vox: the store, ingested first when missing.
+  bool temp_store = false;
+  if (store_path.empty()) {
+    store_path = (fs::temp_directory_path() / ("vox-peer-" + std::to_string(getpid()) + ".store"))
+                     .string();
+    temp_store = true;
+  }
+  struct Cleanup {
+    std::string path;
+    ~Cleanup() {
+      std::error_code ec;
+      if (!path.empty()) fs::remove_all(path, ec);
+    }
+  } cleanup{temp_store ? store_path : std::string()};
+  if (!fs::exists(store_path)) {
+    vox::IngestOptions io;
+    io.input = vdb_path;
+    io.output = store_path;
+    io.grid_name = grid_name;
+    io.threads = threads;
+    auto st = vox::Ingest(io);
+    if (!st.ok()) return Fail(st.status().ToString());
+    out["ingest_seconds"] = clock.Lap();
+  }
+  clock.Lap();
+  vox::OpenOptions oo;
+  oo.cache_bytes = size_t(4) << 30;
+  auto store = vox::Store::Open(store_path, oo);
+  if (!store.ok()) return Fail(store.status().ToString());
+  out["store"] = store_path;
+  out["store_open_seconds"] = clock.Lap();
+
+  vox::Camera cam;
+  if (!cam_path.empty()) {
+    auto c = vox::LoadCamera(cam_path);
+    if (!c.ok()) return Fail(c.status().ToString());
+    cam = *c;
+  } else {
+    glm::dvec3 lo, hi;
+    vox::WorldBounds((*store)->meta(), &lo, &hi);
+    cam = vox::DefaultCamera(lo, hi, width, height);
+  }
+  out["camera"] = nlohmann::json::parse(cam.ToJson());
+  vox::Scene scene;
+  scene.default_lights = false;  // "lights": [] -- primary rays only
+  vox::RenderOptions ro;
+  ro.clip_to_occupied = clip;
+  auto renderer = vox::Renderer::Create(store->get(), cam, scene, ro);
+  if (!renderer.ok()) return Fail(renderer.status().ToString());
+  if (!(*renderer)->passes().ToString().starts_with("primary") || (*renderer)->passes().shadows)
+    return Fail("expected a level set rendered with primary rays only, got " +
+                (*renderer)->passes().ToString());
+  NanoCaster caster(nano, cam, (*renderer)->scene());
+  const vox::TileLayout layout(cam.width, cam.height, tile);
+  const double pixels = double(cam.width) * cam.height;
+
+  // The frames: one warm-up each, then alternating rounds.
+  tbb::enumerable_thread_specific<Worker> workers([&] {
+    Worker w;
+    w.buf.Allocate(tile, vox::ImageLayers{});
+    w.state = (*renderer)->NewThreadState();
+    return w;
+  });
+  auto vox_frame = [&](vox::FrameStats* st) {
+    vox::FrameOptions fo;
+    fo.threads = threads;
+    fo.tile_size = tile;
+    return vox::RenderFrame(**renderer, fo, st);
+  };
+  auto nano_frame = [&] {
+    vox::Stopwatch sw;
+    ForTiles(layout, threads, workers,
+             [&](const TileRect& r, Worker& w) { caster.RenderTile(r, &w.buf); });
+    return sw.Seconds();
+  };
+  std::vector<double> vox_s, nano_s;
+  vox::FrameStats st;
+  if (Status s = vox_frame(&st); !s.ok()) return Fail(s.ToString());
+  out["vox_cold_seconds"] = st.render_seconds;
+  out["nano_first_seconds"] = nano_frame();
+  vox::RenderCounters vox_counters;
+  for (int r = 0; r < rounds; ++r) {
+    if (Status s = vox_frame(&st); !s.ok()) return Fail(s.ToString());
+    vox_s.push_back(st.render_seconds);
+    vox_counters = st.counters;
+    nano_s.push_back(nano_frame());
+  }
+  const double vm = Median(vox_s), nm = Median(nano_s);
+  out["threads"] = threads;
+  out["tile_size"] = tile;
+  out["split"] = (*renderer)->SplitString();
+  out["clip_to_occupied"] = clip;
+  out["vox_seconds"] = vox_s;
+  out["nano_seconds"] = nano_s;
+  out["vox_median_seconds"] = vm;
+  out["nano_median_seconds"] = nm;
+  out["vox_rays_per_second"] = pixels / vm;
+  out["nano_rays_per_second"] = pixels / nm;
+  out["vox_over_nano"] = nm / vm;
+  out["vox_dda_moves_per_ray"] = double(vox_counters.trace.total_moves()) / pixels;
+
+  // The check: one frame of each, pixel by pixel.
+  Image vi, ni;
+  vi.Resize(cam.width, cam.height);
+  ni.Resize(cam.width, cam.height);
+  std::atomic<bool> failed{false};
+  ForTiles(layout, threads, workers, [&](const TileRect& r, Worker& w) {
+    if (!(*renderer)->RenderTile(r, &w.buf, &w.counters, w.state.get()).ok()) failed = true;
+    vi.Put(r, w.buf);
+    caster.RenderTile(r, &w.buf);
+    ni.Put(r, w.buf);
+  });
+  if (failed) return Fail("vox RenderTile failed in the check");
+  const double voxel = (*store)->meta().voxel_size;
+  uint64_t vox_hits = 0, nano_hits = 0, both = 0, ring = 0, off_ring = 0;
+  std::vector<double> dz;
+  auto near = [](const Image& img, int x, int y, uint8_t want) {
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xx = x + dx, yy = y + dy;
+        if (xx >= 0 && yy >= 0 && xx < img.w && yy < img.h &&
+            img.hit[size_t(yy) * img.w + xx] == want)
+          return true;
+      }
+    return false;
+  };
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      const size_t i = size_t(y) * cam.width + x;
+      vox_hits += vi.hit[i];
+      nano_hits += ni.hit[i];
+      if (vi.hit[i] && ni.hit[i]) {
+        ++both;
+        dz.push_back(std::fabs(double(vi.z[i]) - double(ni.z[i])) / voxel);
+      } else if (vi.hit[i] != ni.hit[i]) {
+        // On the ring: each side has the other's answer within one pixel.
+        if (near(ni, x, y, vi.hit[i]) && near(vi, x, y, ni.hit[i]))
+          ++ring;
+        else
+          ++off_ring;
+      }
+    }
+  std::sort(dz.begin(), dz.end());
+  auto q = [&](double f) { return dz.empty() ? 0.0 : dz[size_t(f * double(dz.size() - 1))]; };
+  out["check"] = {{"vox_hit_pixels", vox_hits},
+                  {"nano_hit_pixels", nano_hits},
+                  {"both_hit", both},
+                  {"miss_fraction", 1.0 - double(vox_hits) / pixels},
+                  {"differ_on_ring", ring},
+                  {"differ_off_ring", off_ring},
+                  {"depth_diff_voxels_median", q(0.5)},
+                  {"depth_diff_voxels_p99", q(0.99)},
+                  {"depth_diff_voxels_max", q(1.0)},
+                  {"ok", off_ring == 0}};
+  printf("%s\n", out.dump(2).c_str());
+  fprintf(stderr, "vox %.3g rays/s, nano %.3g rays/s: vox/nano %.2fx; check %s (%llu pixels differ on the "
+          "silhouette ring, %llu off it)\n",
+          pixels / vm, pixels / nm, nm / vm, off_ring == 0 ? "ok" : "FAILED",
+          (unsigned long long)ring, (unsigned long long)off_ring);
+  return off_ring == 0 ? 0 : 3;
+}
