@@ -5,11 +5,17 @@
 
 #include "core/progress.h"
 #include "ingest/ingest.h"
+#include "ingest/limits.h"
 
 namespace vox {
 
 StatusOr<IngestStats> Ingest(const IngestOptions& options, ProgressSink* progress) {
   return IngestWithWriter(options, &StoreWriter::Create, progress);
+}
+
+StatusOr<IngestStats> Ingest(const IngestOptions& options, const IngestLimits& limits,
+                             ProgressSink* progress) {
+  return IngestWithWriter(options, limits, &StoreWriter::Create, progress);
 }
 
 namespace {

@@ -13,6 +13,7 @@
 //   placement.h             levels and origin.
 #include "core/stopwatch.h"
 #include "ingest/ingest.h"
+#include "ingest/limits.h"
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -74,8 +75,8 @@ std::string FormatDouble(double v) {
   return buf;
 }
 
-StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& factory,
-                                 ProgressSink* progress) {
+StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const IngestLimits& limits,
+                                 const WriterFactory& factory, ProgressSink* progress) {
   const Stopwatch t_start;
   IngestStats stats;
   if (o.input.empty()) return InvalidArgumentError("no input .vdb file given");
@@ -229,6 +230,7 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
     budget = limit.bytes;
   }
   cx.memory_budget = budget;
+  cx.max_tile_voxels = limits.max_tile_voxels;
   stats.memory_budget = budget;
   if (progress) progress->Message("reading the topology of " + where);
   const openvdb::math::Transform& xform = meta_grid->transform();
@@ -256,11 +258,10 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const WriterFactory& fa
 
 }  // namespace
 
-
-StatusOr<IngestStats> IngestWithWriter(const IngestOptions& options, const WriterFactory& factory,
-                                       ProgressSink* progress) {
+StatusOr<IngestStats> IngestWithWriter(const IngestOptions& options, const IngestLimits& limits,
+                                       const WriterFactory& factory, ProgressSink* progress) {
   try {
-    return IngestImpl(options, factory, progress);
+    return IngestImpl(options, limits, factory, progress);
   } catch (const openvdb::Exception& e) {
     return CorruptionError(options.input + ": OpenVDB cannot read it: " + e.what());
   } catch (const std::bad_alloc&) {
@@ -269,6 +270,12 @@ StatusOr<IngestStats> IngestWithWriter(const IngestOptions& options, const Write
   } catch (const std::exception& e) {
     return InternalError("ingesting " + options.input + ": " + e.what());
   }
+}
+
+
+StatusOr<IngestStats> IngestWithWriter(const IngestOptions& options, const WriterFactory& factory,
+                                       ProgressSink* progress) {
+  return IngestWithWriter(options, IngestLimits{}, factory, progress);
 }
 
 }  // namespace vox

@@ -264,6 +264,11 @@ std::unique_ptr<RandomAccessFile> NewMemoryFile(std::string name, std::string co
 Status FaultInjectionFile::Read(uint64_t offset, size_t n, uint8_t* scratch) const {
   int64_t left = fail_after_.load();
   if (left == 0) return IoError("'" + path() + "': injected read error");
+  const uint64_t every = fail_every_.load();
+  if (every > 0 && (calls_.fetch_add(1) + 1) % every == 0) {
+    injected_.fetch_add(1);
+    return IoError("'" + path() + "': injected read error");
+  }
   if (left > 0) fail_after_.fetch_sub(1);
   ++reads_;
   VOX_RETURN_IF_ERROR(base_->Read(offset, n, scratch));

@@ -68,6 +68,9 @@ class FaultInjectionFile : public RandomAccessFile {
 
   // Reads after the next `n` successful ones fail; -1 never fails.
   void FailReadsAfter(int64_t n) { fail_after_ = n; }
+  // Every `n`th read fails (IoError), the others succeed; 0 turns it off.
+  void FailEveryNthRead(uint64_t n) { fail_every_ = n; }
+  uint64_t injected_failures() const { return injected_.load(); }
   // Reads covering byte `offset` see it XORed with `mask`.
   void FlipByte(uint64_t offset, uint8_t mask) {
     flip_offset_ = offset;
@@ -81,6 +84,8 @@ class FaultInjectionFile : public RandomAccessFile {
   uint64_t flip_offset_ = UINT64_MAX;
   uint8_t flip_mask_ = 0;
   mutable std::atomic<uint64_t> reads_{0};
+  std::atomic<uint64_t> fail_every_{0};
+  mutable std::atomic<uint64_t> calls_{0}, injected_{0};
 };
 
 // An append-only file written through a buffer. Errors (disk full, file too

@@ -176,6 +176,12 @@ class StoreImpl : public Store {
     return sizeof(DecodedBrick) + uint64_t(e.num_cells) * sizeof(CompactCell) +
            uint64_t(e.voxel_count) * AttrBytesPerVoxel(flags_) + DecodedBrick::kOverheadBytes;
   }
+  // A brick is decoded only if it fits what the budget gives one brick: the
+  // brick cache's capacity, or kMinBrickAllowance if that is smaller (a tiny
+  // cache still decodes ordinary bricks and evicts them at once). Checked
+  // from the table row, before anything is allocated or read.
+  static constexpr uint64_t kMinBrickAllowance = uint64_t(4) << 20;
+  Status CheckBrickFits(uint32_t id) const;
   StatusOr<std::shared_ptr<DecodedBrick>> LoadBrick(uint32_t id);
   // Checks and decodes brick `id` from its record (stored_size + trailer bytes).
   StatusOr<std::shared_ptr<DecodedBrick>> DecodeRecord(uint32_t id, const uint8_t* record);
@@ -361,7 +367,23 @@ void StoreImpl::ReadRun(const Run& run, uint64_t generation, std::vector<uint8_t
   }
 }
 
+Status StoreImpl::CheckBrickFits(uint32_t id) const {
+  const BrickEntry& e = table_[id];
+  // Decoding holds the decompressed bytes and the decoded brick at once.
+  const uint64_t need = DecodedCharge(e) + e.raw_size;
+  const uint64_t allowed = std::max<uint64_t>(cache_.capacity(), kMinBrickAllowance);
+  if (need <= allowed) return OkStatus();
+  return ResourceExhaustedError(
+      "brick " + std::to_string(id) + " of store '" + dir_ + "' would take " +
+      std::to_string(need) + " bytes to decode (" + std::to_string(e.num_cells) + " cells, " +
+      std::to_string(e.voxel_count) + " voxels, " + std::to_string(e.raw_size) +
+      " bytes decompressed), more than the " + std::to_string(allowed) +
+      " bytes the memory budget allows one brick (the brick cache): the store is corrupt, or "
+      "it needs a larger brick cache");
+}
+
 StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
+  VOX_RETURN_IF_ERROR(CheckBrickFits(id));
   const BrickEntry& e = table_[id];
   // Read the record (its own bytes only), then check and decode it.
   thread_local std::vector<uint8_t> record;
@@ -381,6 +403,7 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
 
 StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id,
                                                                 const uint8_t* record) {
+  VOX_RETURN_IF_ERROR(CheckBrickFits(id));
   const BrickEntry& e = table_[id];
   const std::string& path = bricks_->path();
   auto where = [&] {

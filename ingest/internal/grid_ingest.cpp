@@ -79,6 +79,14 @@ class GridIngest {
       tiles_.push_back({t.box, t.value});
       cx_.stats->occupied_tile_voxels += t.box.volume();
     }
+    if (cx_.stats->occupied_tile_voxels > cx_.max_tile_voxels)
+      return ResourceExhaustedError(
+          cx_.options.input + ": grid " + Quote(cx_.meta.grid_name) +
+          " has occupied active tiles that expand to " +
+          std::to_string(cx_.stats->occupied_tile_voxels) + " voxels, more than the limit of " +
+          std::to_string(cx_.max_tile_voxels) +
+          " (--max-voxels; raise it to ingest this grid, which takes time and space in "
+          "proportion)");
     cx_.stats->leaf_nodes = leaf_count;
     cx_.stats->active_voxels = topo_->active_voxels();
     cx_.stats->topology_bytes = topo_->MemoryBytes() + leaves_.capacity() * 4;

@@ -11,6 +11,8 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cstdint>
+
 #include "core/status.h"
 #include "ingest/ingest.h"
 #include "ingest/internal/color.h"
@@ -27,6 +29,7 @@ struct Context {
   StoreMeta meta;  // source, grid, class, transform, options filled in by the caller
   ColorSource* color = nullptr;
   uint64_t memory_budget = 0;  // bytes the ingest may hold (0: no limit known)
+  uint64_t max_tile_voxels = UINT64_MAX;  // IngestLimits::max_tile_voxels
 };
 
 // Ingests `grid` of the file cx.options.input (whose layout is `layout`; a

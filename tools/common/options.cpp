@@ -1,6 +1,7 @@
 #include "tools/common/options.h"
 
 #include <climits>
+#include <cmath>
 #include <variant>
 
 #include "core/shapes.h"
@@ -26,7 +27,7 @@ bool OneOf(std::string_view flag, std::initializer_list<std::string_view> names)
 FlagArity IngestFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--force", "--quiet", "--no-lod"})) return FlagArity::kSwitch;
   if (OneOf(flag, {"--grid", "--levels", "--isovalue", "--threshold", "--color", "--zstd-level",
-                   "--normal-bits", "--threads", "--memory-mb", "--add-lod"}))
+                   "--normal-bits", "--threads", "--memory-mb", "--add-lod", "--max-voxels"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -41,6 +42,11 @@ Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::str
     o.lod = false;
   } else if (flag == "--add-lod") {
     c->add_lod = v;
+  } else if (flag == "--max-voxels") {
+    double d = 0;
+    if (!ParseDouble(v, &d) || !(d >= 1) || d > 1e18 || d != std::floor(d))
+      return InvalidArgumentError("--max-voxels " + v + ": must be a whole number of voxels (1e10 is fine)");
+    c->limits.max_tile_voxels = uint64_t(d);
   } else if (flag == "--memory-mb") {
     VOX_ASSIGN_OR_RETURN(o.memory_bytes, ParseMemorySize("--memory-mb", v));
   } else if (flag == "--grid") {
@@ -68,7 +74,9 @@ Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::str
 
 Status CheckIngestCommand(const IngestCommand& c) {
   const IngestOptions& o = c.options;
-  if (o.threads < 0) return InvalidArgumentError("--threads must be >= 1 (or 0 for all cores)");
+  if (o.threads < 0 || o.threads > kMaxThreads)
+    return InvalidArgumentError("--threads " + std::to_string(o.threads) + ": must be in 1.." +
+                                std::to_string(kMaxThreads) + " (or 0 for all cores)");
   if (o.zstd_level < 1 || o.zstd_level > 22)
     return InvalidArgumentError("--zstd-level must be in 1..22");
   if (auto lv = ParseLevels(o.levels); !lv.ok()) return InvalidArgumentError(lv.status().message());

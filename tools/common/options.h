@@ -20,6 +20,7 @@
 #include "core/core.h"
 #include "core/status.h"
 #include "ingest/ingest.h"
+#include "ingest/limits.h"
 #include "render/job.h"
 #include "render/lod.h"
 
@@ -32,6 +33,7 @@ struct IngestCommand {
   IngestOptions options;
   bool quiet = false;
   std::string add_lod;  // --add-lod STORE: build the pyramid of an existing store instead
+  IngestLimits limits;  // --max-voxels
 };
 FlagArity IngestFlagArity(std::string_view flag);
 // InvalidArgumentError with vox-ingest's usage message for a bad value.

@@ -1,16 +1,29 @@
 // vox-ingest: reads an OpenVDB grid and writes a vox store.
 //   vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]
 //              [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B] [--threads N]
-//              [--memory-mb N] [--no-lod] [--force] [--quiet]
+//              [--memory-mb N] [--max-voxels N] [--no-lod] [--force] [--quiet]
 //   vox-ingest --add-lod store/ [--force] [--quiet]
-// Exit codes: 0 done, 1 the ingest failed, 2 bad command line, 128+N killed
-// by signal N (SIGINT, SIGTERM: the temporary store directory is removed).
+// Exit codes: 0 done, 1 the ingest failed (or crashed: see below), 2 bad
+// command line, 128+N killed by signal N (SIGINT, SIGTERM, SIGKILL: the
+// temporary store directory is removed).
+//
+// The ingest runs in a forked child. OpenVDB's reader can crash on a corrupt
+// .vdb (a segfault in its decompression or topology code), and a file
+// truncated while it is read raises SIGBUS; the parent sees the child die by
+// a signal, reports it naming the file, removes the child's temporary store
+// and exits 1. The parent forwards SIGINT and SIGTERM to the child; if the
+// parent itself is SIGKILLed, the child is killed with it (PR_SET_PDEATHSIG)
+// and the next run removes the temporary directory it leaves.
 #include <pthread.h>
 #include <signal.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <new>
 #include <optional>
@@ -19,6 +32,7 @@
 #include <vector>
 
 #include "ingest/ingest.h"
+#include "ingest/limits.h"
 #include "storage/lod.h"
 #include "storage/memory_budget.h"
 #include "tools/common/flags.h"
@@ -29,7 +43,7 @@ namespace {
 constexpr char kUsage[] =
     "usage: vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]\n"
     "                  [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B]\n"
-    "                  [--threads N] [--memory-mb N] [--no-lod] [--force] [--quiet]\n"
+    "                  [--threads N] [--memory-mb N] [--max-voxels N] [--no-lod] [--force] [--quiet]\n"
     "       vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]\n"
     "  --grid NAME      the grid to ingest (default: the first float or double grid)\n"
     "  --levels         auto (32^3 bricks) or N1+N2: N1 resident levels above bricks of\n"
@@ -43,6 +57,8 @@ constexpr char kUsage[] =
     "  --threads N      worker threads (default: all cores)\n"
     "  --memory-mb N    memory the ingest may hold, MiB or with a unit (512, 2G; default: the\n"
     "                   process's memory cgroup limit or available memory)\n"
+    "  --max-voxels N   the most voxels active tiles may expand to (default 1e10); a grid\n"
+    "                   whose occupied tiles cover more is refused\n"
     "  --no-lod         skip the level-of-detail pyramid (store/lod/, for vox-render --lod;\n"
     "                   written by default)\n"
     "  --add-lod STORE  add the level-of-detail pyramid to an existing store (--force\n"
@@ -59,14 +75,14 @@ int UsageError(const std::string& message) {
 // taken by one thread with sigwait, which is an ordinary thread: it removes
 // this process's temporary store directory `.NAME.tmp-PID-*` beside the
 // output (storage/FORMAT.md, "Writing") and exits with 128 + the signal.
-void RemoveOwnTemporaries(const std::string& output) {
+void RemoveOwnTemporaries(const std::string& output, pid_t pid) {
   namespace fs = std::filesystem;
   std::string target = output;
   while (target.size() > 1 && target.back() == '/') target.pop_back();
   fs::path tp(target), parent = tp.parent_path();
   if (parent.empty()) parent = ".";
   const std::string prefix =
-      "." + tp.filename().string() + ".tmp-" + std::to_string(getpid()) + "-";
+      "." + tp.filename().string() + ".tmp-" + std::to_string(pid) + "-";
   for (int attempt = 0; attempt < 3; ++attempt) {  // writers may still be adding files
     std::error_code ec;
     bool left = false;
@@ -91,21 +107,27 @@ void StartSignalThread(const std::string& output) {
     if (sigwait(&set, &sig) != 0) return;
     std::fprintf(stderr, "\nvox-ingest: %s: removing the unfinished store and exiting\n",
                  sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)");
-    RemoveOwnTemporaries(output);
+    RemoveOwnTemporaries(output, getpid());
     std::_Exit(128 + sig);
   }).detach();
 }
 
-// Test hook: with VOX_INGEST_TEST_STALL set, the first progress report
+// Test hooks: with VOX_INGEST_TEST_STALL set, the first progress report
 // stalls the ingest (the temporary store exists), so tests can signal a
-// real ingest mid-way.
+// real ingest mid-way; with VOX_INGEST_TEST_CRASH=N it raises signal N
+// there instead (a crash while reading, at a known point).
 class StallingProgress : public vox::ProgressSink {
  public:
-  explicit StallingProgress(vox::ProgressSink* inner) : inner_(inner) {}
+  explicit StallingProgress(vox::ProgressSink* inner, int crash_signal)
+      : inner_(inner), crash_signal_(crash_signal) {}
   void Message(std::string_view line) override {
     if (inner_) inner_->Message(line);
   }
   void Progress(uint64_t done, uint64_t total, uint64_t voxels) override {
+    if (crash_signal_ > 0) {
+      signal(crash_signal_, SIG_DFL);
+      raise(crash_signal_);
+    }
     std::fprintf(stderr, "vox-ingest: test stall\n");
     for (;;) pause();
     if (inner_) inner_->Progress(done, total, voxels);
@@ -116,9 +138,63 @@ class StallingProgress : public vox::ProgressSink {
 
  private:
   vox::ProgressSink* inner_;
+  int crash_signal_ = 0;
 };
 
+volatile sig_atomic_t g_child = 0;
+
+extern "C" void ForwardToChild(int sig) {
+  if (g_child > 0) kill(pid_t(g_child), sig);
+}
+
+// Runs `ingest` in a forked child and returns its exit code; a child killed
+// by a signal is reported (naming `input`) and its temporary store removed.
+template <typename F>
+int RunInChild(const std::string& input, const std::string& output, F ingest) {
+  std::fflush(nullptr);
+  const pid_t parent = getpid();
+  const pid_t child = fork();
+  if (child < 0) return ingest();  // cannot fork: run unprotected
+  if (child == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(128 + SIGKILL);  // the parent died before prctl
+    const int code = ingest();
+    std::fflush(nullptr);
+    _exit(code);
+  }
+  g_child = child;
+  struct sigaction sa;
+  std::memset(&sa, 0, sizeof sa);
+  sa.sa_handler = ForwardToChild;
+  sigemptyset(&sa.sa_mask);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
+  int status = 0;
+  while (waitpid(child, &status, 0) < 0) {
+    if (errno != EINTR) {
+      std::perror("vox-ingest: waitpid");
+      return 1;
+    }
+  }
+  if (WIFEXITED(status)) return WEXITSTATUS(status);
+  const int sig = WIFSIGNALED(status) ? WTERMSIG(status) : SIGKILL;
+  RemoveOwnTemporaries(output, child);
+  if (sig == SIGKILL || sig == SIGINT || sig == SIGTERM || sig == SIGHUP) {
+    std::fprintf(stderr, "vox-ingest: the ingest was killed by signal %d (%s)%s; its unfinished "
+                 "store is removed\n", sig, strsignal(sig),
+                 sig == SIGKILL ? ", perhaps for lack of memory" : "");
+    return 128 + sig;
+  }
+  std::fprintf(stderr,
+               "vox-ingest: %s: OpenVDB crashed reading the grid (signal %d, %s): the file is "
+               "corrupt or truncated\n",
+               input.c_str(), sig, strsignal(sig));
+  return 1;
+}
+
 }  // namespace
+
+static int IngestAndReport(const vox::IngestOptions& o, const vox::IngestLimits& limits,
+                           bool quiet);
 
 static int RunTool(int argc, char** argv) {
   vox::IngestCommand command;
@@ -176,13 +252,19 @@ static int RunTool(int argc, char** argv) {
   o.output = positional[1];
   if (vox::Status s = vox::CheckIngestCommand(command); !s.ok()) return UsageError(s.message());
 
+  return RunInChild(o.input, o.output, [&] { return IngestAndReport(o, command.limits, quiet); });
+}
+
+static int IngestAndReport(const vox::IngestOptions& o, const vox::IngestLimits& limits,
+                           bool quiet) {
   StartSignalThread(o.output);
   std::unique_ptr<vox::ProgressSink> progress;
   if (!quiet) progress = vox::MakeStderrProgress(isatty(STDERR_FILENO) != 0);
   std::unique_ptr<vox::ProgressSink> stall;
-  if (std::getenv("VOX_INGEST_TEST_STALL") != nullptr)
-    stall = std::make_unique<StallingProgress>(progress.get());
-  auto stats = vox::Ingest(o, stall ? stall.get() : progress.get());
+  const char* crash = std::getenv("VOX_INGEST_TEST_CRASH");
+  if (std::getenv("VOX_INGEST_TEST_STALL") != nullptr || crash != nullptr)
+    stall = std::make_unique<StallingProgress>(progress.get(), crash ? std::atoi(crash) : 0);
+  auto stats = vox::Ingest(o, limits, stall ? stall.get() : progress.get());
   if (!stats.ok()) {
     std::fprintf(stderr, "vox-ingest: %s\n", stats.status().ToString().c_str());
     return 1;
