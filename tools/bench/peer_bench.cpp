@@ -365,6 +365,7 @@ int main(int argc, char** argv) {
     vox::FrameOptions fo;
     fo.threads = threads;
     fo.tile_size = tile;
+    *st = vox::FrameStats();  // RenderFrame adds to the counters
     return vox::RenderFrame(r ? *r : **renderer, fo, st);
   };
   auto nano_frame = [&] {
