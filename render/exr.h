@@ -9,8 +9,9 @@
 // (world-space unit normal) and voxel.i voxel.j voxel.k (OpenVDB index
 // coordinates of the hit voxel; exact up to 2^24). R, G, B and A are HALF
 // unless ImageLayers::float_color asks for FLOAT (vox-render --float); the
-// others are always FLOAT. Tiles are ZIP-compressed at zlib's fastest level
-// unless the writer is told otherwise (ExrCompression).
+// others are always FLOAT. Tiles are compressed as the writer is told
+// (ExrCompression): vox-render's frames RLE, its parts none, vox-merge's
+// output ZIP at zlib's fastest level.
 // Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
 // vox:part ("I/N"), vox:tileOrder, vox:storeId (the store's store_id, hex),
 // plus renderTimeSeconds (float, as pbrt) and vox:timings (JSON), which are

@@ -79,7 +79,7 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
     // time of compressing in the calling thread, docs/benchmarks.md).
     SetExrThreads(0);
     const ExrCompression compression = options.compression.value_or(
-        options.part.whole() ? ExrCompression::kZip : ExrCompression::kNone);
+        options.part.whole() ? ExrCompression::kRle : ExrCompression::kNone);
     VOX_ASSIGN_OR_RETURN(writer,
                          TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
                                                 options.tile_size, img_layers, attrs, compression));

@@ -118,7 +118,7 @@ TEST_F(CliTest, FloatAndCompressionFlags) {
   auto f = ReadExrInfo(Path("f.exr"));
   ASSERT_TRUE(h.ok() && f.ok());
   EXPECT_FALSE(h->float_color);
-  EXPECT_EQ(h->compression, "zip");
+  EXPECT_EQ(h->compression, "rle");
   EXPECT_TRUE(f->float_color);
   EXPECT_EQ(f->compression, "none");
   r = Exec(Render("--cam " + cam + " -o " + Path("x.exr") + " --compression lzw"));

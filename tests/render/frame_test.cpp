@@ -75,7 +75,7 @@ class FrameTest : public ::testing::Test {
 };
 
 // Default output: R G B A as HALF (each the renderer's float rounded to the
-// nearest half), Z and the layers as FLOAT, ZIP-compressed.
+// nearest half), Z and the layers as FLOAT, RLE-compressed.
 TEST_F(FrameTest, HalfColourIsTheRenderersFloatsRounded) {
   ImageLayers layers;
   layers.normal = layers.voxel = true;
@@ -88,7 +88,7 @@ TEST_F(FrameTest, HalfColourIsTheRenderersFloatsRounded) {
   auto img = ReadExr(Path("half.exr"));
   ASSERT_TRUE(img.ok()) << img.status().ToString();
   EXPECT_FALSE(img->info.float_color);
-  EXPECT_EQ(img->info.compression, "zip");
+  EXPECT_EQ(img->info.compression, "rle");
   size_t inexact = 0;
   for (const auto& [name, pixels] : mem.ch) {
     ASSERT_TRUE(img->pixels.count(name)) << name;

@@ -28,7 +28,9 @@
 //
 //   vox-peer-bench IN.vdb [--store DIR] [--cam cam.json | --size WxH]
 //                  [--rounds N] [--threads N] [--tile-size T] [--grid NAME]
-//                  [--no-clip]
+//                  [--no-clip | --ab-clip]
+// --ab-clip also times vox without the occupied-box clip (a third renderer in
+// the alternation), for A/B in one run.
 #include <nanovdb/NanoVDB.h>
 #include <nanovdb/util/HDDA.h>
 #include <nanovdb/util/OpenToNanoVDB.h>
@@ -70,7 +72,7 @@ using vox::TileRect;
 
 constexpr char kUsage[] =
     "usage: vox-peer-bench IN.vdb [--store DIR] [--cam cam.json | --size WxH] [--rounds N]\n"
-    "                      [--threads N] [--tile-size T] [--grid NAME] [--no-clip]\n"
+    "                      [--threads N] [--tile-size T] [--grid NAME] [--no-clip | --ab-clip]\n"
     "  --store      the vox store of IN.vdb (ingested there first when DIR does not exist;\n"
     "               default: a temporary store, removed at the end)\n"
     "  --cam        camera (default: vox-render's default camera, --size pixels, 1024x1024)\n"
@@ -78,7 +80,8 @@ constexpr char kUsage[] =
     "  --threads    threads of both renderers (default 2)\n"
     "  --tile-size  tile side of both (default 64)\n"
     "  --grid       the level-set grid (default: the file's first float grid)\n"
-    "  --no-clip    vox traces without clipping rays to the occupied box (A/B)\n";
+    "  --no-clip    vox traces without clipping rays to the occupied box\n"
+    "  --ab-clip    time vox with and without the clip, alternating with NanoVDB\n";
 
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -195,7 +198,7 @@ int Fail(const std::string& msg) {
 int main(int argc, char** argv) {
   std::string vdb_path, store_path, cam_path, grid_name;
   int rounds = 7, threads = 2, tile = 64, width = 1024, height = 1024;
-  bool clip = true;
+  bool clip = true, ab_clip = false;
   vox::FlagReader flags(argc, argv);
   auto usage = [](const std::string& error) {
     if (!error.empty()) fprintf(stderr, "vox-peer-bench: %s\n", error.c_str());
@@ -210,6 +213,10 @@ int main(int argc, char** argv) {
     }
     if (a == "--no-clip") {
       clip = false;
+      continue;
+    }
+    if (a == "--ab-clip") {
+      ab_clip = true;
       continue;
     }
     if (!flags.IsFlag()) {
@@ -346,11 +353,20 @@ int main(int argc, char** argv) {
     w.state = (*renderer)->NewThreadState();
     return w;
   });
-  auto vox_frame = [&](vox::FrameStats* st) {
+  std::unique_ptr<vox::Renderer> plain;  // --ab-clip: vox without the clip
+  if (ab_clip) {
+    vox::RenderOptions po = ro;
+    po.clip_to_occupied = !clip;
+    auto p = vox::Renderer::Create(store->get(), cam, scene, po);
+    if (!p.ok()) return Fail(p.status().ToString());
+    plain = std::move(p).value();
+  }
+  auto vox_frame = [&](vox::FrameStats* st, const vox::Renderer* r = nullptr) {
     vox::FrameOptions fo;
     fo.threads = threads;
     fo.tile_size = tile;
-    return vox::RenderFrame(**renderer, fo, st);
+    *st = vox::FrameStats();  // RenderFrame adds to the counters
+    return vox::RenderFrame(r ? *r : **renderer, fo, st);
   };
   auto nano_frame = [&] {
     vox::Stopwatch sw;
@@ -358,9 +374,12 @@ int main(int argc, char** argv) {
              [&](const TileRect& r, Worker& w) { caster.RenderTile(r, &w.buf); });
     return sw.Seconds();
   };
-  std::vector<double> vox_s, nano_s;
+  std::vector<double> vox_s, nano_s, plain_s;
   vox::FrameStats st;
   if (Status s = vox_frame(&st); !s.ok()) return Fail(s.ToString());
+  if (plain) {
+    if (Status s = vox_frame(&st, plain.get()); !s.ok()) return Fail(s.ToString());
+  }
   out["vox_cold_seconds"] = st.render_seconds;
   out["nano_first_seconds"] = nano_frame();
   vox::RenderCounters vox_counters;
@@ -369,6 +388,10 @@ int main(int argc, char** argv) {
     vox_s.push_back(st.render_seconds);
     vox_counters = st.counters;
     nano_s.push_back(nano_frame());
+    if (plain) {
+      if (Status s = vox_frame(&st, plain.get()); !s.ok()) return Fail(s.ToString());
+      plain_s.push_back(st.render_seconds);
+    }
   }
   const double vm = Median(vox_s), nm = Median(nano_s);
   out["threads"] = threads;
@@ -383,6 +406,15 @@ int main(int argc, char** argv) {
   out["nano_rays_per_second"] = pixels / nm;
   out["vox_over_nano"] = nm / vm;
   out["vox_dda_moves_per_ray"] = double(vox_counters.trace.total_moves()) / pixels;
+  if (plain) {
+    const double pm = Median(plain_s);
+    out["vox_other_clip_seconds"] = plain_s;
+    out["vox_other_clip_rays_per_second"] = pixels / pm;
+    out["vox_other_clip_over_nano"] = nm / pm;
+    out["clip_speedup"] = clip ? pm / vm : vm / pm;
+    fprintf(stderr, "vox with the occupied-box clip: %.2fx the rays/s without it\n",
+            clip ? pm / vm : vm / pm);
+  }
 
   // The check: one frame of each, pixel by pixel.
   Image vi, ni;
