@@ -56,7 +56,7 @@ nlohmann::json LodStatsJson(const Renderer& r, const FrameStats& st,
   return j;
 }
 
-// Without --lod: when the voxels at the volume's centre are much smaller
+// Without --lod: when the voxels where the volume begins are much smaller
 // than a pixel of the central ray, says once that --lod 1 would read about
 // N times fewer bricks (N from the pyramid's brick counts at the level the
 // central pixel's cone picks there).
@@ -65,9 +65,12 @@ void LodHint(const std::string& dir, Store& base, const Camera& cam, FILE* log) 
   if (m.voxel_count == 0 || !(m.voxel_size > 0)) return;
   glm::dvec3 lo, hi;
   WorldBounds(m, &lo, &hi);
-  double pixel;  // world size of the central pixel at the volume's centre
+  // The central pixel's width where the volume begins (the nearest point of
+  // its box: most of what a full view sees lies about that far).
+  const glm::dvec3 nearest = glm::clamp(cam.position, lo, hi);
+  double pixel;
   if (cam.projection == Projection::kPerspective)
-    pixel = glm::length(0.5 * (lo + hi) - cam.position) * 2.0 *
+    pixel = glm::length(nearest - cam.position) * 2.0 *
             std::tan(cam.fov_deg * (3.14159265358979323846 / 360.0)) / cam.width;
   else
     pixel = cam.ortho_width / cam.width;
@@ -90,7 +93,8 @@ void LodHint(const std::string& dir, Store& base, const Camera& cam, FILE* log) 
     }
   }
   fprintf(log,
-          "vox-render: about %.1f voxels fall across a pixel; --lod 1 would read %s bricks%s\n",
+          "vox-render: about %.1f voxels fall across a pixel at the volume's front; --lod 1 would "
+          "read %s bricks%s\n",
           voxels, estimate.c_str(),
           HasLod(dir) ? "" : (" (add the pyramid first: vox-ingest --add-lod " + dir + ")").c_str());
 }

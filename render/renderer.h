@@ -27,9 +27,17 @@
 // segment at most every 3 voxels along the ray. A = 1 - transmittance.
 // Integration stops once transmittance falls below 1e-6.
 //
+// Level of detail (RenderOptions::lod, docs/lod.md): primary rays carry a
+// cone one pixel wide and stop at the first occupied cell of the volume's
+// pyramid no larger than F times the cone (render/lod.h); a coarse hit's
+// shadow and reflection rays carry the cone on, a level-0 hit's are exact,
+// fog integrates the cells' mean density. Rays whose level stays 0 take
+// exactly the path without LOD.
+//
 // The code: renderer.cpp (set-up, the pixel and tile loop), surface.cpp
 // (hits, surface shading, reflection, refraction), fog.cpp (fog and
-// transmittance); render/internal/tracing.h holds what they share.
+// transmittance), lod_render.cpp (level-of-detail rays);
+// render/internal/tracing.h holds what they share.
 //
 // Thread safety: a Renderer is immutable after Create; RenderTile is const
 // and runs concurrently (one TileBuffer and RenderCounters per thread).
@@ -206,7 +214,7 @@ class Renderer {
                      int depth, Ctx& cx) const;
   bool Occluded(const Ray& gr, double t_max, Ctx& cx) const;
 
-  // lod.cpp hooks (render/lod_render.cpp): LOD versions of the above.
+  // lod_render.cpp: level-of-detail versions of the above (render/lod.h).
   // The first hit along gr with the cone; *level its LOD level.
   bool FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, Ctx& cx, Hit* hit,
                   int* level, VoxelAttributes* attrs) const;

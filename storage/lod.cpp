@@ -196,7 +196,7 @@ class BaseReader {
   }
 
  private:
-  static constexpr uint32_t kPrefetchWindow = 64;
+  static constexpr uint32_t kPrefetchWindow = 8;
 
   Status Walk(const CompactCell* pool, uint32_t cell, int level, const glm::u64vec3& coord,
               uint32_t brick, const void* brick_data) {

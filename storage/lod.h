@@ -54,8 +54,10 @@ struct LodBuildOptions {
   int zstd_level = 3;
   int normal_bits = 16;
   bool force = false;  // replace an existing lod/ pyramid
-  // Decompressed-brick cache for reading the base store.
-  size_t cache_bytes = size_t(64) << 20;
+  // Decompressed-brick cache for reading the base store: each brick is read
+  // once, so it needs only the brick being walked and those prefetched (the
+  // build's memory stays flat however large the store).
+  size_t cache_bytes = size_t(2) << 20;
   // Polled between bricks: when it turns true, the build stops and writes no pyramid.
   const std::atomic<bool>* cancel = nullptr;
   // Called after each base brick (from the calling thread).

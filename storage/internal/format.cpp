@@ -170,9 +170,7 @@ StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& pa
   m.threshold = r.F64();
   m.build_options = r.String();
   if (!r.ok()) return CorruptionError("'" + path + "': metadata block too short");
-  // 1.1 fields (a 1.0 store has none: a base store); fields a newer minor
-  // version appends after them are ignored.
-  if (r.remaining() >= 10) {
+  if (r.remaining() >= 10) {  // 1.1 fields (1.0: none, a base store); later ones are ignored
     m.lod_level = r.U8();
     m.lod_base_store_id = r.U64();
     m.lod_base_levels = r.U8();
@@ -188,11 +186,9 @@ StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& pa
     return bad("brick level " + std::to_string(m.brick_level) + " outside 1.." +
                std::to_string(m.levels));
   if (flags & ~kAttrAll) return bad("unknown attribute flags " + std::to_string(flags));
-  if (m.lod_level < 0 || m.lod_level > kMaxLevels ||
-      (m.lod_level == 0) != (m.lod_base_store_id == 0 && m.lod_base_levels == 0) ||
+  if ((m.lod_level == 0) != (m.lod_base_store_id == 0 && m.lod_base_levels == 0) ||
       (m.lod_level > 0 && m.lod_base_levels != m.levels + m.lod_level))
-    return bad("inconsistent level-of-detail fields (level " + std::to_string(m.lod_level) +
-               ", base levels " + std::to_string(m.lod_base_levels) + ")");
+    return bad("inconsistent level-of-detail fields (level " + std::to_string(m.lod_level) + ")");
   m.has_normal = flags & kAttrNormal;
   m.has_density = flags & kAttrDensity;
   m.has_color = flags & kAttrColor;
@@ -382,14 +378,6 @@ void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std:
     for (uint32_t i = 0; i < count; ++i)
       ScatterPlanes(planes, count, i, 2, EncodeCoverage(attrs[i].coverage));
 }
-
-uint16_t EncodeCoverage(float c) {
-  if (!(c > 0)) return 1;  // an occupied cell has some coverage
-  if (c >= 1) return 65535;
-  return uint16_t(std::clamp(std::lround(double(c) * 65535.0), 1L, 65535L));
-}
-
-float DecodeCoverage(uint16_t q) { return float(q) / 65535.0f; }
 
 std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
                            int depth, uint8_t flags, int normal_bits) {

@@ -4,6 +4,8 @@
 #ifndef VOX_STORAGE_INTERNAL_FORMAT_H_
 #define VOX_STORAGE_INTERNAL_FORMAT_H_
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -101,8 +103,11 @@ glm::vec3 DecodeOctNormal(uint32_t code);
 
 // Coverage as a 16-bit fraction: round(c * 65535), at least 1 (an occupied
 // cell is never empty); decoded as q / 65535.
-uint16_t EncodeCoverage(float c);
-float DecodeCoverage(uint16_t q);
+inline uint16_t EncodeCoverage(float c) {
+  if (!(c > 0)) return 1;  // an occupied cell has some coverage
+  return c >= 1 ? 65535 : uint16_t(std::clamp(std::lround(double(c) * 65535.0), 1L, 65535L));
+}
+inline float DecodeCoverage(uint16_t q) { return float(q) / 65535.0f; }
 
 // A voxel's attributes from planar attribute bytes (`count` voxels).
 VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,

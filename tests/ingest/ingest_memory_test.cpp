@@ -83,6 +83,7 @@ class IngestMemoryTest : public ::testing::Test {
     o.input = vdb;
     o.output = store;
     o.threads = 2;
+    o.lod = lod_;
     const int64_t before = g_live.load();
     g_peak.store(before);
     auto s = Ingest(o);
@@ -91,6 +92,7 @@ class IngestMemoryTest : public ::testing::Test {
   }
 
   testutil::TempDir dir_;
+  bool lod_ = false;  // the level-of-detail pyramid: measured apart (bounded, not growing)
 };
 
 TEST_F(IngestMemoryTest, PeakHeapGrowsFarSlowerThanTheFile) {
@@ -106,6 +108,12 @@ TEST_F(IngestMemoryTest, PeakHeapGrowsFarSlowerThanTheFile) {
               (long long)p_large, 100 * growth);
   EXPECT_GT(large, 10 * small);
   EXPECT_LT(growth, 0.25);
+  // The pyramid's pass adds its small brick cache, prefetches and one coarse
+  // brick per level: a bounded amount, not the volume.
+  lod_ = true;
+  const int64_t p_large_lod = PeakOfIngest(dir_.File("large.vdb"), dir_.File("large-lod.store"));
+  std::printf("with the pyramid: peak heap %lld bytes\n", (long long)p_large_lod);
+  EXPECT_LT(p_large_lod - p_large, int64_t(12) << 20);
 }
 
 TEST_F(IngestMemoryTest, BudgetBelowTheTablesIsRefused) {
