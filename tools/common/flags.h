@@ -46,6 +46,10 @@ class FlagReader {
   int pos_ = -1;
 };
 
+// The most worker threads a tool accepts for --threads: each costs a stack
+// and per-thread buffers, so a typo like 1000000 is refused, not obeyed.
+inline constexpr int kMaxThreads = 1024;
+
 // A whole decimal number in [lo, hi] (strtoll syntax: optional sign, leading
 // blanks allowed, nothing after the digits). False, leaving *out alone, when
 // `s` is empty, has other characters, overflows or is out of range.

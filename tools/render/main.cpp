@@ -90,8 +90,8 @@ static int RunTool(int argc, char** argv) {
         if (!bytes.ok()) return Usage(bytes.status().message());
         o.memory_bytes = *bytes;
       } else if (a == "--threads") {
-        if (!vox::ParseInt(v, 0, 4096, &o.threads))
-          return Usage("--threads '" + v + "': expected 0..4096");
+        if (!vox::ParseInt(v, 0, vox::kMaxThreads, &o.threads))
+          return Usage("--threads '" + v + "': expected 0.." + std::to_string(vox::kMaxThreads));
       } else if (a == "--tile-size") {
         if (!vox::ParseInt(v, INT_MIN, INT_MAX, &o.tile_size))
           return Usage("--tile-size '" + v + "': expected an integer");
