@@ -13,6 +13,9 @@
 namespace vox {
 namespace {
 
+// The smallest angle a perspective pixel may span, in radians.
+constexpr double kMinPixelAngle = 1e-12;
+
 bool Finite(const glm::dvec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
@@ -50,6 +53,17 @@ Status Camera::Finalize(std::string_view source) {
     if (!std::isfinite(fov_deg) || !(fov_deg > 0) || !(fov_deg < 180))
       return err("fov_deg", "must be in (0, 180) degrees");
     scale_x_ = std::tan(fov_deg * M_PI / 360.0);
+    // A pixel must subtend a distinguishable angle: below this, neighbouring
+    // pixels' unit directions differ by a few ulps (double resolves about
+    // 2.2e-16 of a unit vector) and the image is one ray repeated.
+    // (Square pixels: the same angle vertically.)
+    const double pixel_angle = 2.0 * scale_x_ / double(width);
+    if (!(pixel_angle >= kMinPixelAngle)) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.3g", pixel_angle);
+      return err("fov_deg", "is too small: a pixel would span " + std::string(buf) +
+                                " radians; the minimum is 1e-12 radians per pixel");
+    }
   } else {
     if (!std::isfinite(ortho_width) || !(ortho_width > 0))
       return err("ortho_width", "must be positive");

@@ -289,9 +289,11 @@ class StoreWriterImpl : public StoreWriter {
     std::lock_guard<std::mutex> lock(mu_);
     return FailLocked(std::move(s));
   }
+  // A failure is sticky; its message names the store being written (the
+  // OS error names the temporary file it hit).
   Status FailLocked(Status s) {
-    status_ = s;
-    return s;
+    status_ = s.WithContext("writing store '" + target_ + "'");
+    return status_;
   }
   // A brick refused after its coordinate was recorded may be added again.
   Status Unsee(const glm::u64vec3& c, Status s) {
@@ -493,7 +495,8 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
     return ErrnoError("cannot create temporary directory for store", temp, errno);
   auto w = std::make_unique<StoreWriterImpl>(target, temp, replace, meta, options,
                                              options.store_id != 0 ? options.store_id : id);
-  VOX_RETURN_IF_ERROR(w->Init());
+  Status init = w->Init();
+  if (!init.ok()) return init.WithContext("writing store '" + target + "'");
   return std::unique_ptr<StoreWriter>(std::move(w));
 }
 

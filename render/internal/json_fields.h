@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/status.h"
 
@@ -37,9 +38,31 @@ inline std::string Join(const std::string& prefix, std::string_view key) {
   return prefix.empty() ? std::string(key) : prefix + "." + std::string(key);
 }
 
-// Parses JSON text; a syntax error names the file and the byte offset.
+// Parses JSON text; a syntax error names the file and the byte offset. A key
+// that appears twice in one object is an error naming the key (JSON parsers
+// disagree on which one wins, so the file's meaning would be ambiguous).
 inline StatusOr<json> Parse(std::string_view text, std::string_view file) {
-  json j = json::parse(text, nullptr, /*allow_exceptions=*/false);
+  // One key set per open object; the first duplicate seen is reported.
+  std::vector<std::vector<std::string>> open_objects;
+  std::string duplicate;
+  auto watch = [&](int /*depth*/, json::parse_event_t event, json& parsed) {
+    if (event == json::parse_event_t::object_start) {
+      open_objects.emplace_back();
+    } else if (event == json::parse_event_t::object_end) {
+      if (!open_objects.empty()) open_objects.pop_back();
+    } else if (event == json::parse_event_t::key && !open_objects.empty() && parsed.is_string()) {
+      auto& keys = open_objects.back();
+      const std::string& k = parsed.get_ref<const std::string&>();
+      if (duplicate.empty() && std::find(keys.begin(), keys.end(), k) != keys.end())
+        duplicate = k;
+      keys.push_back(k);
+    }
+    return true;
+  };
+  json j = json::parse(text, watch, /*allow_exceptions=*/false);
+  if (!j.is_discarded() && !duplicate.empty())
+    return InvalidArgumentError(std::string(file) + ": key '" + duplicate +
+                                "' appears twice in one object");
   if (j.is_discarded()) {
     // Re-parse with exceptions to learn where it failed.
     try {

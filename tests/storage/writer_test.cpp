@@ -153,7 +153,7 @@ TEST_F(Writer, DiskFullNamesTheFileAndCleansUp) {
     fprintf(stderr, "%s clean=%d\n", s.ToString().c_str(), int(clean));
     _exit(s.code() == StatusCode::kResourceExhausted && clean ? 0 : 1);
   };
-  EXPECT_EXIT(child(), ::testing::ExitedWithCode(0), "ResourceExhausted: cannot write '.*bricks.vxb'.* clean=1");
+  EXPECT_EXIT(child(), ::testing::ExitedWithCode(0), "ResourceExhausted: writing store '.*': cannot write '.*bricks.vxb'.* clean=1");
 }
 
 }  // namespace

@@ -129,8 +129,8 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
   } else if (a == "--memory-mb") {
     VOX_ASSIGN_OR_RETURN(o->memory_bytes, ParseMemorySize("--memory-mb", v));
   } else if (a == "--threads") {
-    if (!ParseInt(v, 0, 4096, &o->threads))
-      return InvalidArgumentError("--threads '" + v + "': expected 0..4096");
+    if (!ParseInt(v, 0, kMaxThreads, &o->threads))
+      return InvalidArgumentError("--threads '" + v + "': expected 0.." + std::to_string(kMaxThreads));
   } else if (a == "--tile-size") {
     if (!ParseInt(v, INT_MIN, INT_MAX, &o->tile_size))
       return InvalidArgumentError("--tile-size '" + v + "': expected an integer");

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "tools/common/flags.h"
 #include "tools/gen/generate.h"
 #include "tools/gen/shapes.h"
 
@@ -98,6 +99,9 @@ int main(int argc, char** argv) {
       } else if (n < -1000000 || n > 1000000) {
         return UsageError(a + " " + v + ": out of range");
       } else if (a == "--threads") {
+        if (n < 0 || n > vox::kMaxThreads)
+          return UsageError("--threads " + v + ": must be in 1.." + std::to_string(vox::kMaxThreads) +
+                            " (or 0 for all cores)");
         o.threads = int(n);
       } else if (a == "--zstd-level") {
         o.zstd_level = int(n);
