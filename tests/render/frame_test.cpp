@@ -68,6 +68,20 @@ class FrameTest : public ::testing::Test {
     return s;
   }
 
+  // A 64^3 store ("store": a sphere shell, 8^3 bricks of 8^3 voxels) and a
+  // 96x80 camera that sees it whole.
+  void WriteShellStore(Camera* cam) {
+    StoreMeta meta = TestMeta(6, GridClass::kLevelSet);
+    std::vector<MemoryVoxel> voxels = testing::ShellVoxels(64, {31.5, 30.5, 32.5}, 22, 25);
+    ASSERT_TRUE(testing::WriteStore(Path("store"), meta, voxels).ok());
+    cam->position = {90, 70, 100};
+    cam->look_at = {32, 32, 32};
+    cam->fov_deg = 50;
+    cam->width = 96;
+    cam->height = 80;
+    ASSERT_TRUE(cam->Finalize().ok());
+  }
+
   fs::path dir_;
   std::unique_ptr<MemoryVolume> vol_;
   Camera cam_;
@@ -420,16 +434,8 @@ TEST_F(FrameTest, BrickAndAttributeErrorsStopTheRenderWithAMessage) {
 // evicted while the threads' brick tables still lend them to the tracers,
 // and the image is bit for bit the one rendered with a cache that holds all.
 TEST_F(FrameTest, TinyCacheRendersTheSameImage) {
-  StoreMeta meta = TestMeta(6, GridClass::kLevelSet);  // 8^3 bricks of 8^3 voxels
-  std::vector<MemoryVoxel> voxels = testing::ShellVoxels(64, {31.5, 30.5, 32.5}, 22, 25);
-  ASSERT_TRUE(testing::WriteStore(Path("store"), meta, voxels).ok());
   Camera cam;
-  cam.position = {90, 70, 100};
-  cam.look_at = {32, 32, 32};
-  cam.fov_deg = 50;
-  cam.width = 96;
-  cam.height = 80;
-  ASSERT_TRUE(cam.Finalize().ok());
+  ASSERT_NO_FATAL_FAILURE(WriteShellStore(&cam));
   std::map<std::string, std::vector<float>> images[2];
   for (int tiny : {0, 1}) {
     OpenOptions oo;
@@ -475,16 +481,8 @@ TEST_F(FrameTest, TinyCacheRendersTheSameImage) {
 // waiting for each brick, with a cache big enough to hold the frame and one
 // so small that bricks read ahead are evicted before use.
 TEST_F(FrameTest, ReadingAheadChangesNoPixelAndNoCounter) {
-  StoreMeta meta = TestMeta(6, GridClass::kLevelSet);  // 8^3 bricks of 8^3 voxels
-  std::vector<MemoryVoxel> voxels = testing::ShellVoxels(64, {31.5, 30.5, 32.5}, 22, 25);
-  ASSERT_TRUE(testing::WriteStore(Path("store"), meta, voxels).ok());
   Camera cam;
-  cam.position = {90, 70, 100};
-  cam.look_at = {32, 32, 32};
-  cam.fov_deg = 50;
-  cam.width = 96;
-  cam.height = 80;
-  ASSERT_TRUE(cam.Finalize().ok());
+  ASSERT_NO_FATAL_FAILURE(WriteShellStore(&cam));
   for (size_t cache : {size_t(64) << 20, size_t(24) << 10}) {
     std::map<std::string, std::vector<float>> images[2];
     RenderCounters counters[2];
