@@ -34,7 +34,7 @@ def test_render_equals_vox_render(store, files, workdir, camera):
     exr_path = workdir / ("cli_%s.exr" % camera)
     code, _, err = run([tool("render"), store, "--cam", files[camera + "_path"], "--scene",
                         files["scene_path"], "-o", exr_path, "--layers", "normal,voxel",
-                        "--threads", "2", "--tile-size", "16", "--quiet"])
+                        "--threads", "2", "--tile-size", "16", "--float", "--quiet"])
     assert code == 0, err
     exr = vox.read_exr(exr_path)
     # Paths, and the same camera and scene as dicts.
