@@ -44,10 +44,12 @@ struct RenderJobOptions {
   // Read bricks in the background on io_threads threads
   // (OpenOptions::io_threads): the next tiles' first bricks
   // (FrameOptions::prefetch) and, instead of waiting, the bricks a pixel
-  // misses (RenderOptions::read_ahead). Same pixels either way; measured on
-  // the 8192^3 sphere, cold: 1.2-1.3x faster without a memory limit and
-  // 1.6x in a 256 MiB cgroup (docs/benchmarks.md).
-  bool prefetch = true;
+  // misses (RenderOptions::read_ahead). Same pixels either way. Off by
+  // default: on an idle machine (8192^3 sphere, cold, 2 threads) it was
+  // no faster without a memory limit and 1.05x faster in a 256 MiB cgroup,
+  // where it read 1.13x the bytes (pages shared by neighbouring bricks read
+  // again); on a loaded machine it was 1.2-1.6x faster (docs/benchmarks.md).
+  bool prefetch = false;
   int io_threads = OpenOptions::kDefaultIoThreads;
   int tile_size = 64;
   // --lod F: level of detail over the store's pyramid (render/lod.h); 0: off.
