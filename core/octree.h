@@ -77,10 +77,9 @@ inline constexpr CompactCell MakeCompactCell(uint32_t first, uint32_t mask) {
 inline constexpr uint32_t ChildMask(CompactCell c) { return c.bits & 0xffu; }
 inline constexpr uint32_t FirstChild(CompactCell c) { return c.bits >> 8; }
 inline constexpr bool HasChild(CompactCell c, unsigned digit) { return (c.bits >> digit) & 1u; }
-// The index of child `digit`. REQUIRES: HasChild(c, digit).
-inline uint32_t ChildIndex(CompactCell c, unsigned digit) {
-  // Popcount of the mask bits below `digit`, by table: the build targets
-  // x86-64 without POPCNT, where std::popcount would be a bit-trick sequence.
+// The number of set bits of an 8-bit mask, by table: the build targets
+// x86-64 without POPCNT, where std::popcount is a call into libgcc.
+inline uint32_t Popcount8(uint32_t mask8) {
   static constexpr auto kPop8 = [] {
     struct T { uint8_t v[256]; } t{};
     for (int i = 0; i < 256; ++i) t.v[i] = uint8_t((i & 1) + ((i >> 1) & 1) + ((i >> 2) & 1) +
@@ -88,7 +87,11 @@ inline uint32_t ChildIndex(CompactCell c, unsigned digit) {
                                                    ((i >> 5) & 1) + ((i >> 6) & 1) + (i >> 7));
     return t;
   }();
-  return (c.bits >> 8) + kPop8.v[c.bits & ((1u << digit) - 1u)];
+  return kPop8.v[mask8 & 0xffu];
+}
+// The index of child `digit`. REQUIRES: HasChild(c, digit).
+inline uint32_t ChildIndex(CompactCell c, unsigned digit) {
+  return (c.bits >> 8) + Popcount8(c.bits & ((1u << digit) - 1u));
 }
 
 inline constexpr bool IsBrickRef(NodeRef r) { return (r & kBrickBit) != 0; }

@@ -279,7 +279,9 @@ std::string StatsJson(const Renderer& renderer, const FrameStats& st,
   // Bytes the frame read: those the store asked for, and those the process
   // read from storage (/proc/self/io read_bytes: page cache misses).
   j["io"] = {{"brick_bytes_read", b.bytes_read - a.bytes_read},
-             {"read_bytes", b.process_read_bytes - a.process_read_bytes}};
+             {"read_bytes", b.process_read_bytes - a.process_read_bytes},
+             {"windows_read", b.windows_read - a.windows_read},
+             {"window_bytes", b.window_bytes}};
   json timings{{"render_seconds", st.render_seconds},
                {"write_seconds", st.write_seconds},
                {"close_seconds", st.close_seconds}};

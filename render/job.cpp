@@ -131,6 +131,7 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
                                                                uint64_t(o.io_threads)))
                                     : 0;
   open.io_threads = std::max(io_threads, 1);
+  open.read_windows = o.read_windows;
   if (o.lod != 0.0 && !(o.lod > 0 && std::isfinite(o.lod)))
     return InvalidArgumentError("--lod " + std::to_string(o.lod) + ": must be finite and > 0");
   VOX_ASSIGN_OR_RETURN(auto volume, Store::Open(o.store_dir, open));

@@ -50,6 +50,9 @@ struct RenderJobOptions {
   // where it read 1.13x the bytes (pages shared by neighbouring bricks read
   // again); on a loaded machine it was 1.2-1.6x faster (docs/benchmarks.md).
   bool prefetch = false;
+  // Read brick records a window of file neighbours at a time
+  // (OpenOptions::read_windows); --no-read-windows: each record alone.
+  bool read_windows = true;
   int io_threads = OpenOptions::kDefaultIoThreads;
   int tile_size = 64;
   // --lod F: level of detail over the store's pyramid (render/lod.h); 0: off.

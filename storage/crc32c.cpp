@@ -3,6 +3,10 @@
 #include <array>
 #include <cstring>
 
+#if defined(__x86_64__)
+#include <nmmintrin.h>
+#endif
+
 namespace vox::crc32c {
 namespace {
 
@@ -21,9 +25,32 @@ constexpr std::array<std::array<uint32_t, 256>, 4> MakeTables() {
 }
 constexpr auto kTable = MakeTables();
 
+#if defined(__x86_64__)
+// Eight bytes per crc32 instruction (about 10x the tables on a brick).
+__attribute__((target("sse4.2"))) uint32_t ExtendSse42(uint32_t crc, const uint8_t* p, size_t n) {
+  uint64_t c = ~crc;
+  for (; n > 0 && (reinterpret_cast<uintptr_t>(p) & 7) != 0; --n) c = _mm_crc32_u8(uint32_t(c), *p++);
+  for (; n >= 8; n -= 8, p += 8) {
+    uint64_t w;
+    std::memcpy(&w, p, 8);
+    c = _mm_crc32_u64(c, w);
+  }
+  for (; n > 0; --n) c = _mm_crc32_u8(uint32_t(c), *p++);
+  return ~uint32_t(c);
+}
+#endif
+
 }  // namespace
 
 uint32_t Extend(uint32_t crc, const void* data, size_t n) {
+#if defined(__x86_64__)
+  static const bool sse42 = __builtin_cpu_supports("sse4.2");
+  if (sse42) return ExtendSse42(crc, static_cast<const uint8_t*>(data), n);
+#endif
+  return ExtendPortable(crc, data, n);
+}
+
+uint32_t ExtendPortable(uint32_t crc, const void* data, size_t n) {
   const uint8_t* p = static_cast<const uint8_t*>(data);
   uint32_t c = ~crc;
   // Byte at a time until 4-byte aligned, then 4 bytes per step.

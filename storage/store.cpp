@@ -17,6 +17,7 @@
 
 #include "storage/internal/coding.h"
 #include "storage/internal/format.h"
+#include "storage/internal/record_windows.h"
 #include "storage/internal/store_impl.h"
 #include "storage/memory_budget.h"
 #include "storage/page_cache.h"
@@ -99,12 +100,15 @@ class StoreImpl : public Store {
     s.bytes_mapped = bricks_ ? bricks_->size() : 0;
     s.bytes_decompressed = bytes_decompressed_.load(std::memory_order_relaxed);
     s.bytes_resident = c.charge;
-    s.capacity = c.capacity;
+    s.capacity = c.capacity + (windows_ ? windows_->capacity() : 0);
     s.prefetched = c.prefetched;
     s.prefetch_hits = c.prefetch_hits;
     s.prefetch_dropped = pf_dropped_.load(std::memory_order_relaxed);
     s.prefetch_failed = pf_failed_.load(std::memory_order_relaxed);
-    s.bytes_read = bytes_read_.load(std::memory_order_relaxed);
+    s.bytes_read = bytes_read_.load(std::memory_order_relaxed) +
+                   (windows_ ? windows_->bytes_read() : 0);
+    s.windows_read = windows_ ? windows_->windows_read() : 0;
+    s.window_bytes = windows_ ? windows_->window_bytes() : 0;
     auto io = ProcessIoBytes();
     s.process_read_bytes = io.ok() ? *io : 0;
     return s;
@@ -126,7 +130,8 @@ class StoreImpl : public Store {
   uint64_t store_id() const override { return store_id_; }
 
   uint64_t resident_bytes() const override {
-    return top_.size() * sizeof(CompactCell) + top_attr_.size() + table_.size() * sizeof(BrickEntry);
+    return top_.size() * sizeof(CompactCell) + top_attr_.size() +
+           table_.size() * (sizeof(BrickEntry) + sizeof(uint32_t));  // + RecordWindows' order
   }
 
   BrickSizes brick_sizes() const override {
@@ -142,7 +147,16 @@ class StoreImpl : public Store {
     return z;
   }
 
-  void SetCacheCapacity(uint64_t bytes) override { cache_.SetCapacity(size_t(bytes)); }
+  // The brick cache's bytes: decoded bricks, and a share for record windows
+  // (RecordWindows::ShareOf) unless OpenOptions::read_windows is off.
+  void SetCacheCapacity(uint64_t bytes) override {
+    uint64_t windows = 0;
+    if (windows_ && options_.read_windows) {
+      windows_->SetCapacity(RecordWindows::ShareOf(bytes));
+      windows = windows_->capacity();
+    }
+    cache_.SetCapacity(size_t(bytes - windows));
+  }
 
   const std::vector<BrickEntry>& table() const { return table_; }
 
@@ -213,6 +227,7 @@ class StoreImpl : public Store {
   std::vector<uint8_t> top_attr_;
   std::vector<BrickEntry> table_;
   std::unique_ptr<RandomAccessFile> bricks_;
+  std::unique_ptr<RecordWindows> windows_;  // reads records; set by Load
   ShardedPageCache<DecodedBrick> cache_;
   std::atomic<uint64_t> bytes_decompressed_{0};
   std::atomic<uint64_t> bytes_read_{0};
@@ -384,21 +399,18 @@ Status StoreImpl::CheckBrickFits(uint32_t id) const {
 
 StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
   VOX_RETURN_IF_ERROR(CheckBrickFits(id));
-  const BrickEntry& e = table_[id];
-  // Read the record (its own bytes only), then check and decode it.
+  // Read the record (with its window's neighbours, or alone), then check
+  // and decode it.
   thread_local std::vector<uint8_t> record;
   struct Trim {  // scratch grows to the largest brick seen; an outsized one is not kept
     ~Trim() {
       if (record.capacity() > (size_t(64) << 20)) std::vector<uint8_t>().swap(record);
     }
   } trim;
-  record.resize(size_t(e.stored_size) + kTrailerSize);
-  Status rs = bricks_->Read(e.offset, record.size(), record.data());
-  bytes_read_.fetch_add(record.size(), std::memory_order_relaxed);
-  if (!rs.ok())
-    return rs.WithContext("reading brick " + std::to_string(id) + " (offset " +
-                          std::to_string(e.offset) + ") in '" + bricks_->path() + "'");
-  return DecodeRecord(id, record.data());
+  VOX_ASSIGN_OR_RETURN(RecordWindows::Record r, windows_->Read(id, &record));
+  auto b = DecodeRecord(id, r.data);
+  if (!b.ok() && r.hold) windows_->Forget(id);  // bad bytes are not cached, as read errors are not
+  return b;
 }
 
 StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id,
@@ -586,6 +598,8 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
     return bad("bricks hold " + std::to_string(voxels) + " voxels, the metadata says " +
                std::to_string(meta_.voxel_count));
   bricks_ = std::move(bricks);
+  windows_ = std::make_unique<RecordWindows>(bricks_.get(), table_);
+  SetCacheCapacity(options_.cache_bytes);
   return OkStatus();
 }
 

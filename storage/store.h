@@ -131,6 +131,10 @@ struct OpenOptions {
   // own bytes are latency-bound: several at once overlap their waits).
   int io_threads = kDefaultIoThreads;
   static constexpr int kDefaultIoThreads = 8;
+  // Read records a window of file neighbours at a time (RecordWindows: one
+  // read serves the bricks next in space), keeping the compressed windows in
+  // a share of cache_bytes; off: each miss reads its record alone.
+  bool read_windows = true;
 };
 inline constexpr int kMaxIoThreads = 256;
 
@@ -146,6 +150,8 @@ struct CacheStats {
   uint64_t prefetched = 0, prefetch_hits = 0, prefetch_dropped = 0, prefetch_failed = 0;
   uint64_t bytes_read = 0;          // brick file bytes vox's reads asked for since open
   uint64_t process_read_bytes = 0;  // the process's bytes read from storage (ProcessIoBytes)
+  uint64_t windows_read = 0;        // record windows read (OpenOptions::read_windows)
+  uint64_t window_bytes = 0;        // their size now (0: records read alone)
 };
 
 class Volume {

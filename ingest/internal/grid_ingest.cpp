@@ -237,12 +237,22 @@ class GridIngest {
                      Coord(int(hi[0]), int(hi[1]), int(hi[2])));
   }
 
-  static constexpr int kKeyBits = 21;
+  // Brick keys are Morton keys of brick coordinates (MortonKey21): bricks are
+  // built and appended to the brick file in about that order (the parallel
+  // stage reorders only the bricks in flight), so bricks close in space lie
+  // close in the file and a reader's window of neighbouring records serves
+  // many rays.
   static uint64_t Key(int64_t x, int64_t y, int64_t z) {
-    return uint64_t(x) | (uint64_t(y) << kKeyBits) | (uint64_t(z) << (2 * kKeyBits));
+    return MortonKey21(uint64_t(x), uint64_t(y), uint64_t(z));
   }
   static int64_t KeyCoord(uint64_t k, int a) {
-    return int64_t((k >> (a * kKeyBits)) & ((uint64_t(1) << kKeyBits) - 1));
+    uint64_t v = (k >> a) & 0x1249249249249249ull;  // bit 3i -> bit i
+    v = (v | v >> 2) & 0x10c30c30c30c30c3ull;
+    v = (v | v >> 4) & 0x100f00f00f00f00full;
+    v = (v | v >> 8) & 0x1f0000ff0000ffull;
+    v = (v | v >> 16) & 0x1f00000000ffffull;
+    v = (v | v >> 32) & 0x1fffff;
+    return int64_t(v);
   }
 
   Status BuildBrickMap(const CoordBBox& occ) {
@@ -269,8 +279,8 @@ class GridIngest {
           " has occupied active tiles covering " + std::to_string(double(tile_bricks)) +
           " bricks of " + std::to_string(int64_t(1) << B_) + "^3 voxels; vox expands tiles to "
           "voxels and cannot index that many");
-    // (brick key, leaf index) and (brick key, tile index) pairs; the key's
-    // numeric order is z, y, x order of brick coordinates: neighbours stay close.
+    // (brick key, leaf index) and (brick key, tile index) pairs, in key
+    // (Morton) order.
     for (uint32_t i : leaves_) {
       if (!range(NodeBox(i), lo, hi)) continue;
       for (int64_t z = lo[2]; z <= hi[2]; ++z)

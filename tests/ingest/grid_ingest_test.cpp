@@ -3,7 +3,10 @@
 // and occupied (tiles expanded), each brick's voxels strictly in Morton order
 // (the writer relies on it and does not sort again), read from the file's
 // compact topology, on the leaf-only fast path, the mixed leaf-and-tile path and bricks smaller than a leaf.
+#include <algorithm>
+#include <cstdlib>
 #include <map>
+#include <thread>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -64,6 +67,20 @@ class GridIngestTest : public ::testing::Test {
     ASSERT_EQ(got.size(), want.size());
     for (const auto& [ijk, attr] : got) ASSERT_TRUE(want.count(ijk)) << ijk[0] << "," << ijk[1];
     EXPECT_EQ(stats_.occupied_voxels, want.size());
+
+    // Bricks arrive in Morton order of their coordinates (the store's
+    // records lie in that order: neighbours in space, neighbours in the
+    // file), up to the bricks the parallel stage has in flight at once.
+    std::vector<uint64_t> keys;
+    for (const Ijk& c : store_.add_order)
+      keys.push_back(MortonKey21(uint64_t(c[0]), uint64_t(c[1]), uint64_t(c[2])));
+    std::vector<uint64_t> sorted = keys;
+    std::sort(sorted.begin(), sorted.end());
+    const long in_flight = 2 * std::max(2L, long(std::thread::hardware_concurrency()));
+    for (size_t i = 0; i < keys.size(); ++i) {
+      const long rank = long(std::lower_bound(sorted.begin(), sorted.end(), keys[i]) - sorted.begin());
+      ASSERT_LE(std::labs(rank - long(i)), in_flight) << "brick added " << i << "th has Morton rank " << rank;
+    }
 
     // Each brick's voxels strictly in Morton order.
     for (const auto& [bc, voxels] : store_.bricks)

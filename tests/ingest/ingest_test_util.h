@@ -106,6 +106,7 @@ struct FakeStore {
   StoreMeta meta;
   WriteOptions options;
   std::map<Ijk, std::vector<BrickVoxel>> bricks;  // by brick coordinate
+  std::vector<Ijk> add_order;                      // brick coordinates as added
 
   // Voxels in VDB index coordinates with their attributes.
   std::map<Ijk, VoxelAttributes> Voxels() const {
@@ -156,6 +157,7 @@ struct FakeStore {
         EXPECT_TRUE(seen.insert(Ijk{v.x, v.y, v.z}).second) << "duplicate voxel in a brick";
       }
       s_->bricks[key] = std::move(voxels);
+      s_->add_order.push_back(key);
       return OkStatus();
     }
     Status Finish() override {

@@ -294,7 +294,9 @@ TEST(PrefetchIo, DiskBytesPerBrickAreTheBricksOwn) {
   if (*ProcessIoBytes() - *io0 < probe.size())
     GTEST_SKIP() << "no per-process read accounting for " << path;
 
-  auto s = Store::Open(dir, {});
+  OpenOptions alone;
+  alone.read_windows = false;
+  auto s = Store::Open(dir, alone);
   ASSERT_TRUE(s.ok());
   const std::vector<BrickEntry> table = BrickTable(**s);
   const uint32_t n = uint32_t(table.size());
@@ -332,7 +334,62 @@ TEST(PrefetchIo, DiskBytesPerBrickAreTheBricksOwn) {
   const uint64_t read2 = *ProcessIoBytes() - before2;
   EXPECT_LE((*s2)->cache_stats().bytes_read, stored * 3 / 2 + 8192);
   EXPECT_LE(read2, stored * 3 / 2 + 16 * 4096) << stored;
+
+  // Read in windows (the default): fetching every brick reads each byte of
+  // the file once, in one read per window.
+  OpenOptions windows;
+  windows.cache_bytes = size_t(64) << 20;  // windows of 64 KiB
+  auto s3 = Store::Open(dir, windows);
+  ASSERT_TRUE(s3.ok());
+  drop();
+  const uint64_t before3 = *ProcessIoBytes();
+  for (uint32_t id = 0; id < n; ++id) ASSERT_TRUE((*s3)->FetchBrick(id).ok());
+  const uint64_t read3 = *ProcessIoBytes() - before3;
+  const uint64_t file = std::filesystem::file_size(path);
+  const CacheStats c3 = (*s3)->cache_stats();
+  ASSERT_EQ(c3.window_bytes, uint64_t(64) << 10);
+  uint64_t records = 0;
+  for (const BrickEntry& e : table) records += e.stored_size + kTrailerSize;
+  EXPECT_EQ(c3.bytes_read, records);  // every record once, nothing else
+  EXPECT_LE(read3, file + 16 * 4096);
+  EXPECT_LE(c3.windows_read, file / c3.window_bytes + 1);
+  EXPECT_LT(c3.windows_read, uint64_t(n) / 4) << "a window serves many bricks";
   close(fd);
+}
+
+// A brick file that shrinks under an open store read in windows: the records
+// of windows read before (checksums verified then) still serve, every other
+// brick fails with an I/O error naming the file.
+TEST(PrefetchIo, WindowsKeepOnlyWhatTheyReadBeforeAShrink) {
+  auto vol = GenerateShape("sphere:256");
+  ASSERT_TRUE(vol.ok());
+  StoreMeta meta = storage_test::MetaFor(vol->levels, vol->levels - 5, GridClass::kLevelSet, true);
+  storage_test::TempDir tmp;
+  const std::string dir = tmp / "s";
+  ASSERT_TRUE(storage_test::WriteVoxels(dir, vol->voxels, meta).ok());
+  OpenOptions windows;
+  windows.cache_bytes = size_t(64) << 20;  // windows of 64 KiB
+  auto w = Store::Open(dir, windows);
+  ASSERT_TRUE(w.ok());
+  ASSERT_TRUE((*w)->FetchBrick(0).ok());
+  const uint64_t window = (*w)->cache_stats().window_bytes;
+  ASSERT_EQ(window, uint64_t(64) << 10);
+  const auto& table = BrickTable(**w);
+  ASSERT_GT(std::filesystem::file_size(dir + "/bricks.vxb"), 4 * window);
+  ASSERT_EQ(truncate((dir + "/bricks.vxb").c_str(), kFileHeaderSize), 0);
+  int served = 0;
+  for (uint32_t id = 1; id < (*w)->meta().brick_count; ++id) {
+    auto b = (*w)->FetchBrick(id);
+    const bool read_before = table[id].offset / window == table[0].offset / window;
+    EXPECT_EQ(b.ok(), read_before) << "brick " << id << ": " << b.status().ToString();
+    if (b.ok()) {
+      ++served;
+      continue;
+    }
+    EXPECT_EQ(b.status().code(), StatusCode::kIoError);
+    EXPECT_NE(b.status().message().find("bricks.vxb"), std::string::npos) << b.status().ToString();
+  }
+  EXPECT_GT(served, 0);
 }
 
 }  // namespace

@@ -39,6 +39,21 @@ TEST(Crc32c, KnownValues) {
   EXPECT_EQ(crc32c::Unmask(crc32c::Mask(c)), c);
 }
 
+TEST(Crc32c, FastPathEqualsTables) {
+  // Random lengths, alignments and seeds: the instruction path (where the
+  // CPU has one) and the tables agree.
+  std::mt19937 rng(7);
+  std::vector<uint8_t> buf(4096 + 16);
+  for (uint8_t& b : buf) b = uint8_t(rng());
+  for (int i = 0; i < 2000; ++i) {
+    const size_t at = rng() % 16, n = rng() % 4096;
+    const uint32_t seed = i % 2 ? uint32_t(rng()) : 0;
+    ASSERT_EQ(crc32c::Extend(seed, buf.data() + at, n),
+              crc32c::ExtendPortable(seed, buf.data() + at, n))
+        << "at " << at << " n " << n;
+  }
+}
+
 TEST(OctNormal, RoundTripWithinQuantisation) {
   // Maximum angular error (degrees) by precision, measured on random normals
   // and on the axes and octant diagonals.

@@ -84,7 +84,8 @@ Status CheckIngestCommand(const IngestCommand& c) {
 }
 
 FlagArity RenderFlagArity(std::string_view flag) {
-  if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch", "--float"}))
+  if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch", "--float",
+                   "--read-windows", "--no-read-windows"}))
     return FlagArity::kSwitch;
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
@@ -100,6 +101,8 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->quiet = true;
   } else if (a == "--prefetch" || a == "--no-prefetch") {  // --prefetch: the default, kept for scripts
     o->prefetch = a == "--prefetch";
+  } else if (a == "--read-windows" || a == "--no-read-windows") {
+    o->read_windows = a == "--read-windows";
   } else if (a == "--lod") {
     VOX_ASSIGN_OR_RETURN(o->lod, ParseLodFactor("--lod", v));
   } else if (a == "--float") {
