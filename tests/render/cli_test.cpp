@@ -13,6 +13,7 @@
 
 #include "render/camera.h"
 #include "render/exr.h"
+#include "tests/common/run_command.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
 
@@ -21,22 +22,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct RunResult {
-  int code = -1;
-  std::string output;
-};
-
-RunResult Exec(const std::string& cmd) {
-  RunResult r;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using RunResult = testing::CommandResult;
 
 class CliTest : public ::testing::Test {
  protected:
@@ -77,7 +63,7 @@ const char kCam[] =
 TEST_F(CliTest, RendersExrPreviewAndStats) {
   std::string cam = Write("cam.json", kCam);
   RunResult r =
-      Exec(Render("--cam " + cam + " -o " + Path("a.exr") + " --preview " + Path("a.png") +
+      testing::RunCommand(Render("--cam " + cam + " -o " + Path("a.exr") + " --preview " + Path("a.png") +
                   " --stats " + Path("a.json") + " --threads 2 --tile-size 16 --quiet"));
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(r.output, "");  // --quiet
@@ -110,9 +96,9 @@ TEST_F(CliTest, RendersExrPreviewAndStats) {
 
 TEST_F(CliTest, FloatAndCompressionFlags) {
   std::string cam = Write("cam.json", kCam);
-  RunResult r = Exec(Render("--cam " + cam + " -o " + Path("h.exr") + " --threads 2 --quiet"));
+  RunResult r = testing::RunCommand(Render("--cam " + cam + " -o " + Path("h.exr") + " --threads 2 --quiet"));
   ASSERT_EQ(r.code, 0) << r.output;
-  r = Exec(Render("--cam " + cam + " -o " + Path("f.exr") +
+  r = testing::RunCommand(Render("--cam " + cam + " -o " + Path("f.exr") +
                   " --float --compression none --threads 2 --quiet"));
   ASSERT_EQ(r.code, 0) << r.output;
   auto h = ReadExrInfo(Path("h.exr"));
@@ -122,14 +108,14 @@ TEST_F(CliTest, FloatAndCompressionFlags) {
   EXPECT_EQ(h->compression, "rle");
   EXPECT_TRUE(f->float_color);
   EXPECT_EQ(f->compression, "none");
-  r = Exec(Render("--cam " + cam + " -o " + Path("x.exr") + " --compression lzw"));
+  r = testing::RunCommand(Render("--cam " + cam + " -o " + Path("x.exr") + " --compression lzw"));
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("EXR compression 'lzw': expected zip"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(Path("x.exr")));
 }
 
 TEST_F(CliTest, DefaultCameraAndPlainProgress) {
-  RunResult r = Exec(Render("-o " + Path("d.exr") + " --size 40x30 --single-step --threads 1"));
+  RunResult r = testing::RunCommand(Render("-o " + Path("d.exr") + " --size 40x30 --single-step --threads 1"));
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NE(r.output.find("tiles 1/1"), std::string::npos)
       << r.output;  // plain lines, not a terminal
@@ -147,7 +133,7 @@ TEST_F(CliTest, DefaultCameraAndPlainProgress) {
 
 TEST_F(CliTest, TilesAndMergeEqualTheFullRender) {
   std::string cam = Write("cam.json", kCam);
-  ASSERT_EQ(Exec(Render("--cam " + cam + " -o " + Path("full.exr") +
+  ASSERT_EQ(testing::RunCommand(Render("--cam " + cam + " -o " + Path("full.exr") +
                         " --tile-size 16 --quiet --split 3+3"))
                 .code,
             0);
@@ -155,12 +141,12 @@ TEST_F(CliTest, TilesAndMergeEqualTheFullRender) {
   for (int i = 1; i <= 3; ++i) {
     std::string p = Path("p" + std::to_string(i) + ".exr");
     RunResult r =
-        Exec(Render("--cam " + cam + " -o " + p + " --tile-size 16 --quiet --split 3 --tiles " +
+        testing::RunCommand(Render("--cam " + cam + " -o " + p + " --tile-size 16 --quiet --split 3 --tiles " +
                     std::to_string(i) + "/3"));
     ASSERT_EQ(r.code, 0) << r.output;
     parts += " " + p;
   }
-  RunResult m = Exec(std::string(VOX_MERGE_BIN) + parts + " -o " + Path("merged.exr") + " --quiet");
+  RunResult m = testing::RunCommand(std::string(VOX_MERGE_BIN) + parts + " -o " + Path("merged.exr") + " --quiet");
   ASSERT_EQ(m.code, 0) << m.output;
   auto full = ReadExr(Path("full.exr"));
   auto merged = ReadExr(Path("merged.exr"));
@@ -169,7 +155,7 @@ TEST_F(CliTest, TilesAndMergeEqualTheFullRender) {
     EXPECT_EQ(std::memcmp(pixels.data(), merged->pixels[name].data(), pixels.size() * 4), 0)
         << name;
   // A missing part is refused.
-  RunResult bad = Exec(std::string(VOX_MERGE_BIN) + " " + Path("p1.exr") + " " + Path("p3.exr") +
+  RunResult bad = testing::RunCommand(std::string(VOX_MERGE_BIN) + " " + Path("p1.exr") + " " + Path("p3.exr") +
                        " -o " + Path("bad.exr"));
   EXPECT_NE(bad.code, 0);
   EXPECT_NE(bad.output.find("part 2/3 is missing"), std::string::npos) << bad.output;
@@ -195,13 +181,13 @@ TEST_F(CliTest, BadCameraFilesNameTheFieldAndFail) {
   int k = 0;
   for (const Case& c : cases) {
     std::string cam = Write("bad" + std::to_string(k++) + ".json", c.json);
-    RunResult r = Exec(Render("--cam " + cam + " -o " + Path("x.exr") + " --quiet"));
+    RunResult r = testing::RunCommand(Render("--cam " + cam + " -o " + Path("x.exr") + " --quiet"));
     EXPECT_EQ(r.code, 1) << c.json;
     EXPECT_NE(r.output.find(c.field), std::string::npos) << r.output;
     EXPECT_NE(r.output.find(cam), std::string::npos) << r.output;
   }
   std::string scene = Write("bad_scene.json", R"({"lights":[{"type":"directional"}]})");
-  RunResult r = Exec(
+  RunResult r = testing::RunCommand(
       Render("--cam " + Write("cam.json", kCam) + " --scene " + scene + " -o " + Path("x.exr")));
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("lights[0].direction"), std::string::npos) << r.output;
@@ -230,7 +216,7 @@ TEST_F(CliTest, FogStoreTransmittanceIsExponential) {
       Write("fogscene.json",
             R"({"lights":[], "background":[1,1,1], "volume":{"absorption":0.4,"scattering":0}})");
   RunResult r =
-      Exec(std::string(VOX_RENDER_BIN) + " " + Path("fog") + " --cam " + cam + " --scene " + scene +
+      testing::RunCommand(std::string(VOX_RENDER_BIN) + " " + Path("fog") + " --cam " + cam + " --scene " + scene +
            " -o " + Path("fog.exr") + " --quiet --stats " + Path("fog.json"));
   ASSERT_EQ(r.code, 0) << r.output;
   auto img = ReadExr(Path("fog.exr"));
@@ -263,16 +249,16 @@ TEST_F(CliTest, FogStoreTransmittanceIsExponential) {
 }
 
 TEST_F(CliTest, BadFlagsAndMissingStore) {
-  EXPECT_EQ(Exec(Render("--tiles 4/3")).code, 2);
-  EXPECT_EQ(Exec(Render("--tile-size x")).code, 2);
-  RunResult tile = Exec(Render("--tile-size 0 --quiet -o " + Path("t.exr")));
+  EXPECT_EQ(testing::RunCommand(Render("--tiles 4/3")).code, 2);
+  EXPECT_EQ(testing::RunCommand(Render("--tile-size x")).code, 2);
+  RunResult tile = testing::RunCommand(Render("--tile-size 0 --quiet -o " + Path("t.exr")));
   EXPECT_EQ(tile.code, 1);
   EXPECT_NE(tile.output.find("tile size 0"), std::string::npos) << tile.output;
-  EXPECT_EQ(Exec(Render("--bogus")).code, 2);
-  RunResult split = Exec(Render("--split 4+4 --quiet -o " + Path("s.exr")));
+  EXPECT_EQ(testing::RunCommand(Render("--bogus")).code, 2);
+  RunResult split = testing::RunCommand(Render("--split 4+4 --quiet -o " + Path("s.exr")));
   EXPECT_EQ(split.code, 1);
   EXPECT_NE(split.output.find("6 levels"), std::string::npos) << split.output;
-  RunResult missing = Exec(std::string(VOX_RENDER_BIN) + " " + Path("nostore") + " --quiet");
+  RunResult missing = testing::RunCommand(std::string(VOX_RENDER_BIN) + " " + Path("nostore") + " --quiet");
   EXPECT_EQ(missing.code, 1);
   EXPECT_NE(missing.output.find("nostore"), std::string::npos) << missing.output;
 }

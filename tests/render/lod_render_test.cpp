@@ -18,6 +18,7 @@
 #include "render/lod.h"
 #include "render/renderer.h"
 #include "storage/lod.h"
+#include "tests/common/run_command.h"
 #include "tests/render/render_util.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
@@ -221,35 +222,21 @@ TEST_F(LodRender, StopsNeverFinerThanTheConeNorLaterThanTheExactHit) {
   EXPECT_GT(checked, 1000);
 }
 
-struct RunResult {
-  int code = -1;
-  std::string output;
-};
-RunResult Exec(const std::string& cmd) {
-  RunResult r;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using RunResult = testing::CommandResult;
 
 TEST_F(LodRender, BadLodFlagsNameTheFlag) {
   const std::string bin = VOX_RENDER_BIN;
   const std::string out = " -o " + Path("x.exr") + " --size 16x16 --quiet";
   for (const char* bad : {"0", "-1", "nan", "inf", "abc", "1e999", ""}) {
-    RunResult r = Exec(bin + " " + Path("store") + " --lod '" + bad + "'" + out);
+    RunResult r = testing::RunCommand(bin + " " + Path("store") + " --lod '" + bad + "'" + out);
     EXPECT_EQ(r.code, 2) << bad << ": " << r.output;
     EXPECT_NE(r.output.find("--lod"), std::string::npos) << r.output;
   }
-  RunResult r = Exec(bin + " " + Path("nolod") + " --lod 1" + out);
+  RunResult r = testing::RunCommand(bin + " " + Path("nolod") + " --lod 1" + out);
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("--lod"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("--add-lod"), std::string::npos) << r.output;
-  r = Exec(bin + " " + Path("store") + " --lod 1" + out);
+  r = testing::RunCommand(bin + " " + Path("store") + " --lod 1" + out);
   EXPECT_EQ(r.code, 0) << r.output;
 }
 

@@ -23,6 +23,7 @@
 #include "storage/brick_table.h"
 #include "storage/store.h"
 #include "storage/store_budget.h"
+#include "tests/common/run_command.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
 
@@ -31,22 +32,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct RunResult {
-  int code = -1;
-  std::string output;
-};
-
-RunResult Exec(const std::string& cmd) {
-  RunResult r;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using RunResult = testing::CommandResult;
 
 class MemoryBudgetRenderTest : public ::testing::Test {
  protected:
@@ -104,7 +90,7 @@ TEST_F(MemoryBudgetRenderTest, BadMemoryFlagsFailWithoutOutput) {
   for (const char* bad : {"0", "abc", "-5", "12X", ""}) {
     SCOPED_TRACE(bad);
     const std::string out = Path("bad.exr");
-    RunResult r = Exec(Render(std::string("--quiet --memory-mb '") + bad + "' -o " + out));
+    RunResult r = testing::RunCommand(Render(std::string("--quiet --memory-mb '") + bad + "' -o " + out));
     EXPECT_EQ(r.code, 2) << r.output;
     EXPECT_NE(r.output.find("--memory-mb"), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(out));
@@ -113,7 +99,7 @@ TEST_F(MemoryBudgetRenderTest, BadMemoryFlagsFailWithoutOutput) {
 
 TEST_F(MemoryBudgetRenderTest, BudgetBelowTheStoreNeedsNamesTheMiBAndThatSuffices) {
   const std::string out = Path("small.exr");
-  RunResult r = Exec(Render("--quiet --memory-mb 8 -o " + out + " --stats " + Path("small.json")));
+  RunResult r = testing::RunCommand(Render("--quiet --memory-mb 8 -o " + out + " --stats " + Path("small.json")));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("store"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("resident top"), std::string::npos) << r.output;
@@ -125,10 +111,10 @@ TEST_F(MemoryBudgetRenderTest, BudgetBelowTheStoreNeedsNamesTheMiBAndThatSuffice
   EXPECT_GT(need, 8.0);
   // The stated need is enough (rounded up to whole MiB).
   const int enough = int(std::ceil(need));
-  RunResult ok = Exec(Render("--quiet --memory-mb " + std::to_string(enough) + " -o " + out));
+  RunResult ok = testing::RunCommand(Render("--quiet --memory-mb " + std::to_string(enough) + " -o " + out));
   EXPECT_EQ(ok.code, 0) << ok.output;
   // One MiB less is not.
-  RunResult less = Exec(Render("--quiet --memory-mb " + std::to_string(enough - 1) + " -o " +
+  RunResult less = testing::RunCommand(Render("--quiet --memory-mb " + std::to_string(enough - 1) + " -o " +
                                Path("less.exr")));
   EXPECT_EQ(less.code, 1) << less.output;
   EXPECT_FALSE(fs::exists(Path("less.exr")));

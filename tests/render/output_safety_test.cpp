@@ -16,6 +16,7 @@
 
 #include "render/camera.h"
 #include "render/exr.h"
+#include "tests/common/run_command.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
 
@@ -24,22 +25,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct RunResult {
-  int code = -1;
-  std::string output;
-};
-
-RunResult Exec(const std::string& cmd) {
-  RunResult r;
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
-}
+using RunResult = testing::CommandResult;
 
 std::string Bytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -104,7 +90,7 @@ TEST_F(OutputSafetyTest, AFailedRenderKeepsTheEarlierOutputs) {
   const std::string cam = Cam();
   const std::string outs = " -o " + Path("out.exr") + " --preview " + Path("out.png") +
                            " --stats " + Path("out.json") + " --quiet --tile-size 16";
-  ASSERT_EQ(Exec(Render("store", "--cam " + cam + outs)).code, 0);
+  ASSERT_EQ(testing::RunCommand(Render("store", "--cam " + cam + outs)).code, 0);
   const std::string exr = Bytes(Path("out.exr")), png = Bytes(Path("out.png")),
                     json = Bytes(Path("out.json"));
   ASSERT_FALSE(exr.empty() || png.empty() || json.empty());
@@ -117,7 +103,7 @@ TEST_F(OutputSafetyTest, AFailedRenderKeepsTheEarlierOutputs) {
     std::string junk(size_t(size) - 32, '\x5a');
     f.write(junk.data(), std::streamsize(junk.size()));
   }
-  RunResult r = Exec(Render("bad", "--cam " + cam + outs));
+  RunResult r = testing::RunCommand(Render("bad", "--cam " + cam + outs));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_TRUE(Has(r.output, "bricks.vxb") || Has(r.output, "brick")) << r.output;
   EXPECT_EQ(Bytes(Path("out.exr")), exr);
@@ -135,13 +121,13 @@ TEST_F(OutputSafetyTest, OutputPathsAreCheckedBeforeRendering) {
        std::vector<std::string>{" --stats /missing-dir/s.json", " --preview /missing-dir/p.png",
                                 " --stats " + Path("out-is-a-dir")}) {
     fs::create_directories(Path("out-is-a-dir"));
-    RunResult r = Exec(Render("store", "--cam " + cam + " -o " + Path("never.exr") + bad));
+    RunResult r = testing::RunCommand(Render("store", "--cam " + cam + " -o " + Path("never.exr") + bad));
     EXPECT_EQ(r.code, 1) << bad << ": " << r.output;
     EXPECT_TRUE(Has(r.output, "missing-dir") || Has(r.output, "out-is-a-dir")) << r.output;
     EXPECT_FALSE(Has(r.output, "tiles")) << "rendered before failing: " << r.output;
     EXPECT_FALSE(fs::exists(Path("never.exr")));
   }
-  RunResult r = Exec(Render("store", "--cam " + cam + " -o /missing-dir/x.exr --quiet"));
+  RunResult r = testing::RunCommand(Render("store", "--cam " + cam + " -o /missing-dir/x.exr --quiet"));
   EXPECT_EQ(r.code, 1);
   EXPECT_TRUE(Has(r.output, "/missing-dir") && Has(r.output, "does not exist")) << r.output;
 }
@@ -150,26 +136,26 @@ TEST_F(OutputSafetyTest, MergeRefusesAnOutputThatIsAPartAndKeepsEarlierOutputs) 
   const std::string cam = Cam();
   for (int i = 1; i <= 2; ++i)
     ASSERT_EQ(
-        Exec(Render("store", "--cam " + cam + " -o " + Path("p" + std::to_string(i) + ".exr") +
+        testing::RunCommand(Render("store", "--cam " + cam + " -o " + Path("p" + std::to_string(i) + ".exr") +
                                  " --quiet --tile-size 16 --tiles " + std::to_string(i) + "/2"))
             .code,
         0);
   const std::string p1 = Bytes(Path("p1.exr"));
   // The same file under another spelling, and a hard link to it.
-  RunResult r = Exec("cd " + dir_->string() + " && " + Merge("./p1.exr p2.exr -o p1.exr"));
+  RunResult r = testing::RunCommand("cd " + dir_->string() + " && " + Merge("./p1.exr p2.exr -o p1.exr"));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_TRUE(Has(r.output, "p1.exr")) << r.output;
   fs::create_hard_link(Path("p1.exr"), Path("link.exr"));
-  r = Exec(Merge(Path("p1.exr") + " " + Path("p2.exr") + " -o " + Path("link.exr")));
+  r = testing::RunCommand(Merge(Path("p1.exr") + " " + Path("p2.exr") + " -o " + Path("link.exr")));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_EQ(Bytes(Path("p1.exr")), p1);
   // A good merge, then a failing one (part 2 missing) onto the same output.
-  ASSERT_EQ(Exec(Merge(Path("p1.exr") + " " + Path("p2.exr") + " -o " + Path("m.exr"))).code, 0);
+  ASSERT_EQ(testing::RunCommand(Merge(Path("p1.exr") + " " + Path("p2.exr") + " -o " + Path("m.exr"))).code, 0);
   const std::string merged = Bytes(Path("m.exr"));
-  r = Exec(Merge(Path("p1.exr") + " -o " + Path("m.exr")));
+  r = testing::RunCommand(Merge(Path("p1.exr") + " -o " + Path("m.exr")));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_EQ(Bytes(Path("m.exr")), merged);
-  r = Exec(Merge(Path("p1.exr") + " " + Path("p2.exr") + " -o " + Path("m2.exr") +
+  r = testing::RunCommand(Merge(Path("p1.exr") + " " + Path("p2.exr") + " -o " + Path("m2.exr") +
                  " --preview /missing-dir/m.png"));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_FALSE(fs::exists(Path("m2.exr")));
@@ -180,7 +166,7 @@ TEST_F(OutputSafetyTest, MergeRefusesPartsOfDifferentStores) {
   const std::string cam = Cam();
   ASSERT_TRUE(WriteSphere(Path("s2")).ok());
   auto part = [&](int i) {
-    return Exec(Render("s2", "--cam " + cam + " -o " + Path("q" + std::to_string(i) + ".exr") +
+    return testing::RunCommand(Render("s2", "--cam " + cam + " -o " + Path("q" + std::to_string(i) + ".exr") +
                                  " --quiet --tile-size 16 --tiles " + std::to_string(i) + "/2"))
         .code;
   };
@@ -196,7 +182,7 @@ TEST_F(OutputSafetyTest, MergeRefusesPartsOfDifferentStores) {
   }
   ASSERT_TRUE(WriteSphere(Path("s2")).ok());  // re-ingested at the same path: same content
   ASSERT_EQ(part(2), 0);
-  RunResult r = Exec(Merge(Path("q1.exr") + " " + Path("q2.exr") + " -o " + Path("q.exr")));
+  RunResult r = testing::RunCommand(Merge(Path("q1.exr") + " " + Path("q2.exr") + " -o " + Path("q.exr")));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_TRUE(Has(r.output, "q1.exr") && Has(r.output, "q2.exr") &&
               Has(r.output, "different stores"))
@@ -211,7 +197,7 @@ TEST_F(OutputSafetyTest, TwelveThousandLightsKeepTheirTimings) {
              ",9," + std::to_string(i % 11) + R"(],"intensity":0.0001,"shadows":false})";
   scene += "]}";
   Write("lights.json", scene);
-  RunResult r = Exec(Render("store", "--cam " + Write("small.json", R"({"position":[0,3,20],
+  RunResult r = testing::RunCommand(Render("store", "--cam " + Write("small.json", R"({"position":[0,3,20],
       "look_at":[0,0,0], "fov_deg":40, "width":8, "height":8})") +
                                          " --scene " + Path("lights.json") + " -o " +
                                          Path("lights.exr") + " --quiet"));
@@ -254,7 +240,7 @@ TEST(ExrHeader, TimingsArePatchedBehindAHugeAttribute) {
 }
 
 TEST_F(OutputSafetyTest, AbsurdImageSizesAreRefusedWithTheLimit) {
-  RunResult r = Exec(Render("store", "--size 1048576x1048576 -o " + Path("huge.exr") + " --quiet"));
+  RunResult r = testing::RunCommand(Render("store", "--size 1048576x1048576 -o " + Path("huge.exr") + " --quiet"));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_TRUE(Has(r.output, "tiles") && Has(r.output, std::to_string(kMaxTiles))) << r.output;
   EXPECT_FALSE(fs::exists(Path("huge.exr")));
@@ -268,13 +254,13 @@ TEST_F(OutputSafetyTest, FarCamerasAreRefusedNearOnesRender) {
                                    R"(], "look_at":[0.3,0.2,0], "projection":"orthographic",
                                    "ortho_width":14, "width":16, "height":16})");
   };
-  RunResult r = Exec(Render("store", "--cam " + cam(20) + " -o " + Path("near.exr") + " --quiet"));
+  RunResult r = testing::RunCommand(Render("store", "--cam " + cam(20) + " -o " + Path("near.exr") + " --quiet"));
   ASSERT_EQ(r.code, 0) << r.output;
   auto img = ReadExr(Path("near.exr"));
   ASSERT_TRUE(img.ok());
   EXPECT_EQ(img->pixels["A"][8 * 16 + 8], 1.0f);
   for (double z : {1e17, 1e30, 1e300}) {
-    r = Exec(Render("store", "--cam " + cam(z) + " -o " + Path("far.exr") + " --quiet"));
+    r = testing::RunCommand(Render("store", "--cam " + cam(z) + " -o " + Path("far.exr") + " --quiet"));
     EXPECT_EQ(r.code, 1) << z << ": " << r.output;
     EXPECT_TRUE(Has(r.output, "camera position") && Has(r.output, "65536")) << r.output;
     EXPECT_FALSE(fs::exists(Path("far.exr")));

@@ -269,15 +269,20 @@ TEST(PreadFile, ReadsAndRefusesRangesPastTheEnd) {
   EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
 }
 
+// A sphere:256 store with bricks of 32^3 voxels (records of a few KB, as
+// vox-ingest makes them), in `dir`.
+Status WriteSphereStore(const std::string& dir) {
+  auto vol = GenerateShape("sphere:256");
+  if (!vol.ok()) return vol.status();
+  StoreMeta meta = storage_test::MetaFor(vol->levels, vol->levels - 5, GridClass::kLevelSet, true);
+  return storage_test::WriteVoxels(dir, vol->voxels, meta);
+}
+
 // Bytes read from disk for a brick: its record's pages, not a read-around.
 TEST(PrefetchIo, DiskBytesPerBrickAreTheBricksOwn) {
-  // Bricks of 32^3 voxels (records of a few KB, as vox-ingest makes them).
-  auto vol = GenerateShape("sphere:256");
-  ASSERT_TRUE(vol.ok());
-  StoreMeta meta = storage_test::MetaFor(vol->levels, vol->levels - 5, GridClass::kLevelSet, true);
   storage_test::TempDir tmp;
   const std::string dir = tmp / "s";
-  ASSERT_TRUE(storage_test::WriteVoxels(dir, vol->voxels, meta).ok());
+  ASSERT_TRUE(WriteSphereStore(dir).ok());
   const std::string path = dir + "/bricks.vxb";
   int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
   ASSERT_GE(fd, 0);
@@ -361,12 +366,9 @@ TEST(PrefetchIo, DiskBytesPerBrickAreTheBricksOwn) {
 // of windows read before (checksums verified then) still serve, every other
 // brick fails with an I/O error naming the file.
 TEST(PrefetchIo, WindowsKeepOnlyWhatTheyReadBeforeAShrink) {
-  auto vol = GenerateShape("sphere:256");
-  ASSERT_TRUE(vol.ok());
-  StoreMeta meta = storage_test::MetaFor(vol->levels, vol->levels - 5, GridClass::kLevelSet, true);
   storage_test::TempDir tmp;
   const std::string dir = tmp / "s";
-  ASSERT_TRUE(storage_test::WriteVoxels(dir, vol->voxels, meta).ok());
+  ASSERT_TRUE(WriteSphereStore(dir).ok());
   OpenOptions windows;
   windows.cache_bytes = size_t(64) << 20;  // windows of 64 KiB
   auto w = Store::Open(dir, windows);

@@ -538,7 +538,7 @@ class Bench:
             return store  # vox-gen renames a finished store into place
         log(f"vox-gen sphere {store} --size {n}")
         t0 = time.monotonic()
-        r = subprocess.run([self.gen, "sphere", store, "--size", str(n), "--quiet", "--force"])
+        r = subprocess.run([self.gen, "sphere", store, "--size", str(n), "--no-lod", "--quiet", "--force"])
         if r.returncode != 0:
             sys.exit(f"scale: vox-gen failed for --size {n} (exit {r.returncode})")
         log(f"  made in {time.monotonic() - t0:.1f} s")
