@@ -195,6 +195,7 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
   bi.channels = 5 + (o.layers.normal ? 3 : 0) + (o.layers.voxel ? 3 : 0);
   bi.cache_override = uint64_t(o.cache_mb) << 20;
   bi.io_threads = io_threads;
+  bi.read_window_bytes = o.read_windows ? kMaxReadWindowBytes : 0;
   const bool keep = o.keep_image && out != nullptr;
   const size_t pixels = size_t(camera.width) * size_t(camera.height);
   if (keep) bi.process_base += uint64_t(pixels) * uint64_t(bi.channels) * sizeof(float);

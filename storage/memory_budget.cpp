@@ -134,6 +134,14 @@ std::string FormatMiB(uint64_t bytes) {
   return buf;
 }
 
+// Rounded up to 0.1 MiB: a stated need that, given back, suffices.
+std::string FormatMiBUp(uint64_t bytes) {
+  const uint64_t tenth = kMiB / 10;
+  char buf[32];
+  snprintf(buf, sizeof buf, "%.1f", double((bytes + tenth - 1) / tenth) / 10.0);
+  return buf;
+}
+
 }  // namespace
 
 std::string MemoryLimit::ToString() const {
@@ -262,9 +270,12 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
   b.exr_writer = threads * 2 * tile_bytes + tiles * sizeof(uint64_t) +
                  uint64_t(in.image_width) * tile * 4 * sizeof(float);
   // Pages of the brick file that reads in flight touch: the record and the
-  // kernel's read-ahead window (128 KiB by default) on each side; a
-  // prefetching I/O thread's run, in its buffer and in the page cache.
-  b.page_cache = std::max<uint64_t>(2 * kMiB, threads * (in.max_stored_brick_bytes + 256 * 1024)) +
+  // kernel's read-ahead window (128 KiB by default) on each side, or a record
+  // window (read into a buffer before the window cache takes it, and in the
+  // page cache); a prefetching I/O thread's run, in its buffer and in the
+  // page cache.
+  b.page_cache = std::max<uint64_t>(2 * kMiB, threads * (in.max_stored_brick_bytes + 256 * 1024 +
+                                                         2 * in.read_window_bytes)) +
                  uint64_t(std::max(in.io_threads, 0)) * 2 * kPrefetchRunBytes;
   const uint64_t fixed = b.process_base + b.headroom + b.resident_top + b.tile_buffers + b.exr_writer +
                          b.page_cache;
@@ -278,7 +289,7 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
   auto too_small = [&] {
     return ResourceExhaustedError(
         "memory budget of " + FormatMiB(total) + " MiB is too small: the render needs at least " +
-        FormatMiB(need()) + " MiB (in MiB: process " + FormatMiB(b.process_base) + ", resident top " +
+        FormatMiBUp(need()) + " MiB (in MiB: process " + FormatMiB(b.process_base) + ", resident top " +
         FormatMiB(b.resident_top) + ", tile buffers " + FormatMiB(b.tile_buffers) + ", EXR writer " +
         FormatMiB(b.exr_writer) + ", page cache " + FormatMiB(b.page_cache) + ", brick cache " +
         FormatMiB(min_cache) + ", pins " + FormatMiB(min_pins) + ", headroom 1/8)");

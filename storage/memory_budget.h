@@ -24,6 +24,10 @@ constexpr uint64_t kMiB = uint64_t(1) << 20;
 // merges neighbouring bricks into runs of at most this many bytes).
 constexpr uint64_t kPrefetchRunBytes = uint64_t(1) << 20;
 
+// The largest window of brick records a reader reads at once
+// (OpenOptions::read_windows; storage/internal/record_windows.h).
+constexpr uint64_t kMaxReadWindowBytes = uint64_t(1) << 20;
+
 // What the process may use, in bytes. 0 in a field means "none found".
 struct MemoryLimit {
   uint64_t bytes = 0;          // the smallest of the limits below that exist (0: none known)
@@ -58,6 +62,9 @@ struct BudgetInputs {
   int tile_size = 64;
   int threads = 1;
   int io_threads = 0;             // prefetching I/O threads (0: no prefetch)
+  // The largest record window a miss reads (0: records read alone): each
+  // thread's read in flight holds it in a buffer and in the page cache.
+  uint64_t read_window_bytes = kMaxReadWindowBytes;
   int channels = 5;               // EXR channels: R G B A Z, + 3 per extra layer
   // Pins wanted per thread table (a power of two, 1..256); the split lowers
   // it until the tables fit their share (1/8 of what the fixed costs leave).

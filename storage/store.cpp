@@ -99,7 +99,7 @@ class StoreImpl : public Store {
     s.evictions = c.evictions;
     s.bytes_mapped = bricks_ ? bricks_->size() : 0;
     s.bytes_decompressed = bytes_decompressed_.load(std::memory_order_relaxed);
-    s.bytes_resident = c.charge;
+    s.bytes_resident = c.charge + (windows_ ? windows_->charge() : 0);
     s.capacity = c.capacity + (windows_ ? windows_->capacity() : 0);
     s.prefetched = c.prefetched;
     s.prefetch_hits = c.prefetch_hits;

@@ -22,6 +22,7 @@
 #include "core/status.h"
 #include "storage/file.h"
 #include "storage/internal/format.h"
+#include "storage/memory_budget.h"
 #include "storage/page_cache.h"
 
 namespace vox::storage_internal {
@@ -47,7 +48,7 @@ class RecordWindows {
   static uint64_t ShareOf(uint64_t cache_bytes);
 
   static constexpr uint64_t kMinWindow = uint64_t(64) << 10;
-  static constexpr uint64_t kMaxWindow = uint64_t(1) << 20;
+  static constexpr uint64_t kMaxWindow = kMaxReadWindowBytes;
   static constexpr uint64_t kMaxCapacity = uint64_t(64) << 20;
 
   // Brick `id`'s record (stored_size + kTrailerSize bytes), valid while the
@@ -68,6 +69,8 @@ class RecordWindows {
   // Bytes read from the file since construction, and windows read.
   uint64_t bytes_read() const { return bytes_read_.load(std::memory_order_relaxed); }
   uint64_t windows_read() const { return windows_read_.load(std::memory_order_relaxed); }
+  // Bytes the window cache holds now.
+  uint64_t charge() const { return cache_ ? cache_->TotalCharge() : 0; }
   // Heap bytes of the offset order (4 per brick).
   uint64_t resident_bytes() const { return order_.size() * sizeof(uint32_t); }
 

@@ -343,7 +343,8 @@ TEST(SplitMemoryBudget, Arithmetic) {
   EXPECT_EQ(b->resident_top, 3 * kMiB);
   EXPECT_EQ(b->tile_buffers, 2u * 64 * 64 * 5 * 4);                    // 160 KiB
   EXPECT_EQ(b->exr_writer, 2u * 2 * 64 * 64 * 5 * 4 + 256 * 8 + 1024u * 64 * 16);
-  EXPECT_EQ(b->page_cache, 2 * kMiB);  // 2 x (16 KiB + 256 KiB) is below the floor
+  // 2 threads x (16 KiB record + 256 KiB read-ahead + a 1 MiB record window twice).
+  EXPECT_EQ(b->page_cache, 2 * (16 * 1024 + 256 * 1024 + 2 * kMiB));
   // 256 pins x 64 KiB x 2 threads = 32 MiB < (768 - fixed) / 8: all wanted pins.
   EXPECT_EQ(b->pins_per_thread, 256);
   EXPECT_EQ(b->brick_pins, 32 * kMiB);

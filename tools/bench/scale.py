@@ -40,7 +40,7 @@ it read from the block device, i.e. its /proc/PID/io read_bytes, from wait4),
 vox-render's --stats JSON (cache.bricks_paged_in, and when present
 cache.bytes_read / cache.process_read_bytes and a "memory" object), and whether
 its EXR's pixels are bit-identical to the unlimited run's (this script parses
-the tiled ZIP EXRs itself, see --compare).
+the tiled RLE or ZIP EXRs itself, see --compare).
 
 Where --vdb N=PATH gives an OpenVDB file, vdb_render renders the same two
 views in the same cgroups (only that: no pixel check against vox).
@@ -126,8 +126,8 @@ def _read_exr(path):
     if mode & 0xF != 0:
         raise ValueError(f"{path}: only ONE_LEVEL tiled EXRs are supported")
     comp = attrs["compression"][1][0]
-    if comp not in (0, 3):
-        raise ValueError(f"{path}: compression {comp} (only none and ZIP are supported)")
+    if comp not in (0, 1, 3):
+        raise ValueError(f"{path}: compression {comp} (only none, RLE and ZIP are supported)")
     nx, ny = -(-w // tw), -(-h // th)
     offsets = struct.unpack_from(f"<{nx * ny}Q", data, pos)
     tiles = {}
@@ -138,18 +138,34 @@ def _read_exr(path):
         tiles[(tx, ty)] = (data[off + 20:off + 20 + size], cw * ch * bpp, cw, ch)
     if len(tiles) != nx * ny:
         raise ValueError(f"{path}: {len(tiles)} tiles, expected {nx * ny}")
-    return {"w": w, "h": h, "chans": chans, "tiles": tiles}
+    return {"w": w, "h": h, "chans": chans, "tiles": tiles, "comp": comp}
 
 
-def _tile_transformed(stored, raw_size):
-    """ZIP's predicted, interleaved bytes (a bijection of the raw pixels), or None for a raw tile."""
-    return None if len(stored) == raw_size else zlib.decompress(stored)
+def _rle_decode(stored):
+    """OpenEXR's RLE: a signed count byte c; c < 0: -c literal bytes follow; else the next byte c + 1 times."""
+    out, i = bytearray(), 0
+    while i < len(stored):
+        c = stored[i] - 256 if stored[i] > 127 else stored[i]
+        if c < 0:
+            out += stored[i + 1:i + 1 - c]
+            i += 1 - c
+        else:
+            out += bytes([stored[i + 1]]) * (c + 1)
+            i += 2
+    return bytes(out)
 
 
-def _tile_raw(stored, raw_size):
+def _tile_transformed(stored, raw_size, comp=3):
+    """RLE's or ZIP's predicted, interleaved bytes (a bijection of the raw pixels), or None for a raw tile."""
+    if len(stored) == raw_size:
+        return None
+    return _rle_decode(stored) if comp == 1 else zlib.decompress(stored)
+
+
+def _tile_raw(stored, raw_size, comp=3):
     if len(stored) == raw_size:
         return stored
-    d = zlib.decompress(stored)
+    d = _tile_transformed(stored, raw_size, comp)
     t = bytes(v & 0xFF for v in itertools.accumulate(d[1:], lambda a, b: a + b - 128, initial=d[0]))
     half = (len(t) + 1) // 2
     out = bytearray(len(t))
@@ -185,10 +201,11 @@ def compare_exr(a, b):
         sb = eb["tiles"][key][0]
         if sa == sb:
             continue
-        ta, tb = _tile_transformed(sa, size), _tile_transformed(sb, size)
+        ta, tb = _tile_transformed(sa, size, ea["comp"]), _tile_transformed(sb, size, eb["comp"])
         if ta is not None and tb is not None and ta == tb:
             continue
-        n += _pixels_differing(_tile_raw(sa, size), _tile_raw(sb, size), ea["chans"], cw, ch)
+        n += _pixels_differing(_tile_raw(sa, size, ea["comp"]), _tile_raw(sb, size, eb["comp"]),
+                               ea["chans"], cw, ch)
     return n
 
 
@@ -200,14 +217,12 @@ def exr_covered_pixels(path):
         raise ValueError(f"{path}: no A channel")
     n = 0
     for stored, size, cw, ch in e["tiles"].values():
-        raw = _tile_raw(stored, size)
+        raw = _tile_raw(stored, size, e["comp"])
         line = cw * sum(s for _, s in e["chans"])
         off = sum(s for c, s in e["chans"][:names.index("A")]) * cw
-        s = e["chans"][names.index("A")][1]
-        if s != 4:
-            raise ValueError(f"{path}: A is not a 32-bit float")
+        fmt = {4: "f", 2: "e"}[e["chans"][names.index("A")][1]]  # float or half
         for y in range(ch):
-            vals = struct.unpack_from(f"<{cw}f", raw, y * line + off)
+            vals = struct.unpack_from(f"<{cw}{fmt}", raw, y * line + off)
             n += sum(1 for v in vals if v > 0)
     return n
 
