@@ -1,6 +1,7 @@
 // Store::Open and the store reader: checks every block of the index at open,
-// then serves bricks from the brick file through the page cache, and reads
-// requested bricks ahead on an I/O thread (Prefetch).
+// then serves bricks from the brick file through the page cache, reading
+// records a window of file neighbours at a time (RecordWindows), and reads
+// requested bricks ahead on I/O threads (Prefetch).
 #include <sys/stat.h>
 
 #include <algorithm>
@@ -629,10 +630,11 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir, const OpenO
   std::string base = dir;
   while (base.size() > 1 && base.back() == '/') base.pop_back();
   // Both files are read with pread: the index once, sequentially, at open;
-  // bricks as random reads of their own bytes (no read-ahead: a fault's
+  // bricks as random reads without the kernel's read-ahead (a fault's
   // read-around on a mapping, or the kernel's read-ahead, would read
-  // megabytes per brick on disks with a large read_ahead_kb, thrashing under
-  // a memory limit). Prefetch merges neighbouring bricks into larger reads.
+  // megabytes per brick on disks with a large read_ahead_kb, outside any
+  // budget, thrashing under a memory limit). Instead a miss reads its
+  // record's window, sized and cached within the budget (RecordWindows).
   auto open = [&](const char* name, bool random_access) {
     auto f = OpenPreadFile(base + "/" + name, random_access);
     if (!f.ok() && f.status().code() == StatusCode::kNotFound)
