@@ -87,8 +87,9 @@ bool MakeStore(const std::string& shape, int brick_level, vox::GridClass gc, boo
 }
 
 // The .vdb target's seeds: small grids of each kind the ingest reads, each
-// written with no compression and with OpenVDB's default (zip, active mask;
-// blosc too when this OpenVDB has it). Returns the number written.
+// written with OpenVDB's default compression (zip, active mask) and blosc
+// when this OpenVDB has it; the sphere also uncompressed. Returns the number
+// written.
 int WriteVdbSeeds(const fs::path& dir) {
   openvdb::initialize();
   fs::create_directories(dir);
@@ -146,6 +147,8 @@ int WriteVdbSeeds(const fs::path& dir) {
   int n = 0;
   for (const auto& [name, grids] : files)
     for (const auto& [cname, c] : compressions) {
+      // Uncompressed files are large (over 1 MB here): one is enough.
+      if (c == openvdb::io::COMPRESS_NONE && name != "sphere") continue;
       openvdb::io::File f((dir / (name + "-" + cname + ".vdb")).string());
       f.setCompression(c);
       f.write(grids);
