@@ -187,6 +187,7 @@ Status TiledExrWriter::WriteTile(const TileRect& rect, const TileBuffer& buf) {
   }
   std::lock_guard<std::mutex> lock(mu_);
   if (!file_) return InternalError(path_ + ": WriteTile after Finish");
+  if (!failed_.ok()) return failed_;
   try {
     Imf::FrameBuffer fb;
     for (int c = 0; c < kNumChannels; ++c)
@@ -198,8 +199,12 @@ Status TiledExrWriter::WriteTile(const TileRect& rect, const TileBuffer& buf) {
     file_->setFrameBuffer(fb);
     file_->writeTile(rect.tx, rect.ty);
   } catch (const std::exception& e) {
-    return IoError(path_ + ": writing tile (" + std::to_string(rect.tx) + ", " +
-                   std::to_string(rect.ty) + ") failed: " + e.what());
+    // A TiledOutputFile whose writeTile threw cannot be used again: the
+    // tile buffer it failed on is never released, so the next writeTile
+    // waits for it forever. Every later call returns this error instead.
+    failed_ = IoError(path_ + ": writing tile (" + std::to_string(rect.tx) + ", " +
+                      std::to_string(rect.ty) + ") failed: " + e.what());
+    return failed_;
   }
   return OkStatus();
 }
@@ -207,6 +212,14 @@ Status TiledExrWriter::WriteTile(const TileRect& rect, const TileBuffer& buf) {
 Status TiledExrWriter::Finish(double render_seconds, const std::string& timings_json) {
   std::lock_guard<std::mutex> lock(mu_);
   if (!file_ || !out_) return InternalError(path_ + ": EXR already finished");
+  if (!failed_.ok()) {
+    try {
+      file_.reset();
+    } catch (const std::exception&) {
+    }
+    out_.reset();  // removes the temporary
+    return failed_;
+  }
   Status s;
   try {
     file_.reset();

@@ -135,6 +135,7 @@ class TiledExrWriter {
   ImageLayers layers_;
   std::mutex mu_;
   std::unique_ptr<Imf::TiledOutputFile> file_;
+  Status failed_;  // the first failed WriteTile: the file is unusable after it
 };
 
 // Writes renderTimeSeconds and vox:timings (JSON, at most 1000 bytes) into

@@ -165,10 +165,20 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
   arena.execute([&] {
     tbb::parallel_for(0, threads, [&](int) {
       Worker& w = workers.local();
+      // Each worker hands its counters to the frame's under err_mu, which
+      // the calling thread takes after the loop: the hand-over is ordered
+      // for ThreadSanitizer too (an uninstrumented TBB's join is not).
+      auto hand_over = [&] {
+        std::lock_guard<std::mutex> lock(err_mu);
+        stats->counters.Add(w.counters);
+        w.counters = RenderCounters();
+        stats->write_seconds += w.write_seconds;
+        w.write_seconds = 0;
+      };
       for (;;) {
-        if (abort.load(std::memory_order_relaxed)) return;
+        if (abort.load(std::memory_order_relaxed)) return hand_over();
         const int64_t i = cursor.fetch_add(1);
-        if (i >= end) return;
+        if (i >= end) return hand_over();
         const TileRect& rect = layout.order()[size_t(i)];
         uint64_t rays_before = 0;
         for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
@@ -184,8 +194,8 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
             first_error = s.WithContext("tile (" + std::to_string(rect.tx) + ", " +
                                         std::to_string(rect.ty) + ")");
           abort = true;
-          return;
         }
+        if (!s.ok()) return hand_over();
         uint64_t rays_after = 0;
         for (int k = 0; k < kNumRayKinds; ++k) rays_after += w.counters.rays[k];
         rays.fetch_add(rays_after - rays_before, std::memory_order_relaxed);
@@ -201,15 +211,16 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
   scout_stop = true;
   if (scout.joinable()) scout.join();
   stats->render_seconds = frame_clock.Lap();
-  for (Worker& w : workers) {
-    stats->counters.Add(w.counters);
-    stats->write_seconds += w.write_seconds;
+  Status error;
+  {
+    std::lock_guard<std::mutex> lock(err_mu);  // after the workers' hand-overs
+    error = first_error;
   }
   stats->tiles = done.load();
   stats->cache_end = volume->cache_stats();
-  if (!first_error.ok()) {
+  if (!error.ok()) {
     if (writer) writer->Abandon();  // an earlier file at exr_path stays intact
-    return first_error;
+    return error;
   }
   const ProgressSnapshot last = snapshot();
   progress.Finish(uint64_t(last.tiles_done), uint64_t(last.tiles_total),

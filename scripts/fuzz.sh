@@ -1,17 +1,17 @@
 #!/usr/bin/env bash
 # Runs one libFuzzer target under ASan+UBSan for SECONDS with memory caps.
-#   scripts/fuzz.sh TARGET SECONDS      TARGET: store | parse | exr
+#   scripts/fuzz.sh TARGET SECONDS      TARGET: store | parse | exr | vdb
 # Builds with clang into build-fuzz/ (only what the target needs), writes the
 # seed corpus (fuzz_seed_gen) to build-fuzz/fuzz/seeds/, and keeps what the
 # fuzzer finds in build-fuzz/fuzz/corpus/TARGET/ between runs. A crash leaves
 # its input as build-fuzz/fuzz/crash-* and fails the script; replay it with
 #   build-fuzz/tests/fuzz/fuzz_TARGET build-fuzz/fuzz/crash-...
-# A long run: scripts/fuzz.sh store 3600 (docs/fuzzing.md).
+# A long run: scripts/fuzz.sh store 3600 (docs/robustness.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 target="${1:-}"
 secs="${2:-60}"
-case "$target" in store|parse|exr) ;; *) echo "usage: scripts/fuzz.sh store|parse|exr SECONDS" >&2; exit 2;; esac
+case "$target" in store|parse|exr|vdb) ;; *) echo "usage: scripts/fuzz.sh store|parse|exr|vdb SECONDS" >&2; exit 2;; esac
 dir=build-fuzz
 gen=()
 command -v ninja >/dev/null && [ ! -f "$dir/CMakeCache.txt" ] && gen=(-G Ninja)

@@ -75,10 +75,12 @@ TEST(CgroupHarness, UnlimitedRunIsMeasured) {
   EXPECT_EQ(big->exit_code, 0) << big->Describe();
   EXPECT_FALSE(big->oom_killed);
   EXPECT_GE(big->peak_bytes, 200 * kMiB);
+#ifndef VOX_SANITIZED  // ASan's shadow memory and allocator change what is charged
   // The peak follows the allocation: 192 MiB more touched, about 192 MiB more charged.
   const double diff = double(big->peak_bytes) - double(small->peak_bytes);
   EXPECT_GT(diff, 180.0 * kMiB) << small->Describe() << " / " << big->Describe();
   EXPECT_LT(diff, 204.0 * kMiB) << small->Describe() << " / " << big->Describe();
+#endif
 }
 
 TEST(CgroupHarness, MissingProgramExits127) {

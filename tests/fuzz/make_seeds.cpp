@@ -2,7 +2,15 @@
 // made by the real writer (a level set with colour, a fog volume, a top-only
 // store), each in the three store-input modes; cameras, scenes and ray lines,
 // valid and near-valid; the demo's cam.json and scene.json when DEMO_DIR is
-// given. Deterministic. Usage: fuzz_seed_gen OUT_DIR [DEMO_DIR]
+// given; small .vdb files written by OpenVDB (level sets, double, fog,
+// active tiles, an extra vec3 grid, an empty grid, no scalar grid, each
+// with OpenVDB's compressions). Deterministic but for the .vdb files' UUIDs.
+// Usage: fuzz_seed_gen OUT_DIR [DEMO_DIR]
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+#include <openvdb/tools/LevelSetUtil.h>
+
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -78,6 +86,78 @@ bool MakeStore(const std::string& shape, int brick_level, vox::GridClass gc, boo
   return true;
 }
 
+// The .vdb target's seeds: small grids of each kind the ingest reads, each
+// written with OpenVDB's default compression (zip, active mask) and blosc
+// when this OpenVDB has it; the sphere also uncompressed. Returns the number
+// written.
+int WriteVdbSeeds(const fs::path& dir) {
+  openvdb::initialize();
+  fs::create_directories(dir);
+  using openvdb::Coord;
+  auto sphere = [](float radius) {
+    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(radius, openvdb::Vec3f(0.5f),
+                                                                      1.0f, 2.0f);
+    g->setName("sphere");
+    return g;
+  };
+  std::vector<std::pair<std::string, openvdb::GridPtrVec>> files;
+  files.push_back({"sphere", {sphere(5.0f)}});
+  {
+    auto g = openvdb::tools::createLevelSetSphere<openvdb::DoubleGrid>(4.0, openvdb::Vec3d(-3.0),
+                                                                       0.5, 2.0);
+    g->setName("double");
+    files.push_back({"double", {g}});
+  }
+  {
+    auto fog = sphere(4.0f);
+    openvdb::tools::sdfToFogVolume(*fog);
+    fog->setName("density");
+    files.push_back({"fog", {fog}});
+  }
+  {
+    auto g = sphere(4.0f);
+    g->tree().addTile(1, Coord(16, 0, 0), -1.0f, true);   // an occupied tile
+    g->tree().addTile(1, Coord(-24, 8, 0), 2.0f, true);   // active, not occupied
+    files.push_back({"tiles", {g}});
+  }
+  {
+    auto g = sphere(4.0f);
+    auto cd = openvdb::Vec3fGrid::create(openvdb::Vec3f(0.0f));
+    cd->setName("Cd");
+    for (int i = -4; i <= 4; ++i) cd->tree().setValue(Coord(i, i, 0), openvdb::Vec3f(0.1f * i, 0.5f, 1.0f));
+    files.push_back({"color", {cd, g}});
+  }
+  {
+    auto g = openvdb::FloatGrid::create(3.0f);
+    g->setGridClass(openvdb::GRID_LEVEL_SET);
+    g->setName("empty");
+    files.push_back({"empty", {g}});
+  }
+  {
+    auto cd = openvdb::Vec3fGrid::create();
+    cd->setName("only-vec3");
+    cd->tree().setValue(Coord(1, 2, 3), openvdb::Vec3f(1.0f));
+    files.push_back({"no-scalar", {cd}});
+  }
+  std::vector<std::pair<std::string, uint32_t>> compressions = {
+      {"none", openvdb::io::COMPRESS_NONE},
+      {"zip", openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK}};
+  if (openvdb::io::Archive::hasBloscCompression())
+    compressions.push_back({"blosc", openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK});
+  int n = 0;
+  for (const auto& [name, grids] : files)
+    for (const auto& [cname, c] : compressions) {
+      // Uncompressed files are large (over 1 MB here): one is enough.
+      if (c == openvdb::io::COMPRESS_NONE && name != "sphere") continue;
+      openvdb::io::File f((dir / (name + "-" + cname + ".vdb")).string());
+      f.setCompression(c);
+      f.write(grids);
+      f.close();
+      ++n;
+    }
+  return n;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -150,6 +230,8 @@ int main(int argc, char** argv) {
     n += 3;
   }
   fs::remove_all(scratch);
+
+  n += WriteVdbSeeds(out / "vdb");
 
   // Parse target: byte 0 selects camera (0), scene (1), ray lines (2).
   const std::vector<std::pair<char, std::string>> texts = {
