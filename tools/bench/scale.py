@@ -566,9 +566,10 @@ class Bench:
             return
         if limit != "none" and any(
                 r["bin"] == self.bin and r["tool"] == tool and r["grid"] == str(n) and
-                r["camera"] == cam and r["phase"] == phase and r["timeout"] == "1" and
+                r["camera"] == cam and r["phase"] == phase and
+                (r["timeout"] == "1" or r["oom"] == "1") and
                 r["limit"] != "none" and frac_value(r["limit"]) >= frac_value(limit) for r in self.rows):
-            return  # that limit or a looser one timed out: this would too, slowly
+            return  # that limit or a looser one timed out or was OOM-killed: this would be too, slowly
         limit_bytes = 0 if limit == "none" else int(store_bytes * frac_value(limit))
         tag = f"{tool}_{n}_{cam}_{limit.replace('/', 'of')}_{phase}_{run}"
         out = os.path.join(self.a.work, "out")
