@@ -23,30 +23,18 @@
 #include "render/exr.h"
 #include "render/tiles.h"
 #include "storage/store.h"
+#include "tests/common/run_command.h"
 
 namespace vox {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int exit_code = -1;
-  std::string output;
-};
+using Result = testing::CommandResult;
 
 Result RunTool(const std::string& env, const std::string& cmd) {
-  Result r;
   // Under ASan the shim cannot come first in the library order: allow it.
-  const std::string full = "ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=0 " + env + " " +
-                           cmd + " 2>&1";
-  FILE* p = ::popen(full.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(p);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
+  return testing::RunCommand("ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=0 " + env + " " + cmd);
 }
 
 std::string Slurp(const std::string& path) {
@@ -90,7 +78,7 @@ class WriteFault : public ::testing::Test {
     ASSERT_NE(mkdtemp(tmpl), nullptr);
     dir_ = tmpl;
     store_ = dir_ + "/store";
-    ASSERT_EQ(RunTool("", Gen(store_)).exit_code, 0);
+    ASSERT_EQ(RunTool("", Gen(store_)).code, 0);
   }
   void TearDown() override { fs::remove_all(dir_); }
   std::string Gen(const std::string& out, const std::string& extra = "") {
@@ -114,7 +102,7 @@ TEST_F(WriteFault, StoreWriterKeepsTheEarlierStore) {
     Result r = RunTool(Shim(f.mode, path, f.err, f.after), Gen(store_, "--force --size 128"));
     SCOPED_TRACE(f.mode + " " + f.err + " after " + std::to_string(f.after) + ": " + r.output);
     EXPECT_NE(r.output.find("fault_shim: injected"), std::string::npos) << "fault not reached";
-    EXPECT_EQ(r.exit_code, 1);
+    EXPECT_EQ(r.code, 1);
     EXPECT_NE(r.output.find(f.words), std::string::npos);
     EXPECT_NE(r.output.find(store_), std::string::npos) << "the message names the store";
     auto after = Store::Open(store_, {});
@@ -124,12 +112,12 @@ TEST_F(WriteFault, StoreWriterKeepsTheEarlierStore) {
   }
   // A new store that fails leaves nothing at its path.
   Result r = RunTool(Shim("write", "/.fresh.tmp-", "ENOSPC", 5000), Gen(dir_ + "/fresh"));
-  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_FALSE(fs::exists(dir_ + "/fresh"));
   EXPECT_TRUE(Temporaries(dir_).empty());
   // Short writes: a complete, identical store.
   r = RunTool(Shim("short", "/.short.tmp-", "EIO"), Gen(dir_ + "/short"));
-  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_EQ(r.code, 0) << r.output;
   auto s = Store::Open(dir_ + "/short", {});
   ASSERT_TRUE(s.ok()) << s.status().ToString();
   EXPECT_EQ((*s)->meta().voxel_count, voxels);
@@ -142,7 +130,7 @@ TEST_F(WriteFault, StoreWriterKeepsTheEarlierStore) {
 // write after the first failure.
 TEST_F(WriteFault, RenderOutputsKeepTheirEarlierFiles) {
   const std::string exr = dir_ + "/out.exr", png = dir_ + "/out.png", stats = dir_ + "/s.json";
-  ASSERT_EQ(RunTool("", Render("-o " + exr + " --preview " + png + " --stats " + stats)).exit_code, 0);
+  ASSERT_EQ(RunTool("", Render("-o " + exr + " --preview " + png + " --stats " + stats)).code, 0);
   std::string exr0 = Slurp(exr), png0 = Slurp(png), stats0 = Slurp(stats);
   ASSERT_GT(exr0.size(), 1000u);
   struct Target {
@@ -158,12 +146,12 @@ TEST_F(WriteFault, RenderOutputsKeepTheirEarlierFiles) {
         // libpng writes through stdio, whose write(2) the shim cannot see;
         // a small output may also end before the fault's byte offset.
         EXPECT_TRUE(t.name == ".out.png.tmp-" || f.after > 0) << "fault not reached";
-        EXPECT_EQ(r.exit_code, 0);
+        EXPECT_EQ(r.code, 0);
         // The run replaced every output: they are the earlier outputs now.
         exr0 = Slurp(exr), png0 = Slurp(png), stats0 = Slurp(stats);
         continue;
       }
-      EXPECT_EQ(r.exit_code, 1);
+      EXPECT_EQ(r.code, 1);
       EXPECT_NE(r.output.find(f.words), std::string::npos);
       EXPECT_NE(r.output.find(t.path), std::string::npos) << "the message names the output";
       EXPECT_EQ(Slurp(t.path), t.path == exr ? exr0 : t.path == png ? png0 : stats0)
@@ -173,17 +161,17 @@ TEST_F(WriteFault, RenderOutputsKeepTheirEarlierFiles) {
   // Short writes on the EXR: it completes and has the same size (the
   // timings in its header differ, their slot does not).
   Result r = RunTool(Shim("short", ".out.exr.tmp-", "EIO"), Render("-o " + exr));
-  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(Slurp(exr).size(), exr0.size());
 }
 
 TEST_F(WriteFault, MergeKeepsTheEarlierImage) {
   const std::string p1 = dir_ + "/p1.exr", p2 = dir_ + "/p2.exr", out = dir_ + "/merged.exr";
-  ASSERT_EQ(RunTool("", Render("-o " + p1 + " --tiles 1/2")).exit_code, 0);
-  ASSERT_EQ(RunTool("", Render("-o " + p2 + " --tiles 2/2")).exit_code, 0);
+  ASSERT_EQ(RunTool("", Render("-o " + p1 + " --tiles 1/2")).code, 0);
+  ASSERT_EQ(RunTool("", Render("-o " + p2 + " --tiles 2/2")).code, 0);
   const std::string merge = std::string(VOX_MERGE_BIN) + " " + p1 + " " + p2 + " -o " + out +
                             " --quiet";
-  ASSERT_EQ(RunTool("", merge).exit_code, 0);
+  ASSERT_EQ(RunTool("", merge).code, 0);
   const std::string out0 = Slurp(out), p10 = Slurp(p1);
   ASSERT_GT(out0.size(), 4000u);
   for (Fault f : kFaults) {
@@ -193,7 +181,7 @@ TEST_F(WriteFault, MergeKeepsTheEarlierImage) {
     Result r = RunTool(Shim(f.mode, ".merged.exr.tmp-", f.err, f.after), merge);
     SCOPED_TRACE(f.mode + " " + f.err + ": " + r.output);
     ASSERT_NE(r.output.find("fault_shim: injected"), std::string::npos) << "fault not reached";
-    EXPECT_EQ(r.exit_code, 1);
+    EXPECT_EQ(r.code, 1);
     EXPECT_NE(r.output.find(f.words), std::string::npos);
     EXPECT_NE(r.output.find(out), std::string::npos);
     EXPECT_EQ(Slurp(out), out0);
@@ -201,7 +189,7 @@ TEST_F(WriteFault, MergeKeepsTheEarlierImage) {
     EXPECT_TRUE(Temporaries(dir_).empty());
   }
   Result r = RunTool(Shim("short", ".merged.exr.tmp-", "EIO"), merge);
-  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_EQ(Slurp(out), out0) << "merging is deterministic";
 }
 

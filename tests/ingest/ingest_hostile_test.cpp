@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "storage/store.h"
+#include "tests/common/run_command.h"
 #include "tests/ingest/ingest_test_util.h"
 
 namespace vox {
@@ -26,25 +27,13 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int exit_code = -1;
-  std::string output;
-};
+using Result = testing::CommandResult;
 
 // Runs vox-ingest with `env` prepended (a shell assignment list), stderr
 // folded into the output. A sanitizer build must let a crash be a crash.
 Result RunIngest(const std::string& args, const std::string& env = "") {
-  Result r;
-  const std::string cmd = "ASAN_OPTIONS=handle_segv=0:handle_sigbus=0:handle_abort=0 " + env +
-                          " " + VOX_INGEST_BINARY + " " + args + " 2>&1";
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(p);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
+  return testing::RunCommand("ASAN_OPTIONS=handle_segv=0:handle_sigbus=0:handle_abort=0 " + env +
+                             " " + VOX_INGEST_BINARY + " " + args);
 }
 
 std::vector<std::string> Leftovers(const std::string& dir) {
@@ -78,7 +67,7 @@ TEST_F(IngestHostileTest, ACrashWhileReadingIsReportedAndCleanedUp) {
   for (int sig : {SIGSEGV, SIGBUS}) {
     const std::string out = dir_.File("store");
     Result r = RunIngest(vdb_ + " " + out + " --quiet", "VOX_INGEST_TEST_CRASH=" + std::to_string(sig));
-    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_EQ(r.code, 1) << r.output;
     EXPECT_NE(r.output.find(vdb_ + ": OpenVDB crashed reading the grid (signal " +
                             std::to_string(sig)),
               std::string::npos)
@@ -91,12 +80,12 @@ TEST_F(IngestHostileTest, ACrashWhileReadingIsReportedAndCleanedUp) {
 
 TEST_F(IngestHostileTest, AnEarlierStoreSurvivesACrashedReplace) {
   const std::string out = dir_.File("store");
-  ASSERT_EQ(RunIngest(vdb_ + " " + out + " --quiet").exit_code, 0);
+  ASSERT_EQ(RunIngest(vdb_ + " " + out + " --quiet").code, 0);
   auto before = Store::Open(out, {});
   ASSERT_TRUE(before.ok());
   const uint64_t id = (*before)->store_id();
   Result r = RunIngest(vdb_ + " " + out + " --quiet --force", "VOX_INGEST_TEST_CRASH=11");
-  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.code, 1) << r.output;
   auto after = Store::Open(out, {});
   ASSERT_TRUE(after.ok()) << after.status().ToString();
   EXPECT_EQ((*after)->store_id(), id);
@@ -129,9 +118,9 @@ TEST_F(IngestHostileTest, MutatedAndTruncatedFilesNeverKillTheTool) {
     std::ofstream(in, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
     Result r = RunIngest(in + " " + out + " --quiet --threads 2");
     ++runs;
-    ASSERT_TRUE(r.exit_code == 0 || r.exit_code == 1) << "mutation " << i << ": exit "
-                                                       << r.exit_code << "\n" << r.output;
-    if (r.exit_code == 0) {
+    ASSERT_TRUE(r.code == 0 || r.code == 1) << "mutation " << i << ": exit "
+                                                       << r.code << "\n" << r.output;
+    if (r.code == 0) {
       ++ingested;
       EXPECT_TRUE(Store::Open(out, {}).ok()) << "mutation " << i;
     } else {
@@ -159,7 +148,7 @@ TEST_F(IngestHostileTest, TileExpansionIsLimited) {
   const std::string huge = dir_.File("huge.vdb");
   testutil::WriteVdb(huge, {fog});
   Result r = RunIngest(huge + " " + dir_.File("h") + " --quiet");
-  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("--max-voxels"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("68719476736 voxels"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir_.File("h")));
@@ -171,18 +160,18 @@ TEST_F(IngestHostileTest, TileExpansionIsLimited) {
   const std::string tile = dir_.File("tile.vdb");
   testutil::WriteVdb(tile, {small});
   r = RunIngest(tile + " " + dir_.File("t1") + " --quiet --max-voxels 1000");
-  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("2097152 voxels, more than the limit of 1000 (--max-voxels"),
             std::string::npos)
       << r.output;
   r = RunIngest(tile + " " + dir_.File("t2") + " --quiet");
-  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.code, 0) << r.output;
   auto s = Store::Open(dir_.File("t2"), {});
   ASSERT_TRUE(s.ok()) << s.status().ToString();
   EXPECT_EQ((*s)->meta().voxel_count, 128u * 128u * 128u);
   for (const char* bad : {"0", "-5", "1.5", "x"}) {
     r = RunIngest(tile + " " + dir_.File("t3") + " --max-voxels " + bad);
-    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
+    EXPECT_EQ(r.code, 2) << bad << ": " << r.output;
     EXPECT_NE(r.output.find("--max-voxels"), std::string::npos) << r.output;
   }
 }
@@ -190,12 +179,12 @@ TEST_F(IngestHostileTest, TileExpansionIsLimited) {
 TEST_F(IngestHostileTest, ThreadsAreCapped) {
   for (const char* n : {"1000000", "1025", "-1"}) {
     Result r = RunIngest(vdb_ + " " + dir_.File("s") + " --threads " + n);
-    EXPECT_EQ(r.exit_code, 2) << n << ": " << r.output;
+    EXPECT_EQ(r.code, 2) << n << ": " << r.output;
     EXPECT_NE(r.output.find("--threads " + std::string(n) + ": must be in 1..1024"),
               std::string::npos)
         << r.output;
   }
-  EXPECT_EQ(RunIngest(vdb_ + " " + dir_.File("s") + " --quiet --threads 64").exit_code, 0);
+  EXPECT_EQ(RunIngest(vdb_ + " " + dir_.File("s") + " --quiet --threads 64").code, 0);
 }
 
 }  // namespace

@@ -29,15 +29,7 @@ class CliTest : public ::testing::Test {
   static void SetUpTestSuite() {
     dir_ = new fs::path(fs::temp_directory_path() / ("vox_cli_test_" + std::to_string(getpid())));
     fs::create_directories(*dir_);
-    StoreMeta meta = testing::TestMeta(6, GridClass::kLevelSet, 0.25);
-    meta.brick_level = 3;
-    meta.origin = {-32, -32, -32};
-    meta.index_to_world = glm::scale(glm::dmat4(1.0), glm::dvec3(0.25));
-    meta.source_file = "generated";
-    meta.grid_name = "sphere";
-    // A sphere of radius 20 voxels centred on index (0,0,0): world radius 5.
-    std::vector<MemoryVoxel> voxels = testing::ShellVoxels(64, glm::dvec3(32), 17, 20);
-    Status s = testing::WriteStore(Path("store"), meta, voxels);
+    Status s = testing::WriteSphereShellStore(Path("store"));
     ASSERT_TRUE(s.ok()) << s.ToString();
   }
   static void TearDownTestSuite() {

@@ -103,16 +103,7 @@ class ExrCameraTest : public ::testing::Test {
   void SetUp() override {
     dir_ = fs::temp_directory_path() / ("vox_exr_camera_test_" + std::to_string(getpid()));
     fs::create_directories(dir_);
-    StoreMeta meta = testing::TestMeta(6, GridClass::kLevelSet, 0.25);
-    meta.brick_level = 3;
-    meta.origin = {-32, -32, -32};
-    meta.index_to_world = glm::scale(glm::dmat4(1.0), glm::dvec3(0.25));
-    meta.source_file = "generated";
-    meta.grid_name = "sphere";
-    // A shell of radius 20 voxels (world 5) around index (0, 0, 0).
-    ASSERT_TRUE(testing::WriteStore(Path("store"), meta,
-                                    testing::ShellVoxels(64, glm::dvec3(32), 17, 20))
-                    .ok());
+    ASSERT_TRUE(testing::WriteSphereShellStore(Path("store")).ok());
   }
   void TearDown() override { fs::remove_all(dir_); }
   std::string Path(const std::string& n) const { return (dir_ / n).string(); }

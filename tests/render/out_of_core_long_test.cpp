@@ -166,8 +166,8 @@ TEST_F(OutOfCoreLong, StoreLargerThanRamRendersIn1GiB) {
   // A band-b shell of the unit sphere (radius 15/32 of the grid) holds about
   // 4 pi r^2 b voxels at about 1 byte each on disk (vox-gen's 8192^3 sphere,
   // band 3: 549 MiB, 1.03 B per voxel); the band is the smallest that passes
-  // MemTotal by 10% (32768^3 on 23.5 GiB: band 9, about 26 GB, an hour or
-  // more to write on 2 cores).
+  // MemTotal by 10% (32768^3 with 23.5 GiB of RAM: band 10, about 30 GB,
+  // over an hour to write on 2 cores).
   const double r = double(size) * 15 / 32;
   const uint64_t ram = MemTotalBytes();
   double band = 3;

@@ -50,14 +50,7 @@ class OutputSafetyTest : public ::testing::Test {
     fs::remove_all(*dir_);
     delete dir_;
   }
-  static Status WriteSphere(const std::string& path) {
-    StoreMeta meta = testing::TestMeta(6, GridClass::kLevelSet, 0.25);
-    meta.brick_level = 3;
-    meta.origin = {-32, -32, -32};
-    meta.index_to_world = glm::scale(glm::dmat4(1.0), glm::dvec3(0.25));
-    meta.grid_name = "sphere";
-    return testing::WriteStore(path, meta, testing::ShellVoxels(64, glm::dvec3(32), 17, 20));
-  }
+  static Status WriteSphere(const std::string& path) { return testing::WriteSphereShellStore(path); }
   static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
   static std::string Write(const std::string& name, const std::string& text) {
     std::ofstream(Path(name)) << text;

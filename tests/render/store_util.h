@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
 #include <map>
 #include <string>
 #include <tuple>
@@ -12,6 +13,7 @@
 
 #include "render/volume.h"
 #include "storage/store.h"
+#include "tests/render/test_volumes.h"
 
 namespace vox::testing {
 
@@ -57,6 +59,18 @@ inline Status WriteStore(const std::string& dir, StoreMeta meta,
     VOX_RETURN_IF_ERROR(writer->AddBrick(
         {std::get<0>(coord), std::get<1>(coord), std::get<2>(coord)}, std::move(list)));
   return writer->Finish();
+}
+
+// The tools tests' store: a 64^3 level set (bricks of 8^3, voxels of 0.25)
+// holding a shell of radius 17..20 voxels around index (0,0,0), world radius 5.
+inline Status WriteSphereShellStore(const std::string& dir) {
+  StoreMeta meta = TestMeta(6, GridClass::kLevelSet, 0.25);
+  meta.brick_level = 3;
+  meta.origin = {-32, -32, -32};
+  meta.index_to_world = glm::scale(glm::dmat4(1.0), glm::dvec3(0.25));
+  meta.source_file = "generated";
+  meta.grid_name = "sphere";
+  return WriteStore(dir, meta, ShellVoxels(64, glm::dvec3(32), 17, 20));
 }
 
 }  // namespace vox::testing
