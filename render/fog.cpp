@@ -21,7 +21,7 @@ double Renderer::Transmittance(const Ray& gr, double t_max, Ctx& cx, const Cone*
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     // Level of detail: each coarse cell's mean density over its segment.
     Status s = lod_->Traverse(
-        *cx.tracer, gr, *cone,
+        *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
           if (seg.t0 >= t_max) return false;
           const double t1 = std::min(seg.t1, t_max);
@@ -111,7 +111,7 @@ glm::dvec3 Renderer::Fog(const Ray& gr, Ctx& cx, double* transmittance, double* 
   Status s;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     s = lod_->Traverse(
-        *cx.tracer, gr, *cone,
+        *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
           double rho = 1.0;
           if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume))

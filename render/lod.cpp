@@ -10,8 +10,58 @@
 
 namespace vox {
 namespace {
-constexpr double kInf = std::numeric_limits<double>::infinity();
+// A LodThread's table keys a coarse brick by its level in the top bits.
+constexpr int kLevelTagShift = 26;
+constexpr uint32_t kIdMask = (uint32_t(1) << kLevelTagShift) - 1;
+
+// Occupied box of a store's metadata, in its grid's coordinates.
+void ApplyOccupiedBox(const StoreMeta& m, LodLevelTracer* t) {
+  if (m.voxel_count == 0) return;
+  const int64_t lo[3] = {m.bbox_min.x - m.origin.x, m.bbox_min.y - m.origin.y,
+                         m.bbox_min.z - m.origin.z};
+  const int64_t hi[3] = {m.bbox_max.x - m.origin.x, m.bbox_max.y - m.origin.y,
+                         m.bbox_max.z - m.origin.z};
+  if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) return;
+  t->SetOccupiedBox(lo, hi);
+}
 }  // namespace
+
+// The table's shared source: brick (level << kLevelTagShift | id) of the
+// level's store.
+class LodThread::Levels : public BrickSource {
+ public:
+  explicit Levels(std::vector<BrickSource*> sources) : sources_(std::move(sources)) {}
+  StatusOr<BrickView> FetchBrick(uint32_t tagged) override {
+    return Source(tagged)->FetchBrick(tagged & kIdMask);
+  }
+  StatusOr<BrickView> FetchBrickIfReady(uint32_t tagged) override {
+    return Source(tagged)->FetchBrickIfReady(tagged & kIdMask);
+  }
+
+ private:
+  BrickSource* Source(uint32_t tagged) const {
+    return sources_[size_t(tagged >> kLevelTagShift) - 1];
+  }
+  std::vector<BrickSource*> sources_;  // level l at l - 1
+};
+
+// Level `level`'s bricks, lent by the thread's table under their tag.
+class LodThread::Tagged : public BrickSource {
+ public:
+  Tagged(LendingBrickTable* table, int level)
+      : table_(table), tag_(uint32_t(level) << kLevelTagShift) {}
+  StatusOr<BrickView> FetchBrick(uint32_t id) override { return table_->FetchBrick(tag_ | id); }
+  bool lends() const override { return true; }
+  const BrickView* LendBrick(uint32_t id, Status* error) override {
+    return table_->LendBrick(tag_ | id, error);
+  }
+
+ private:
+  LendingBrickTable* table_;
+  uint32_t tag_;
+};
+
+LodThread::~LodThread() = default;
 
 StatusOr<double> ParseLodFactor(const std::string& flag, const std::string& text) {
   errno = 0;
@@ -42,6 +92,7 @@ StatusOr<LodTracer> LodTracer::Create(Volume* base, const std::vector<Volume*>& 
                                   std::to_string(m.levels));
     VOX_ASSIGN_OR_RETURN(LodLevelTracer tr,
                          LodLevelTracer::Create(v, DefaultFirstStepLevels(v.levels)));
+    ApplyOccupiedBox(levels[i]->meta(), &tr);
     t.tracers_.push_back(tr);
   }
   if (m.voxel_count > 0) {
@@ -49,6 +100,29 @@ StatusOr<LodTracer> LodTracer::Create(Volume* base, const std::vector<Volume*>& 
     t.box_hi_ = glm::dvec3(m.bbox_max - m.origin) + 1.0;
   }
   return t;
+}
+
+std::unique_ptr<LodThread> LodTracer::NewThread(int slot_bits) const {
+  std::unique_ptr<LodThread> th(new LodThread());
+  th->tracers_ = tracers_;
+  std::vector<BrickSource*> sources;
+  for (Volume* v : levels_) sources.push_back(v->view().bricks);
+  th->levels_ = std::make_unique<LodThread::Levels>(sources);
+  th->table_ = std::make_unique<LendingBrickTable>(th->levels_.get(), slot_bits);
+  for (size_t i = 0; i < levels_.size(); ++i) {
+    const int level = int(i + 1);
+    OctreeView v = levels_[i]->view();
+    // Tags need the level to fit above the ids (tags 1..63, ids < 2^26).
+    if (v.bricks == nullptr || level >= 64 || levels_[i]->meta().brick_count > kIdMask + uint64_t(1))
+      continue;
+    th->tagged_.push_back(std::make_unique<LodThread::Tagged>(th->table_.get(), level));
+    v.bricks = th->tagged_.back().get();
+    auto t = LodLevelTracer::Create(v, tracers_[i].n1());
+    if (!t.ok()) continue;  // cannot fail: the same tree and split as tracers_[i]
+    ApplyOccupiedBox(levels_[i]->meta(), &*t);
+    th->tracers_[i] = *t;
+  }
+  return th;
 }
 
 int LodTracer::LevelForWidth(double w) const {
@@ -91,69 +165,15 @@ bool LodTracer::Exact(const Ray& gr, const Cone& cone) const {
   return LevelStart(cone, 1) >= t_out;
 }
 
-Status LodTracer::Traverse(const LodLevelTracer& base, const Ray& gr, const Cone& cone,
-                           const std::function<bool(const LodSegment&)>& visit,
-                           TraceCounters* counters) const {
-  double t_in, t_out;
-  BoxSpan(gr, &t_in, &t_out);
-  if (!(t_in <= t_out)) return OkStatus();
-  const int top = max_level();
-  double t_a = 0.0;
-  int l = LevelForWidth(cone.Width(std::max(0.0, t_in)));
-  while (l < top && LevelStart(cone, l + 1) <= t_a) ++l;
-  bool stopped = false;  // the visitor said stop
-  while (!stopped) {
-    const double t_b = l < top ? LevelStart(cone, l + 1) : kInf;
-    LodSegment seg;
-    seg.level = l;
-    if (l == 0) {
-      seg.volume = base_;
-      VOX_RETURN_IF_ERROR(base.Traverse(
-          gr,
-          [&](const Hit& h) {
-            if (h.t >= t_b) return false;  // the segment ends
-            seg.hit = h;
-            seg.t0 = h.t;
-            seg.t1 = std::min(VoxelExitT(gr, h.voxel), t_b);
-            if (!visit(seg)) stopped = true;
-            return !stopped;
-          },
-          counters));
-    } else {
-      const double start = std::max(t_a, t_in);
-      if (start >= t_out) break;
-      const double s = std::ldexp(1.0, -l);
-      const Ray cr{(gr.origin + start * gr.dir) * s, gr.dir * s};
-      seg.volume = levels_[size_t(l - 1)];
-      VOX_RETURN_IF_ERROR(tracers_[size_t(l - 1)].Traverse(
-          cr,
-          [&](const Hit& h) {
-            const double t0 = start + h.t;
-            if (t0 >= t_b) return false;
-            seg.hit = h;
-            seg.t0 = t0;
-            seg.t1 = std::min(start + VoxelExitT(cr, h.voxel), t_b);
-            if (!visit(seg)) stopped = true;
-            return !stopped;
-          },
-          counters));
-    }
-    if (stopped || t_b >= t_out) break;
-    t_a = t_b;
-    ++l;
-    while (l < top && LevelStart(cone, l + 1) <= t_a) ++l;
-  }
-  return OkStatus();
-}
-
-StatusOr<bool> LodTracer::FirstHit(const LodLevelTracer& base, const Ray& gr, const Cone& cone,
-                                   bool skip_start_run, double eps, LodSegment* out,
-                                   VoxelAttributes* attrs, TraceCounters* counters) const {
+StatusOr<bool> LodTracer::FirstHit(const LodLevelTracer& base, const LodThread* thread,
+                                   const Ray& gr, const Cone& cone, bool skip_start_run,
+                                   double eps, LodSegment* out, VoxelAttributes* attrs,
+                                   TraceCounters* counters) const {
   bool run_active = skip_start_run, found = false;
   double run_end = 0.0;
   Status attr_error;
   VOX_RETURN_IF_ERROR(Traverse(
-      base, gr, cone,
+      base, thread, gr, cone,
       [&](const LodSegment& seg) {
         if (run_active && seg.t0 <= run_end + eps * (1.0 + run_end)) {
           run_end = std::max(run_end, seg.t1);

@@ -11,19 +11,29 @@
 // Ray parameters: coarse segments trace the ray scaled by 2^-l from the
 // segment's start; every t reported is the unscaled ray's.
 //
+// Speed: a thread may bring its own LodThread (NewThread): its coarse levels'
+// bricks then go through one small pinned-brick table of that thread
+// (storage/brick_table.h) instead of the stores' shared caches, as the base
+// store's do through the caller's tracer. Each level's tracer clips rays to
+// its store's occupied box. Neither changes an answer.
+//
 // Thread safety: immutable after Create; Traverse and FirstHit are const and
-// thread-safe when the volumes are (the base tracer is the caller's own).
+// thread-safe when the volumes are (the base tracer and the LodThread are
+// the caller's own).
 #ifndef VOX_RENDER_LOD_H_
 #define VOX_RENDER_LOD_H_
 
+#include <algorithm>
 #include <cstdint>
-#include <functional>
+#include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "core/ray.h"
 #include "core/status.h"
 #include "core/tracer.h"
+#include "storage/brick_table.h"
 #include "storage/store.h"
 
 namespace vox {
@@ -59,6 +69,30 @@ struct LodSegment {
 // The tracer of one coarse or base level.
 using LodLevelTracer = AutoTracer<double>;
 
+class LodTracer;
+
+// One thread's tracers of the coarse levels, their bricks lent by one
+// pinned-brick table of 2^slot_bits slots shared by the levels. Use it on
+// one thread; release it before the volumes.
+class LodThread {
+ public:
+  ~LodThread();
+  LodThread(const LodThread&) = delete;
+  LodThread& operator=(const LodThread&) = delete;
+  // Level l's tracer (1 <= l <= levels).
+  const LodLevelTracer& level(int l) const { return tracers_[size_t(l - 1)]; }
+
+ private:
+  friend class LodTracer;
+  LodThread() = default;
+  class Levels;  // the table's shared source: tagged ids to the levels' stores
+  class Tagged;  // one level's view of the table
+  std::unique_ptr<Levels> levels_;
+  std::unique_ptr<LendingBrickTable> table_;
+  std::vector<std::unique_ptr<Tagged>> tagged_;
+  std::vector<LodLevelTracer> tracers_;
+};
+
 class LodTracer {
  public:
   // `levels[l - 1]` is level l's volume (levels 1 .. levels.size()); `base`
@@ -74,22 +108,29 @@ class LodTracer {
   // occupied box: the LOD trace equals the full-resolution trace.
   bool Exact(const Ray& gr, const Cone& cone) const;
 
+  // A thread's own coarse tracers (see LodThread), with a table of
+  // 2^slot_bits slots (clamped to 0..16). Levels whose brick ids do not
+  // leave room for the table's level tag keep the shared tracers.
+  std::unique_ptr<LodThread> NewThread(int slot_bits) const;
+
   // Visits the occupied cells along the ray in order, level by level,
-  // until `visit` returns false. `base` traces level 0 (the caller's
-  // tracer of the base volume, e.g. with a per-thread brick table).
-  Status Traverse(const LodLevelTracer& base, const Ray& gr, const Cone& cone,
-                  const std::function<bool(const LodSegment&)>& visit,
-                  TraceCounters* counters = nullptr) const;
+  // until `visit` (bool(const LodSegment&)) returns false. `base` traces
+  // level 0 (the caller's tracer of the base volume, e.g. with a per-thread
+  // brick table); `thread` (optional) the coarse levels.
+  template <class Visitor>
+  Status Traverse(const LodLevelTracer& base, const LodThread* thread, const Ray& gr,
+                  const Cone& cone, Visitor&& visit, TraceCounters* counters = nullptr) const;
 
   // The first occupied cell along the ray, after the run of cells it starts
   // in when `skip_start_run` (cells each entered within eps * (1 + t) of
   // where the previous was left), with its attributes when `attrs`.
   // False on a miss.
-  StatusOr<bool> FirstHit(const LodLevelTracer& base, const Ray& gr, const Cone& cone,
-                          bool skip_start_run, double eps, LodSegment* out,
+  StatusOr<bool> FirstHit(const LodLevelTracer& base, const LodThread* thread, const Ray& gr,
+                          const Cone& cone, bool skip_start_run, double eps, LodSegment* out,
                           VoxelAttributes* attrs, TraceCounters* counters = nullptr) const;
 
  private:
+  static constexpr double kInf = std::numeric_limits<double>::infinity();
   // Ray parameter where the level reaches l (infinite when it never does).
   double LevelStart(const Cone& cone, int l) const;
   // [t_in, t_out] of the ray in the base's occupied box (t_in > t_out: misses).
@@ -101,6 +142,63 @@ class LodTracer {
   double factor_ = 1.0;
   glm::dvec3 box_lo_{0.0}, box_hi_{-1.0};  // occupied box, base grid coordinates
 };
+
+template <class Visitor>
+Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, const Ray& gr,
+                           const Cone& cone, Visitor&& visit, TraceCounters* counters) const {
+  double t_in, t_out;
+  BoxSpan(gr, &t_in, &t_out);
+  if (!(t_in <= t_out)) return OkStatus();
+  const int top = max_level();
+  double t_a = 0.0;
+  int l = LevelForWidth(cone.Width(std::max(0.0, t_in)));
+  while (l < top && LevelStart(cone, l + 1) <= t_a) ++l;
+  bool stopped = false;  // the visitor said stop
+  while (!stopped) {
+    const double t_b = l < top ? LevelStart(cone, l + 1) : kInf;
+    LodSegment seg;
+    seg.level = l;
+    if (l == 0) {
+      seg.volume = base_;
+      VOX_RETURN_IF_ERROR(base.Traverse(
+          gr,
+          [&](const Hit& h) {
+            if (h.t >= t_b) return false;  // the segment ends
+            seg.hit = h;
+            seg.t0 = h.t;
+            seg.t1 = std::min(VoxelExitT(gr, h.voxel), t_b);
+            if (!visit(seg)) stopped = true;
+            return !stopped;
+          },
+          counters));
+    } else {
+      const double start = std::max(t_a, t_in);
+      if (start >= t_out) break;
+      const double s = std::ldexp(1.0, -l);
+      const Ray cr{(gr.origin + start * gr.dir) * s, gr.dir * s};
+      seg.volume = levels_[size_t(l - 1)];
+      const LodLevelTracer& tracer =
+          thread != nullptr ? thread->level(l) : tracers_[size_t(l - 1)];
+      VOX_RETURN_IF_ERROR(tracer.Traverse(
+          cr,
+          [&](const Hit& h) {
+            const double t0 = start + h.t;
+            if (t0 >= t_b) return false;
+            seg.hit = h;
+            seg.t0 = t0;
+            seg.t1 = std::min(start + VoxelExitT(cr, h.voxel), t_b);
+            if (!visit(seg)) stopped = true;
+            return !stopped;
+          },
+          counters));
+    }
+    if (stopped || t_b >= t_out) break;
+    t_a = t_b;
+    ++l;
+    while (l < top && LevelStart(cone, l + 1) <= t_a) ++l;
+  }
+  return OkStatus();
+}
 
 }  // namespace vox
 

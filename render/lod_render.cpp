@@ -18,7 +18,7 @@ bool Renderer::FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, 
   LodSegment seg;
   if (attrs != nullptr) ++cx.c->attribute_lookups;
   StatusOr<bool> found =
-      lod_->FirstHit(*cx.tracer, gr, cone, skip_start_run, eps_t_, &seg, attrs, &cx.c->trace);
+      lod_->FirstHit(*cx.tracer, cx.lod, gr, cone, skip_start_run, eps_t_, &seg, attrs, &cx.c->trace);
   if (!found.ok()) {
     cx.Fail(found.status());
     return false;

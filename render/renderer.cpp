@@ -75,18 +75,24 @@ std::string RenderPasses::ToString() const {
 struct Renderer::ThreadState {
   std::unique_ptr<LendingBrickTable> bricks;
   RenderTracer tracer;
+  std::unique_ptr<LodThread> lod;  // --lod: the coarse levels' tracers and table
 };
 
 std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> Renderer::NewThreadState()
     const {
   std::unique_ptr<ThreadState, ThreadStateDeleter> ts(new ThreadState());
   OctreeView view = volume_->view();
+  int bits = options_.table_slot_bits;
+  if (bits < 0) {
+    const uint64_t capacity = volume_->cache_stats().capacity;
+    bits = LendingBrickTable::SlotBits(capacity > 0 ? capacity : uint64_t(1) << 30);
+  }
+  if (lod_) {
+    // The pins are shared: half for the base's table, half for the levels'.
+    bits = std::max(0, bits - 1);
+    ts->lod = lod_->NewThread(bits);
+  }
   if (view.bricks != nullptr) {
-    int bits = options_.table_slot_bits;
-    if (bits < 0) {
-      const uint64_t capacity = volume_->cache_stats().capacity;
-      bits = LendingBrickTable::SlotBits(capacity > 0 ? capacity : uint64_t(1) << 30);
-    }
     ts->bricks = std::make_unique<LendingBrickTable>(view.bricks, bits);
     view.bricks = ts->bricks.get();
   }
@@ -250,6 +256,7 @@ void Renderer::FirstBricks(const TileRect& rect, int stride, std::vector<uint32_
 Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
                             ThreadState* ts) const {
   Ctx cx{ts ? &ts->tracer : &tracer_, counters, OkStatus()};
+  if (ts != nullptr) cx.lod = ts->lod.get();
   const int spp = scene_.samples_per_pixel;
   const ImageLayers& layers = options_.layers;
   const float inf = std::numeric_limits<float>::infinity();

@@ -25,6 +25,7 @@ struct Renderer::Ctx {
   const RenderTracer* tracer;
   RenderCounters* c;
   Status error;
+  const LodThread* lod = nullptr;  // --lod: the thread's coarse tracers (optional)
   bool failed() const { return !error.ok(); }
   void Fail(const Status& s) {
     if (error.ok()) error = s;

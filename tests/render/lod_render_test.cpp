@@ -168,6 +168,9 @@ TEST_F(LodRender, StopsNeverFinerThanTheConeNorLaterThanTheExactHit) {
   ASSERT_TRUE(base_tracer.ok());
   std::set<Key> occupied;
   for (const MemoryVoxel& v : *voxels_) occupied.insert({int64_t(v.x), int64_t(v.y), int64_t(v.z)});
+  // A thread's own coarse tracers (a 2-slot table, so bricks are replaced
+  // all the time) must give the shared tracers' answers.
+  std::unique_ptr<LodThread> thread = lt->NewThread(1);
   std::mt19937_64 rng(3);
   std::uniform_real_distribution<double> u(-1, 1), in(0, 128), cone(0, 0.2);
   int coarse = 0, checked = 0;
@@ -176,8 +179,18 @@ TEST_F(LodRender, StopsNeverFinerThanTheConeNorLaterThanTheExactHit) {
     const Ray r{glm::dvec3(in(rng), in(rng), in(rng)) - 150.0 * dir, dir};
     const Cone c{cone(rng) * 4, cone(rng) * (i % 3 == 0 ? 0.0 : 0.2)};
     LodSegment seg;
-    auto f = lt->FirstHit(*base_tracer, r, c, false, 0.0, &seg, nullptr);
+    auto f = lt->FirstHit(*base_tracer, nullptr, r, c, false, 0.0, &seg, nullptr);
     ASSERT_TRUE(f.ok());
+    LodSegment seg_t;
+    auto ft = lt->FirstHit(*base_tracer, thread.get(), r, c, false, 0.0, &seg_t, nullptr);
+    ASSERT_TRUE(ft.ok());
+    ASSERT_EQ(*ft, *f);
+    if (*f) {
+      EXPECT_EQ(seg_t.level, seg.level);
+      EXPECT_EQ(seg_t.hit.voxel, seg.hit.voxel);
+      EXPECT_EQ(seg_t.t0, seg.t0);
+      EXPECT_EQ(seg_t.t1, seg.t1);
+    }
     auto exact = base_tracer->FirstHit(r);
     ASSERT_TRUE(exact.ok());
     if (!*f) {

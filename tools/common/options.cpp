@@ -326,7 +326,7 @@ StatusOr<std::optional<Hit>> Prober::TraceLod(const Ray& index_ray, TraceCounter
     return h;
   }
   LodSegment seg;
-  auto f = impl_->lod->FirstHit(*impl_->lod_base, r, cone, false, 0.0, &seg, nullptr, counters);
+  auto f = impl_->lod->FirstHit(*impl_->lod_base, nullptr, r, cone, false, 0.0, &seg, nullptr, counters);
   if (!f.ok()) return f.status();
   if (!*f) return std::optional<Hit>();
   Hit hit = seg.hit;
