@@ -26,14 +26,23 @@ namespace fs = std::filesystem;
 using storage_internal::kLodDirName;
 
 // What a cell needs from its voxels: sums over its occupied base voxels.
+// The normal is area-weighted: only surface voxels (level sets: an occupied
+// voxel whose neighbour along the dominant axis of its normal, outwards, is
+// not occupied) count, each by the area of surface its column holds,
+// 1 / max |n_a|. The voxels deeper in the band carry no surface, and their
+// normals are the least accurate (their central differences reach past the
+// narrow band, where values are clamped). A cell without a surface voxel
+// takes the mean of all its voxels' normals.
 struct Aggregate {
   uint64_t count = 0;       // occupied base voxels
   glm::dvec3 normal{0.0};   // sum of their unit normals
+  glm::dvec3 surface{0.0};  // sum of the surface voxels' normals, area-weighted
   glm::dvec3 color{0.0};    // sum of their colours
   double density = 0.0;     // sum of their densities (1 each without densities)
   void Add(const Aggregate& o) {
     count += o.count;
     normal += o.normal;
+    surface += o.surface;
     color += o.color;
     density += o.density;
   }
@@ -156,8 +165,9 @@ class Cascade {
     v.z = uint32_t(local.z);
     v.attr.coverage = float(double(a.count) / cell_voxels);
     if (lv.has_normal) {
-      const double len = glm::length(a.normal);
-      v.attr.normal = len > 0 ? glm::vec3(a.normal / len) : glm::vec3(0.0f);
+      const glm::dvec3& n = glm::length(a.surface) > 0 ? a.surface : a.normal;
+      const double len = glm::length(n);
+      v.attr.normal = len > 0 ? glm::vec3(n / len) : glm::vec3(0.0f);
     }
     if (lv.has_color) v.attr.color = glm::vec3(a.color / double(a.count));
     if (lv.has_density) v.attr.density = float(a.density / cell_voxels);
@@ -187,6 +197,7 @@ class BaseReader {
     const StoreMeta& m = store.meta();
     fog_ = m.grid_class == GridClass::kFogVolume;
     has_density_ = m.has_density;
+    has_normal_ = m.has_normal;
   }
 
   Status Run(uint64_t* bricks_read) {
@@ -211,6 +222,7 @@ class BaseReader {
       } else if (r.kind == ChildRef::kBrick) {
         if (o_.cancel != nullptr && o_.cancel->load())
           return IoError("interrupted; no level-of-detail pyramid written");
+        brick_coord_ = child;
         if (r.index >= prefetched_to_) {
           std::vector<uint32_t> ids;
           const uint64_t end = std::min<uint64_t>(r.index + kPrefetchWindow, store_.meta().brick_count);
@@ -219,7 +231,10 @@ class BaseReader {
           prefetched_to_ = uint32_t(end);
         }
         VOX_ASSIGN_OR_RETURN(BrickView b, store_.FetchBrick(r.index));
-        VOX_RETURN_IF_ERROR(Walk(b.cells, 0, level + 1, child, r.index, b.data));
+        brick_cells_ = b.cells;
+        const Status walked = Walk(b.cells, 0, level + 1, child, r.index, b.data);
+        brick_cells_ = nullptr;
+        VOX_RETURN_IF_ERROR(walked);
         ++bricks_read_;
         if (o_.progress) o_.progress(bricks_read_, store_.meta().brick_count);
       } else {
@@ -231,6 +246,18 @@ class BaseReader {
         Aggregate g;
         g.count = 1;
         g.normal = glm::dvec3(a.normal);
+        if (has_normal_) {
+          int axis = 0;
+          for (int k = 1; k < 3; ++k)
+            if (std::fabs(g.normal[k]) > std::fabs(g.normal[axis])) axis = k;
+          const double na = g.normal[axis];
+          if (na != 0) {
+            glm::i64vec3 out = glm::i64vec3(child);
+            out[axis] += na > 0 ? 1 : -1;
+            VOX_ASSIGN_OR_RETURN(const bool outside_occupied, Occupied(out));
+            if (!outside_occupied) g.surface = g.normal / std::fabs(na);
+          }
+        }
         g.color = glm::dvec3(a.color);
         g.density = has_density_ ? double(a.density) : (fog_ ? 1.0 : 0.0);
         VOX_RETURN_IF_ERROR(cascade_.Push(1, child, g));
@@ -239,11 +266,44 @@ class BaseReader {
     return OkStatus();
   }
 
+  // Whether base voxel `v` (grid coordinates) is occupied: from the current
+  // brick's cells when it lies in that brick, else down from the top (its
+  // brick through the store's cache).
+  StatusOr<bool> Occupied(const glm::i64vec3& v) {
+    const int64_t n = int64_t(1) << view_.levels;
+    if (v.x < 0 || v.y < 0 || v.z < 0 || v.x >= n || v.y >= n || v.z >= n) return false;
+    const glm::u64vec3 c(v);
+    const int depth = view_.levels - view_.brick_level;
+    const bool same_brick = brick_cells_ != nullptr && (c >> uint64_t(depth)) == brick_coord_;
+    const CompactCell* pool = same_brick ? brick_cells_ : view_.top;
+    int level = same_brick ? view_.brick_level : 0;
+    CompactCell cell = pool[0];
+    BrickView pin;
+    for (; level < view_.levels; ++level) {
+      const int bit = view_.levels - 1 - level;
+      const unsigned d = unsigned((c.x >> bit) & 1) | unsigned(((c.y >> bit) & 1) << 1) |
+                         unsigned(((c.z >> bit) & 1) << 2);
+      const ChildRef r = ChildOf(cell, d, level, view_);
+      if (r.kind == ChildRef::kEmpty) return false;
+      if (r.kind == ChildRef::kPayload) return true;
+      if (r.kind == ChildRef::kBrick) {
+        VOX_ASSIGN_OR_RETURN(pin, store_.FetchBrick(r.index));
+        pool = pin.cells;
+        cell = pool[0];
+      } else {
+        cell = pool[r.index];
+      }
+    }
+    return false;
+  }
+
   Store& store_;
   Cascade& cascade_;
   const LodBuildOptions& o_;
   OctreeView view_;
-  bool fog_ = false, has_density_ = false;
+  bool fog_ = false, has_density_ = false, has_normal_ = false;
+  const CompactCell* brick_cells_ = nullptr;  // the brick being walked
+  glm::u64vec3 brick_coord_{0};               // its coordinates in the brick grid
   uint64_t bricks_read_ = 0;
   uint32_t prefetched_to_ = 0;
 };

@@ -7,7 +7,8 @@
 // is the cell of 2^l base voxels per axis at v << l, present when one of
 // them is occupied, with the aggregates of that cell as attributes:
 //   coverage: the fraction of the cell's 8^l voxels that are occupied;
-//   normal:   the mean of the occupied voxels' normals, renormalised;
+//   normal:   the area-weighted mean of the surface voxels' normals,
+//             renormalised (storage/FORMAT.md);
 //   colour:   the mean colour of the occupied voxels;
 //   density:  the mean density over the whole cell (empty voxels count 0,
 //             a voxel of a fog store without densities counts 1), so a fog's

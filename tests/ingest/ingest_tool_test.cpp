@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <string>
 #include <vector>
 
@@ -90,7 +91,8 @@ TEST_F(IngestToolTest, UsageErrors) {
 
 TEST_F(IngestToolTest, BadMemoryBudgetsNameTheFlagAndLeaveNoStore) {
   std::string out = dir_.File("m");
-  for (const std::string& v : {"", "abc", "0", "-5", "12Q", "0.5"}) {
+  for (const std::string& v :
+       std::initializer_list<std::string>{"", "abc", "0", "-5", "12Q", "0.5"}) {
     Result r = RunTool(vdb_ + " " + out + " --quiet --memory-mb" + (v.empty() ? "" : " " + v));
     EXPECT_EQ(r.exit_code, 2) << v << "\n" << r.output;
     EXPECT_NE(r.output.find("--memory-mb"), std::string::npos) << r.output;
@@ -170,7 +172,8 @@ TEST_F(IngestToolTest, NormalBitsOutside8To16Refused) {
   EXPECT_EQ(help.exit_code, 0);
   EXPECT_NE(help.output.find("--normal-bits B"), std::string::npos) << help.output;
   const std::string out = dir_.File("nb");
-  for (const std::string bits : {"7", "17", "99", "0", "-12", "abc", "12.5", "''"}) {
+  for (const std::string& bits :
+       std::initializer_list<std::string>{"7", "17", "99", "0", "-12", "abc", "12.5", "''"}) {
     Result r = RunTool(vdb_ + " " + out + " --normal-bits " + bits);
     EXPECT_EQ(r.exit_code, 2) << bits << "\n" << r.output;
     const std::string first_line = r.output.substr(0, r.output.find('\n'));

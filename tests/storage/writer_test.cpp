@@ -129,7 +129,9 @@ TEST_F(Writer, UnwritableTargets) {
   auto s3 = StoreWriter::Create("/proc/self/vox_store", meta_, {});
   EXPECT_FALSE(s3.ok());
   EXPECT_TRUE(Contains(s3.status().message(), "/proc/self/")) << s3.status().ToString();
-  EXPECT_EQ(StoreWriter::Create(tmp_ / "s", meta_, WriteOptions{99, false}).status().code(),
+  WriteOptions level99;
+  level99.zstd_level = 99;
+  EXPECT_EQ(StoreWriter::Create(tmp_ / "s", meta_, level99).status().code(),
             StatusCode::kInvalidArgument);
   StoreMeta bad = meta_;
   bad.brick_level = bad.levels + 1;

@@ -115,8 +115,9 @@ TEST_F(ProbeLod, WideConeStopsAtCoarseCellsNoLaterThanTheExactHit) {
         << "a cell's first voxel is aligned to its size in grid coordinates: " << b[i];
     double te = 0;
     long long ex, ey, ez;
-    if (std::sscanf(a[i].c_str(), "hit %lld %lld %lld %lf", &ex, &ey, &ez, &te) == 4)
+    if (std::sscanf(a[i].c_str(), "hit %lld %lld %lld %lf", &ex, &ey, &ez, &te) == 4) {
       EXPECT_LE(t, te + 1e-9) << b[i] << " vs " << a[i];
+    }
   }
   EXPECT_GT(coarse, 50);
   EXPECT_NE(lod.err.find("lod stops by level"), std::string::npos);
