@@ -1,0 +1,243 @@
+// The store reader behind Store::Open (storage/store.cpp): the resident
+// top, the brick table, the page cache of decoded bricks, record windows,
+// and the background reads of Prefetch (storage/store_prefetch.cpp).
+// Private to storage.
+//
+// Thread safety: as Store (storage/store.h).
+#ifndef VOX_STORAGE_INTERNAL_STORE_READER_H_
+#define VOX_STORAGE_INTERNAL_STORE_READER_H_
+
+#include <algorithm>
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <memory>
+#include <mutex>
+#include <new>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "storage/file.h"
+#include "storage/internal/format.h"
+#include "storage/internal/record_windows.h"
+#include "storage/page_cache.h"
+#include "storage/store.h"
+
+namespace vox::storage_internal {
+
+class StoreImpl : public Store {
+ public:
+  StoreImpl(std::string dir, const OpenOptions& options)
+      : dir_(std::move(dir)), options_(options), cache_(options.cache_bytes) {}
+  ~StoreImpl() override {
+    {
+      std::lock_guard<std::mutex> lock(pf_mu_);
+      pf_stop_ = true;
+    }
+    pf_generation_.fetch_add(1);
+    pf_cv_.notify_all();
+    for (std::thread& t : pf_threads_) t.join();
+  }
+
+  Status Load(std::unique_ptr<RandomAccessFile> index, std::unique_ptr<RandomAccessFile> bricks);
+
+  const StoreMeta& meta() const override { return meta_; }
+  OctreeView view() override {
+    return {meta_.levels, meta_.brick_level, top_.data(), uint32_t(top_.size()), this};
+  }
+
+  StatusOr<BrickView> FetchBrick(uint32_t id) override {
+    VOX_ASSIGN_OR_RETURN(auto b, Get(id));
+    const DecodedBrick* data = b.get();
+    return BrickView{b->cells.data(), uint32_t(b->cells.size()), std::move(b), data};
+  }
+
+  StatusOr<BrickView> FetchBrickIfReady(uint32_t id) override {
+    std::shared_ptr<const DecodedBrick> b = id < table_.size() ? cache_.Peek(id) : nullptr;
+    if (!b) {
+      if (id >= table_.size()) return Get(id).status();  // the error naming the bad id
+      return UnavailableError("brick " + std::to_string(id) + " of store '" + dir_ +
+                              "' is not in memory");
+    }
+    const DecodedBrick* data = b.get();
+    return BrickView{b->cells.data(), uint32_t(b->cells.size()), std::move(b), data};
+  }
+
+  StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) override {
+    if (brick == kNoBrick) {
+      if (meta_.brick_level != meta_.levels || payload >= meta_.voxel_count)
+        return InvalidArgumentError("payload " + std::to_string(payload) +
+                                    " is not a voxel of the top of store '" + dir_ + "'");
+      return ReadAttributes(top_attr_.data(), uint32_t(meta_.voxel_count), flags_, payload);
+    }
+    VOX_ASSIGN_OR_RETURN(auto b, Get(brick));
+    return BrickAttributes(*b, brick, payload);
+  }
+
+  StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) override {
+    if (hit.brick_data == nullptr || hit.brick == kNoBrick) return Attributes(hit.brick, hit.payload);
+    return BrickAttributes(*static_cast<const DecodedBrick*>(hit.brick_data), hit.brick,
+                           hit.payload);
+  }
+
+  CacheStats cache_stats() const override {
+    PageCacheCounters c = cache_.counters();
+    CacheStats s;
+    s.hits = c.hits;
+    s.misses = c.misses;
+    s.evictions = c.evictions;
+    s.bytes_mapped = bricks_ ? bricks_->size() : 0;
+    s.bytes_decompressed = bytes_decompressed_.load(std::memory_order_relaxed);
+    s.bytes_resident = c.charge + (windows_ ? windows_->charge() : 0);
+    s.capacity = c.capacity + (windows_ ? windows_->capacity() : 0);
+    s.prefetched = c.prefetched;
+    s.prefetch_hits = c.prefetch_hits;
+    s.prefetch_dropped = pf_dropped_.load(std::memory_order_relaxed);
+    s.prefetch_failed = pf_failed_.load(std::memory_order_relaxed);
+    s.bytes_read = bytes_read_.load(std::memory_order_relaxed) +
+                   (windows_ ? windows_->bytes_read() : 0);
+    s.windows_read = windows_ ? windows_->windows_read() : 0;
+    s.window_bytes = windows_ ? windows_->window_bytes() : 0;
+    auto io = ProcessIoBytes();
+    s.process_read_bytes = io.ok() ? *io : 0;
+    return s;
+  }
+
+  std::string description() const override { return dir_; }
+  void Prefetch(std::span<const uint32_t> brick_ids) override;
+  uint64_t PrefetchBacklog() const override {
+    return pf_queued_raw_.load(std::memory_order_relaxed) + cache_.PrefetchUnused();
+  }
+  void CancelPrefetch() override {
+    std::lock_guard<std::mutex> lock(pf_mu_);
+    for (const Run& r : pf_queue_) pf_dropped_.fetch_add(r.ids.size(), std::memory_order_relaxed);
+    pf_queue_.clear();
+    pf_queued_bricks_ = 0;
+    pf_queued_raw_.store(0, std::memory_order_relaxed);
+    pf_generation_.fetch_add(1);  // runs being read finish; none starts under the old generation
+  }
+  uint64_t store_id() const override { return store_id_; }
+
+  uint64_t resident_bytes() const override {
+    return top_.size() * sizeof(CompactCell) + top_attr_.size() +
+           table_.size() * (sizeof(BrickEntry) + sizeof(uint32_t));  // + RecordWindows' order
+  }
+
+  BrickSizes brick_sizes() const override {
+    BrickSizes z;
+    uint64_t sum = 0;
+    for (const BrickEntry& e : table_) {
+      const uint64_t decoded = DecodedCharge(e);
+      z.max_decoded = std::max(z.max_decoded, decoded);
+      z.max_stored = std::max<uint64_t>(z.max_stored, uint64_t(e.stored_size) + kTrailerSize);
+      sum += decoded;
+    }
+    if (!table_.empty()) z.mean_decoded = sum / table_.size();
+    return z;
+  }
+
+  // The brick cache's bytes: decoded bricks, and a share for record windows
+  // (RecordWindows::ShareOf) unless OpenOptions::read_windows is off.
+  void SetCacheCapacity(uint64_t bytes) override {
+    uint64_t windows = 0;
+    if (windows_ && options_.read_windows) {
+      windows_->SetCapacity(RecordWindows::ShareOf(bytes));
+      windows = windows_->capacity();
+    }
+    cache_.SetCapacity(size_t(bytes - windows));
+  }
+
+  const std::vector<BrickEntry>& table() const { return table_; }
+
+ private:
+  StatusOr<std::shared_ptr<const DecodedBrick>> Get(uint32_t id) {
+    if (id >= table_.size())
+      return InvalidArgumentError("brick " + std::to_string(id) + " does not exist (store '" +
+                                  dir_ + "' has " + std::to_string(table_.size()) + " bricks)");
+    return cache_.GetOrLoad(id, [&]() -> StatusOr<std::pair<std::shared_ptr<const DecodedBrick>,
+                                                            size_t>> {
+      StatusOr<std::shared_ptr<DecodedBrick>> b = InternalError("unreached");
+      try {
+        b = LoadBrick(id);
+      } catch (const std::bad_alloc&) {
+        b = ResourceExhaustedError("out of memory decoding brick " + std::to_string(id) +
+                                   " of store '" + dir_ + "'");
+      } catch (const std::exception& e) {  // never leave single-flight waiters hanging
+        b = InternalError("decoding brick " + std::to_string(id) + " of store '" + dir_ +
+                          "': " + e.what());
+      }
+      if (!b.ok()) return b.status();
+      size_t charge = (*b)->charge();
+      return std::make_pair(std::shared_ptr<const DecodedBrick>(std::move(*b)), charge);
+    });
+  }
+
+  // What the cache charges for the brick of entry `e` once decoded
+  // (DecodedBrick::charge() of its cells and attribute planes).
+  uint64_t DecodedCharge(const BrickEntry& e) const {
+    // As DecodedBrick::charge() counts a decoded brick (its capacities are its sizes).
+    return sizeof(DecodedBrick) + uint64_t(e.num_cells) * sizeof(CompactCell) +
+           uint64_t(e.voxel_count) * AttrBytesPerVoxel(flags_) + DecodedBrick::kOverheadBytes;
+  }
+  // A brick is decoded only if it fits what the budget gives one brick: the
+  // brick cache's capacity, or kMinBrickAllowance if that is smaller (a tiny
+  // cache still decodes ordinary bricks and evicts them at once). Checked
+  // from the table row, before anything is allocated or read.
+  static constexpr uint64_t kMinBrickAllowance = uint64_t(4) << 20;
+  Status CheckBrickFits(uint32_t id) const;
+  StatusOr<std::shared_ptr<DecodedBrick>> LoadBrick(uint32_t id);
+  // Checks and decodes brick `id` from its record (stored_size + trailer bytes).
+  StatusOr<std::shared_ptr<DecodedBrick>> DecodeRecord(uint32_t id, const uint8_t* record);
+  // A run of bricks neighbouring in the brick file, in file order, read with
+  // one pread.
+  struct Run {
+    std::vector<uint32_t> ids;
+    uint64_t raw = 0;  // their decoded charge
+  };
+  void PrefetchLoop();
+  void ReadRun(const Run& run, uint64_t generation, std::vector<uint8_t>* buf);
+
+  StatusOr<VoxelAttributes> BrickAttributes(const DecodedBrick& b, uint32_t brick,
+                                            uint32_t payload) const {
+    if (payload >= b.voxel_count)
+      return InvalidArgumentError("payload " + std::to_string(payload) + " outside brick " +
+                                  std::to_string(brick) + " (" + std::to_string(b.voxel_count) +
+                                  " voxels) of store '" + dir_ + "'");
+    return ReadAttributes(b.attr_planes.data(), b.voxel_count, b.flags, payload);
+  }
+
+  const std::string dir_;
+  const OpenOptions options_;
+  StoreMeta meta_;
+  int depth_ = 0;
+  uint64_t store_id_ = 0;
+  uint8_t flags_ = 0;
+  std::vector<CompactCell> top_;  // traversal form (the file holds the build form)
+  std::vector<uint8_t> top_attr_;
+  std::vector<BrickEntry> table_;
+  std::unique_ptr<RandomAccessFile> bricks_;
+  std::unique_ptr<RecordWindows> windows_;  // reads records; set by Load
+  ShardedPageCache<DecodedBrick> cache_;
+  std::atomic<uint64_t> bytes_decompressed_{0};
+  std::atomic<uint64_t> bytes_read_{0};
+
+  // Prefetch: runs queue under pf_mu_; io_threads threads, started by the
+  // first Prefetch, serve them until the store closes.
+  mutable std::mutex pf_mu_;
+  std::condition_variable pf_cv_;
+  std::deque<Run> pf_queue_;
+  size_t pf_queued_bricks_ = 0;
+  std::atomic<uint64_t> pf_queued_raw_{0};
+  bool pf_stop_ = false;
+  std::vector<std::thread> pf_threads_;
+  std::atomic<uint64_t> pf_generation_{0};  // bumped by CancelPrefetch and close
+  std::atomic<uint64_t> pf_dropped_{0}, pf_failed_{0};
+};
+
+
+}  // namespace vox::storage_internal
+
+#endif  // VOX_STORAGE_INTERNAL_STORE_READER_H_
