@@ -13,9 +13,9 @@ namespace {
 // A LodThread's table keys a coarse brick by its level in the top bits.
 constexpr int kLevelTagShift = 26;
 constexpr uint32_t kIdMask = (uint32_t(1) << kLevelTagShift) - 1;
+}  // namespace
 
-// Occupied box of a store's metadata, in its grid's coordinates.
-void ApplyOccupiedBox(const StoreMeta& m, LodLevelTracer* t) {
+void ClipToOccupiedBox(const StoreMeta& m, LodLevelTracer* t) {
   if (m.voxel_count == 0) return;
   const int64_t lo[3] = {m.bbox_min.x - m.origin.x, m.bbox_min.y - m.origin.y,
                          m.bbox_min.z - m.origin.z};
@@ -24,7 +24,6 @@ void ApplyOccupiedBox(const StoreMeta& m, LodLevelTracer* t) {
   if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) return;
   t->SetOccupiedBox(lo, hi);
 }
-}  // namespace
 
 // The table's shared source: brick (level << kLevelTagShift | id) of the
 // level's store.
@@ -92,7 +91,7 @@ StatusOr<LodTracer> LodTracer::Create(Volume* base, const std::vector<Volume*>& 
                                   std::to_string(m.levels));
     VOX_ASSIGN_OR_RETURN(LodLevelTracer tr,
                          LodLevelTracer::Create(v, DefaultFirstStepLevels(v.levels)));
-    ApplyOccupiedBox(levels[i]->meta(), &tr);
+    ClipToOccupiedBox(levels[i]->meta(), &tr);
     t.tracers_.push_back(tr);
   }
   if (m.voxel_count > 0) {
@@ -119,7 +118,7 @@ std::unique_ptr<LodThread> LodTracer::NewThread(int slot_bits) const {
     v.bricks = th->tagged_.back().get();
     auto t = LodLevelTracer::Create(v, tracers_[i].n1());
     if (!t.ok()) continue;  // cannot fail: the same tree and split as tracers_[i]
-    ApplyOccupiedBox(levels_[i]->meta(), &*t);
+    ClipToOccupiedBox(levels_[i]->meta(), &*t);
     th->tracers_[i] = *t;
   }
   return th;

@@ -69,6 +69,11 @@ struct LodSegment {
 // The tracer of one coarse or base level.
 using LodLevelTracer = AutoTracer<double>;
 
+// Misses first: rays of `t` that pass outside the occupied box of the store
+// described by `m` (widened by a voxel) are misses without a walk
+// (Tracer::SetOccupiedBox); nothing for an empty store.
+void ClipToOccupiedBox(const StoreMeta& m, LodLevelTracer* t);
+
 class LodTracer;
 
 // One thread's tracers of the coarse levels, their bricks lent by one

@@ -103,14 +103,7 @@ std::unique_ptr<Renderer::ThreadState, Renderer::ThreadStateDeleter> Renderer::N
 }
 
 void Renderer::ApplyOccupiedBox(RenderTracer* t) const {
-  const StoreMeta& m = volume_->meta();
-  if (!options_.clip_to_occupied || m.voxel_count == 0) return;
-  const int64_t lo[3] = {m.bbox_min.x - m.origin.x, m.bbox_min.y - m.origin.y,
-                         m.bbox_min.z - m.origin.z};
-  const int64_t hi[3] = {m.bbox_max.x - m.origin.x, m.bbox_max.y - m.origin.y,
-                         m.bbox_max.z - m.origin.z};
-  if (lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]) return;
-  t->SetOccupiedBox(lo, hi);
+  if (options_.clip_to_occupied) ClipToOccupiedBox(volume_->meta(), t);
 }
 
 void Renderer::ThreadStateDeleter::operator()(ThreadState* ts) const { delete ts; }
