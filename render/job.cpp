@@ -13,6 +13,7 @@
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "render/frame.h"
+#include "render/lod.h"
 #include "render/volume.h"
 #include "render/internal/atomic_file.h"
 #include "render/renderer.h"
@@ -199,8 +200,19 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
   const bool keep = o.keep_image && out != nullptr;
   const size_t pixels = size_t(camera.width) * size_t(camera.height);
   if (keep) bi.process_base += uint64_t(pixels) * uint64_t(bi.channels) * sizeof(float);
+  // --lod: the levels finer than any ray of this camera can stop at get no
+  // more than the minimum cache (a full view of a huge volume uses none of
+  // the base's bricks).
+  int first_level = 0;
+  if (o.lod > 0) {
+    std::vector<Volume*> levels(lod_stores.begin(), lod_stores.end());
+    VOX_ASSIGN_OR_RETURN(const LodTracer lt, LodTracer::Create(volume.get(), levels, o.lod));
+    glm::dvec3 lo, hi;
+    WorldBounds(meta, &lo, &hi);
+    first_level = lt.FirstLevelSeen(camera, PrimaryConeOf(camera, meta.voxel_size), lo, hi);
+  }
   VOX_ASSIGN_OR_RETURN(const MemoryBudget budget,
-                       BudgetStores(volume.get(), lod_stores, process.bytes, bi));
+                       BudgetStores(volume.get(), lod_stores, process.bytes, bi, first_level));
   int slot_bits = 0;
   while ((2 << slot_bits) <= budget.pins_per_thread) ++slot_bits;
   ro.table_slot_bits = slot_bits;

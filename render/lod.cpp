@@ -62,6 +62,16 @@ class LodThread::Tagged : public BrickSource {
 
 LodThread::~LodThread() = default;
 
+Cone PrimaryConeOf(const Camera& cam, double voxel_size) {
+  const double vs = std::max(voxel_size, 1e-300);
+  Cone c;
+  if (cam.projection == Projection::kPerspective)
+    c.spread = 2.0 * std::tan(cam.fov_deg * (3.14159265358979323846 / 360.0)) / cam.width / vs;
+  else
+    c.w0 = cam.ortho_width / cam.width / vs;
+  return c;
+}
+
 StatusOr<double> ParseLodFactor(const std::string& flag, const std::string& text) {
   errno = 0;
   char* end = nullptr;
@@ -122,6 +132,17 @@ std::unique_ptr<LodThread> LodTracer::NewThread(int slot_bits) const {
     th->tracers_[i] = *t;
   }
   return th;
+}
+
+int LodTracer::FirstLevelSeen(const Camera& camera, const Cone& cone, const glm::dvec3& lo,
+                              const glm::dvec3& hi) const {
+  double t = 0.0;
+  if (camera.projection == Projection::kPerspective) {
+    const glm::dvec3 nearest = glm::clamp(camera.position, lo, hi);
+    t = glm::length(camera.position - nearest) * (1.0 - 1e-9);  // conservative
+  }
+  if (!std::isfinite(t)) return 0;
+  return LevelForWidth(cone.Width(t));
 }
 
 int LodTracer::LevelForWidth(double w) const {

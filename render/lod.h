@@ -33,6 +33,7 @@
 #include "core/ray.h"
 #include "core/status.h"
 #include "core/tracer.h"
+#include "render/camera.h"
 #include "storage/brick_table.h"
 #include "storage/store.h"
 
@@ -44,6 +45,12 @@ struct Cone {
   double spread = 0.0;  // base voxels per unit of the ray parameter
   double Width(double t) const { return w0 + spread * t; }
 };
+
+// The cone of `camera`'s primary rays, one pixel wide at the image plane,
+// over a volume of voxel size `voxel_size` (world units): a perspective
+// cone grows with the distance along the ray (camera rays are unit length
+// in world units), an orthographic one does not.
+Cone PrimaryConeOf(const Camera& camera, double voxel_size);
 
 // Parses --lod's factor: a finite number > 0; errors name `flag`.
 StatusOr<double> ParseLodFactor(const std::string& flag, const std::string& text);
@@ -109,6 +116,12 @@ class LodTracer {
   int max_level() const { return int(levels_.size()); }
   // The level for a cone of width `w` voxels: largest l with 2^l <= F w.
   int LevelForWidth(double w) const;
+  // The finest level a primary ray of `camera` (cone `cone`) can stop at, or
+  // a secondary ray of its hits: the level of the cone where it is narrowest
+  // within the world box [lo, hi] of the volume, at the box's point nearest
+  // the camera (0 when the camera is inside).
+  int FirstLevelSeen(const Camera& camera, const Cone& cone, const glm::dvec3& lo,
+                     const glm::dvec3& hi) const;
   // Whether the cone keeps level 0 wherever the ray meets the base volume's
   // occupied box: the LOD trace equals the full-resolution trace.
   bool Exact(const Ray& gr, const Cone& cone) const;

@@ -169,15 +169,7 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
   if (options.lod != 0.0) {
     VOX_ASSIGN_OR_RETURN(LodTracer lt, LodTracer::Create(volume, options.lod_levels, options.lod));
     r->lod_ = std::move(lt);
-    // One pixel at the image plane, in base voxels: a perspective cone
-    // grows with the distance along the ray (world units: camera rays are
-    // unit length), an orthographic one does not.
-    const double vs = std::max(meta.voxel_size, 1e-300);
-    if (cam.projection == Projection::kPerspective)
-      r->primary_cone_.spread =
-          2.0 * std::tan(cam.fov_deg * (3.14159265358979323846 / 360.0)) / cam.width / vs;
-    else
-      r->primary_cone_.w0 = cam.ortho_width / cam.width / vs;
+    r->primary_cone_ = PrimaryConeOf(cam, meta.voxel_size);
   }
   return r;
 }

@@ -42,7 +42,7 @@ StatusOr<MemoryBudget> BudgetStore(Store* store, uint64_t total, BudgetInputs in
 }
 
 StatusOr<MemoryBudget> BudgetStores(Store* base, const std::vector<Store*>& levels,
-                                    uint64_t total, BudgetInputs in) {
+                                    uint64_t total, BudgetInputs in, int first_level) {
   if (levels.empty()) return BudgetStore(base, total, in);
   std::vector<Store*> all{base};
   all.insert(all.end(), levels.begin(), levels.end());
@@ -50,12 +50,15 @@ StatusOr<MemoryBudget> BudgetStores(Store* base, const std::vector<Store*>& leve
   in.max_brick_bytes = in.max_stored_brick_bytes = 0;
   std::vector<double> weight;
   double sum = 0;
-  for (Store* s : all) {
+  first_level = std::clamp(first_level, 0, int(levels.size()));
+  for (size_t i = 0; i < all.size(); ++i) {
+    Store* s = all[i];
     const Store::BrickSizes sizes = s->brick_sizes();
     in.resident_bytes += s->resident_bytes();
     in.max_brick_bytes = std::max(in.max_brick_bytes, sizes.max_decoded);
     in.max_stored_brick_bytes = std::max(in.max_stored_brick_bytes, sizes.max_stored);
-    weight.push_back(double(s->meta().brick_count) * double(sizes.mean_decoded) + 1.0);
+    const bool used = int(i) >= first_level;
+    weight.push_back(used ? double(s->meta().brick_count) * double(sizes.mean_decoded) + 1.0 : 0.0);
     sum += weight.back();
   }
   auto b = SplitMemoryBudget(total, in);

@@ -46,9 +46,11 @@ StatusOr<MemoryBudget> BudgetStore(Store* store, uint64_t total, BudgetInputs in
 // pyramid (storage/lod.h), which share one budget: resident tops add up,
 // the largest brick of any sizes the pins, and the brick cache is divided
 // among the stores in proportion to their decoded bricks (each at least 4
-// MiB), never more than the split's cache in all.
+// MiB), never more than the split's cache in all. `first_level`: the
+// finest level the frame can use (0: the base; levels[l - 1] is level l);
+// the finer stores get only the minimum, the rest is shared by the others.
 StatusOr<MemoryBudget> BudgetStores(Store* base, const std::vector<Store*>& levels,
-                                    uint64_t total, BudgetInputs in);
+                                    uint64_t total, BudgetInputs in, int first_level = 0);
 
 // The same for a reader that renders no image, on one thread (vox-probe,
 // vox-info --verify); `cache_override` as BudgetInputs::cache_override.

@@ -150,6 +150,17 @@ TEST_F(LodRender, FarViewReadsFewerBricksWithTheSameSilhouette) {
   for (int l = 1; l <= kMaxLevels; ++l) coarse += cb.lod.stops[l];
   EXPECT_GT(coarse, cb.hit_pixels / 2);
   EXPECT_EQ(cb.lod.stops[0] + coarse, cb.trace.hits) << "every hit counted at its level";
+  // The finest level the memory budget keeps a cache for (FirstLevelSeen)
+  // is never finer than a stop: here level 1, so the base gets no stop.
+  glm::dvec3 lo, hi;
+  WorldBounds(base_->meta(), &lo, &hi);
+  const LodTracer& lt = *(*b)->lod();
+  const int first = lt.FirstLevelSeen(cam, (*b)->PrimaryCone(), lo, hi);
+  EXPECT_EQ(first, 1);
+  for (int l = 0; l < first; ++l) EXPECT_EQ(cb.lod.stops[l], 0u) << "a stop at level " << l;
+  const Camera close = Cam(glm::dvec3(64.5, 80, 64.5 + 75), 256);
+  EXPECT_EQ(lt.FirstLevelSeen(close, PrimaryConeOf(close, base_->meta().voxel_size), lo, hi), 0)
+      << "a close-up needs the base";
   size_t inter = 0, uni = 0;
   for (size_t i = 0; i < ia.ch.at("A").size(); ++i) {
     const bool x = ia.ch.at("A")[i] > 0, y = ib.ch.at("A")[i] > 0;

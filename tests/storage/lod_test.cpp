@@ -12,6 +12,7 @@
 #include <glm/geometric.hpp>
 
 #include "storage/lod.h"
+#include "storage/store_budget.h"
 #include "tests/storage/test_util.h"
 
 namespace vox::storage_test {
@@ -139,6 +140,49 @@ TEST(Lod, AggregatesEqualBruteForceLevelSetWithColour) {
   ASSERT_TRUE(st.ok()) << st.status().ToString();
   EXPECT_EQ(st->levels, 5);
   CheckPyramid(dir, voxels, meta);
+}
+
+// The levels a frame cannot use (finer than `first_level`) get the minimum
+// cache share; the others share the rest, never more than the budget's cache.
+TEST(Lod, BudgetGivesUnusedLevelsOnlyTheMinimum) {
+  TempDir tmp;
+  const StoreMeta meta = MetaFor(7, 4, GridClass::kLevelSet, false);
+  const std::string dir = tmp / "s";
+  ASSERT_TRUE(WriteVoxels(dir, RandomVoxels(7, 11), meta).ok());
+  ASSERT_TRUE(BuildLod(dir, LodBuildOptions{}).ok());
+  OpenOptions oo;
+  auto base = Store::Open(dir, oo);
+  ASSERT_TRUE(base.ok());
+  auto pyr = LodPyramid::Open(dir, **base, oo);
+  ASSERT_TRUE(pyr.ok());
+  std::vector<Store*> all{base->get()}, levels;
+  for (int l = 1; l <= (*pyr)->max_level(); ++l) levels.push_back((*pyr)->level(l));
+  all.insert(all.end(), levels.begin(), levels.end());
+  BudgetInputs in;
+  in.image_width = in.image_height = 64;
+  in.threads = 1;
+  const uint64_t total = uint64_t(256) << 20, min_share = uint64_t(4) << 20;
+  std::vector<uint64_t> even;
+  for (int first : {0, 2}) {
+    SCOPED_TRACE("first level " + std::to_string(first));
+    auto b = BudgetStores(base->get(), levels, total, in, first);
+    ASSERT_TRUE(b.ok()) << b.status().ToString();
+    uint64_t sum = 0;
+    for (size_t i = 0; i < all.size(); ++i) {
+      const uint64_t cap = all[i]->cache_stats().capacity;
+      sum += cap;
+      if (int(i) < first) {
+        EXPECT_LE(cap, min_share) << "level " << i;
+      } else {
+        EXPECT_GT(cap, min_share) << "level " << i;
+        if (first > 0) {
+          EXPECT_GT(cap, even[i]) << "level " << i << " got no more";
+        }
+      }
+      if (first == 0) even.push_back(cap);
+    }
+    EXPECT_LE(sum, b->brick_cache);
+  }
 }
 
 TEST(Lod, AggregatesEqualBruteForceFog) {
