@@ -353,7 +353,7 @@ TEST(BeamStart, MissesAndUnusableBeams) {
   BeamCorners wide = away.Corners(0, 0, 8, 8);  // 180 degrees across: no usable beam
   wide.d[0] = glm::dvec3(1, 0, 0);
   wide.d[1] = glm::dvec3(0, 0, 1);
-  wide.d[2] = glm::dvec3(-1, 0, 0.001);
+  wide.d[2] = glm::dvec3(-1, 0, -0.5);
   wide.d[3] = glm::dvec3(0, 0, 1);
   EXPECT_EQ(BeamStartPlane(view, 3, wide).s_min, -INFINITY);
   BeamCorners nan = away.Corners(0, 0, 8, 8);

@@ -32,7 +32,8 @@
 // --ab-clip also times vox without the occupied-box clip (a third renderer in
 // the alternation), for A/B in one run; --ab-beam likewise vox with the beam
 // start distances toggled (RenderOptions::beam), and checks that both vox
-// frames are bit-identical (exits 3 otherwise).
+// frames are bit-identical (exits 3 otherwise). --ab-beam-block N: the other
+// vox has the beam on with N-pixel blocks instead of off.
 #include <nanovdb/NanoVDB.h>
 #include <nanovdb/util/HDDA.h>
 #include <nanovdb/util/OpenToNanoVDB.h>
@@ -88,7 +89,8 @@ constexpr char kUsage[] =
     "  --ab-clip    time vox with and without the clip, alternating with NanoVDB\n"
     "  --no-beam    vox traces without beam start distances\n"
     "  --ab-beam    time vox with and without beam start distances, alternating with NanoVDB\n"
-    "  --beam-block pixels per side of a beam block (default 8)\n";
+    "  --beam-block pixels per side of a beam block (default 8)\n"
+    "  --ab-beam-block N  with --ab-beam: the other vox has beam blocks of N, not no beam\n";
 
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -206,7 +208,7 @@ int main(int argc, char** argv) {
   std::string vdb_path, store_path, cam_path, grid_name;
   int rounds = 7, threads = 2, tile = 64, width = 1024, height = 1024;
   bool clip = true, ab_clip = false, beam = true, ab_beam = false;
-  int beam_block = 8;
+  int beam_block = 8, ab_beam_block = 0;
   vox::FlagReader flags(argc, argv);
   auto usage = [](const std::string& error) {
     if (!error.empty()) fprintf(stderr, "vox-peer-bench: %s\n", error.c_str());
@@ -241,7 +243,8 @@ int main(int argc, char** argv) {
       continue;
     }
     if (a != "--store" && a != "--cam" && a != "--size" && a != "--rounds" && a != "--threads" &&
-        a != "--tile-size" && a != "--grid" && a != "--beam-block")
+        a != "--tile-size" && a != "--grid" && a != "--beam-block" &&
+        a != "--ab-beam-block")
       return usage("unknown flag " + a);
     const std::optional<std::string> v = flags.Value();
     if (!v) return usage(a + " needs a value");
@@ -258,6 +261,9 @@ int main(int argc, char** argv) {
       ok = vox::ParseInt(*v, 1, 4096, &threads);
     } else if (a == "--beam-block") {
       ok = vox::ParseInt(*v, 1, 4096, &beam_block);
+    } else if (a == "--ab-beam-block") {
+      ok = vox::ParseInt(*v, 1, 4096, &ab_beam_block);
+      ab_beam = ok;
     } else if (a == "--tile-size") {
       ok = vox::ParseInt(*v, vox::kMinTileSize, vox::kMaxTileSize, &tile);
     } else {
@@ -379,6 +385,10 @@ int main(int argc, char** argv) {
     vox::RenderOptions po = ro;
     if (ab_clip) po.clip_to_occupied = !clip;
     if (ab_beam) po.beam = !beam;
+    if (ab_beam_block > 0) {
+      po.beam = true;
+      po.beam_block = ab_beam_block;
+    }
     auto p = vox::Renderer::Create(store->get(), cam, scene, po);
     if (!p.ok()) return Fail(p.status().ToString());
     plain = std::move(p).value();
@@ -422,6 +432,7 @@ int main(int argc, char** argv) {
   out["clip_to_occupied"] = clip;
   out["beam"] = beam;
   out["beam_block"] = beam_block;
+  if (ab_beam_block > 0) out["other_beam_block"] = ab_beam_block;
   out["vox_seconds"] = vox_s;
   out["nano_seconds"] = nano_s;
   out["vox_median_seconds"] = vm;
@@ -436,8 +447,12 @@ int main(int argc, char** argv) {
     out["vox_other_beam_rays_per_second"] = pixels / pm;
     out["vox_other_beam_over_nano"] = nm / pm;
     out["beam_speedup"] = beam ? pm / vm : vm / pm;
-    fprintf(stderr, "vox with beam start distances: %.2fx the rays/s without them\n",
-            beam ? pm / vm : vm / pm);
+    if (ab_beam_block > 0)
+      fprintf(stderr, "vox with beam blocks of %d: %.2fx the rays/s with blocks of %d\n",
+              beam_block, pm / vm, ab_beam_block);
+    else
+      fprintf(stderr, "vox with beam start distances: %.2fx the rays/s without them\n",
+              beam ? pm / vm : vm / pm);
   } else if (plain) {
     const double pm = Median(plain_s);
     out["vox_other_clip_seconds"] = plain_s;
