@@ -2,9 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-
 #include <glm/geometric.hpp>
+#include <limits>
 
 namespace vox {
 namespace {
@@ -48,8 +47,12 @@ StartPlane BeamStartPlane(const OctreeView& tree, int n1, const BeamCorners& bea
   if (tree.top == nullptr || tree.levels < 1 || n1 < 1) return none;
   Frustum f;
   glm::dvec3 dsum(0.0), osum(0.0);
+  const double grid = std::ldexp(1.0, tree.levels);
   for (int i = 0; i < 4; ++i) {
     if (!Finite(beam.o[i]) || !Finite(beam.d[i])) return none;
+    // Far origins: the side planes through them would lose the cells'
+    // position next to |o| in double (the tracer clips such rays exactly).
+    if (IsFarOrigin(beam.o[i], grid)) return none;
     const double len = glm::length(beam.d[i]);
     if (!(len > 0) || !std::isfinite(len)) return none;
     dsum += beam.d[i] / len;
@@ -112,7 +115,8 @@ StartPlane BeamStartPlane(const OctreeView& tree, int n1, const BeamCorners& bea
     int nk = 0;
     for (unsigned digit = 0; digit < 8; ++digit) {
       if (!((mask >> digit) & 1u)) continue;
-      Node k{0, node.level + 1,
+      Node k{0,
+             node.level + 1,
              {node.lo[0] + ((digit & 1) ? half : 0.0), node.lo[1] + ((digit & 2) ? half : 0.0),
               node.lo[2] + ((digit & 4) ? half : 0.0)},
              0};
@@ -127,7 +131,8 @@ StartPlane BeamStartPlane(const OctreeView& tree, int n1, const BeamCorners& bea
     }
     // Nearest child on top of the stack: front to back.
     for (int i = 1; i < nk; ++i)  // insertion sort, farthest first (at most 8)
-      for (int j = i; j > 0 && kids[j - 1].s_lo < kids[j].s_lo; --j) std::swap(kids[j - 1], kids[j]);
+      for (int j = i; j > 0 && kids[j - 1].s_lo < kids[j].s_lo; --j)
+        std::swap(kids[j - 1], kids[j]);
     for (int i = 0; i < nk; ++i) stack[top++] = kids[i];
   }
   if (cells_tested) *cells_tested += tests;

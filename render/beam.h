@@ -39,8 +39,8 @@ struct BeamCorners {
 // first-step levels over `tree`: cells of level min(n1, tree.brick_level)
 // are the occupied units. Returns a plane with s_min = -inf (no hint) when
 // the corners do not make a usable beam (directions more than 90 degrees
-// apart, non-finite values); s_min = +inf when the beam meets no occupied
-// cell. `cells_tested` (optional) counts the box tests, for benchmarks.
+// apart, non-finite values, origins far from the grid: IsFarOrigin); s_min = +inf when the beam
+// meets no occupied cell. `cells_tested` (optional) counts the box tests, for benchmarks.
 StartPlane BeamStartPlane(const OctreeView& tree, int n1, const BeamCorners& beam,
                           uint64_t* cells_tested = nullptr);
 

@@ -283,7 +283,8 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
     for (int by = 0; by < nby; ++by)
       for (int bx = 0; bx < nbx; ++bx) {
         const int x0 = rect.x0 + bx * bs, y0 = rect.y0 + by * bs;
-        const int x1 = std::min(x0 + bs, rect.x0 + rect.w), y1 = std::min(y0 + bs, rect.y0 + rect.h);
+        const int x1 = std::min(x0 + bs, rect.x0 + rect.w);
+        const int y1 = std::min(y0 + bs, rect.y0 + rect.h);
         planes[by * nbx + bx] = BeamStartPlane(view, tracer_.n1(), BlockCorners(x0, y0, x1, y1));
       }
   }

@@ -106,14 +106,17 @@ TEST(StartPlane, TightestPlanesKeepEveryHit) {
         list.push_back(RayFromOutside(rng, levels, target, G * rng.Uniform(0.7, 3.0)));
       }
       for (int k = 0; k < 300; ++k) {
-        list.push_back(RayFrom(rng, rng.PointIn(voxels[size_t(rng.Int(0, int64_t(voxels.size()) - 1))])));
-        list.push_back(RayFrom(rng, glm::dvec3(rng.Uniform(0, G), rng.Uniform(0, G), rng.Uniform(0, G))));
+        list.push_back(
+            RayFrom(rng, rng.PointIn(voxels[size_t(rng.Int(0, int64_t(voxels.size()) - 1))])));
+        list.push_back(
+            RayFrom(rng, glm::dvec3(rng.Uniform(0, G), rng.Uniform(0, G), rng.Uniform(0, G))));
       }
       // Along axes, voxel edges and through voxel corners (integer origins).
       for (int k = 0; k < 200; ++k) {
         Ray r;
         const int a = k % 3;
-        r.origin = glm::dvec3(double(rng.Int(0, 128)), double(rng.Int(0, 128)), double(rng.Int(0, 128)));
+        r.origin =
+            glm::dvec3(double(rng.Int(0, 128)), double(rng.Int(0, 128)), double(rng.Int(0, 128)));
         r.origin[a] = k % 2 ? -3.0 : G + 3.0;
         r.dir = glm::dvec3(k % 5 == 0 ? -0.0 : 0.0);
         r.dir[a] = k % 2 ? 1.0 : -1.0;
@@ -129,10 +132,11 @@ TEST(StartPlane, TightestPlanesKeepEveryHit) {
         ++rays;
         hits += !plain.empty();
         fewer_cells += cb.cells_visited < ca.cells_visited;
-        ASSERT_EQ(plain.size(), jumped.size()) << "bl=" << bl << " n1=" << n1 << " " << RayString(r);
+        ASSERT_EQ(plain.size(), jumped.size())
+            << "bl=" << bl << " n1=" << n1 << " " << RayString(r);
         for (size_t i = 0; i < plain.size(); ++i)
-          ASSERT_TRUE(plain[i] == jumped[i]) << "bl=" << bl << " n1=" << n1 << " hit " << i << " "
-                                             << RayString(r);
+          ASSERT_TRUE(plain[i] == jumped[i])
+              << "bl=" << bl << " n1=" << n1 << " hit " << i << " " << RayString(r);
         ASSERT_TRUE(Visits(*trl, r, nullptr, nullptr) == Visits(*trl, r, &sp, nullptr))
             << "fixed128 bl=" << bl << " n1=" << n1 << " " << RayString(r);
         if (!plain.empty()) {

@@ -9,6 +9,8 @@
 // from each occupied first-step cell (checked by brute force), so a start
 // past the first hit cannot happen. A plane moved past the first hit must
 // change some hits (the comparison can fail).
+#include "render/beam.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -20,7 +22,6 @@
 #include <vector>
 
 #include "core/tracer.h"
-#include "render/beam.h"
 #include "tests/core/test_util.h"
 
 namespace vox::testing {
@@ -80,8 +81,8 @@ struct GridCam {
   }
 };
 
-GridCam LookAt(bool persp, const glm::dvec3& pos, const glm::dvec3& target, double half,
-               int w = 32, int h = 32) {
+GridCam LookAt(bool persp, const glm::dvec3& pos, const glm::dvec3& target, double half, int w = 32,
+               int h = 32) {
   GridCam c;
   c.persp = persp;
   c.pos = pos;
@@ -123,7 +124,8 @@ void CheckCamera(const Scene& scene, MemoryOctree& tree, const TracerT& tr, int 
                  bool check_contract, int num_subs) {
   const OctreeView view = tree.view();
   const int leaf = std::min(n1, view.brick_level);
-  const auto cells = check_contract ? OccupiedCells(scene, leaf) : decltype(OccupiedCells(scene, 1)){};
+  const auto cells =
+      check_contract ? OccupiedCells(scene, leaf) : decltype(OccupiedCells(scene, 1)){};
   const double cs = std::ldexp(1.0, scene.levels - leaf);
   const double G = std::ldexp(1.0, scene.levels);
   const double subs[][2] = {{0.5, 0.5}, {0, 0}, {1, 0}, {0, 1}, {1, 1}, {0.5, 0}, {0, 0.5}};
@@ -146,8 +148,8 @@ void CheckCamera(const Scene& scene, MemoryOctree& tree, const TracerT& tr, int 
             if (!plain.empty()) ++tot->hits;
             if (cb.cells_visited < ca.cells_visited) ++tot->jumped;
             ASSERT_EQ(plain.size(), beam.size())
-                << what << " pixel (" << px + sub[0] << ", " << py + sub[1] << ") "
-                << RayString(r) << " s_min " << sp.s_min;
+                << what << " pixel (" << px + sub[0] << ", " << py + sub[1] << ") " << RayString(r)
+                << " s_min " << sp.s_min;
             for (size_t i = 0; i < plain.size(); ++i)
               ASSERT_TRUE(plain[i] == beam[i])
                   << what << " hit " << i << " pixel (" << px + sub[0] << ", " << py + sub[1]
@@ -164,8 +166,8 @@ void CheckCamera(const Scene& scene, MemoryOctree& tree, const TracerT& tr, int 
             }
             // The promise, by brute force: ray points before the plane are more
             // than the margin away from every occupied cell of the leaf level.
-            if (check_contract && &sub == &subs[0] && (px + py) % 3 == 0 &&
-                sp.s_min > -INFINITY && gd > 0) {
+            if (check_contract && &sub == &subs[0] && (px + py) % 3 == 0 && sp.s_min > -INFINITY &&
+                gd > 0) {
               const double t_end = std::min(sp.s_min == INFINITY ? 1e300 : (sp.s_min - s0) / gd,
                                             4.0 * G / glm::length(r.dir));
               const double step = 0.25 / glm::length(r.dir);
@@ -185,8 +187,8 @@ void CheckCamera(const Scene& scene, MemoryOctree& tree, const TracerT& tr, int 
                     for (int64_t z = lo[2]; z <= hi[2]; ++z)
                       ASSERT_EQ(cells.count({x, y, z}), 0u)
                           << what << ": point t=" << t << " before the plane is within "
-                          << kStartPlaneMargin << " of occupied cell " << x << "," << y << ","
-                          << z << " " << RayString(r);
+                          << kStartPlaneMargin << " of occupied cell " << x << "," << y << "," << z
+                          << " " << RayString(r);
               }
             }
           }
@@ -265,8 +267,10 @@ std::vector<std::pair<GridCam, std::string>> Cameras(Rng& rng, const Scene& s) {
   }
   // Perspective whose centre ray is axis-parallel (an even image: the centre
   // is a block corner), and one looking straight down a lattice line.
-  cams.push_back({LookAt(true, glm::dvec3(64, 64, -40), glm::dvec3(64, 64, 64), 0.5), "axis-persp"});
-  cams.push_back({LookAt(true, glm::dvec3(16, 32, 200), glm::dvec3(16, 32, 0), 0.3), "lattice-persp"});
+  cams.push_back(
+      {LookAt(true, glm::dvec3(64, 64, -40), glm::dvec3(64, 64, 64), 0.5), "axis-persp"});
+  cams.push_back(
+      {LookAt(true, glm::dvec3(16, 32, 200), glm::dvec3(16, 32, 0), 0.3), "lattice-persp"});
   return cams;
 }
 
@@ -285,8 +289,8 @@ void RunAll(const char* tracer_name, int num_subs) {
         int k = 0;
         for (const auto& [cam, cname] : Cameras(rng, s)) {
           const int block = (k++ % 3 == 0) ? 5 : 8;  // 5: partial blocks at the image edge
-          const std::string what = std::string(tracer_name) + " " + s.name + " bl=" +
-                                   std::to_string(bl) + " n1=" + std::to_string(n1) + " " +
+          const std::string what = std::string(tracer_name) + " " + s.name +
+                                   " bl=" + std::to_string(bl) + " n1=" + std::to_string(n1) + " " +
                                    cname + " block " + std::to_string(block);
           CheckCamera(s, *tree, *tr, n1, cam, block, what, &tot, /*check_contract=*/bl == 4,
                       num_subs);
@@ -301,10 +305,12 @@ void RunAll(const char* tracer_name, int num_subs) {
   EXPECT_GT(tot.block_misses, 0u);
   EXPECT_LT(tot.skips_beam, tot.skips_plain);
   EXPECT_GT(tot.contract_points, 100000u);
-  printf("%s: %llu rays, %llu hit, %llu with fewer cells visited, %llu block misses, skips %llu -> %llu\n",
-         tracer_name, (unsigned long long)tot.rays, (unsigned long long)tot.hits,
-         (unsigned long long)tot.jumped, (unsigned long long)tot.block_misses,
-         (unsigned long long)tot.skips_plain, (unsigned long long)tot.skips_beam);
+  printf(
+      "%s: %llu rays, %llu hit, %llu with fewer cells visited, %llu block misses, skips %llu -> "
+      "%llu\n",
+      tracer_name, (unsigned long long)tot.rays, (unsigned long long)tot.hits,
+      (unsigned long long)tot.jumped, (unsigned long long)tot.block_misses,
+      (unsigned long long)tot.skips_plain, (unsigned long long)tot.skips_beam);
 }
 
 TEST(BeamStart, SameHitsAsPlainWalk64) { RunAll<Tracer<Fixed64, double>>("fixed64/double", 7); }
@@ -356,6 +362,8 @@ TEST(BeamStart, MissesAndUnusableBeams) {
   wide.d[2] = glm::dvec3(-1, 0, -0.5);
   wide.d[3] = glm::dvec3(0, 0, 1);
   EXPECT_EQ(BeamStartPlane(view, 3, wide).s_min, -INFINITY);
+  const GridCam far = LookAt(true, glm::dvec3(-1e12, 64, 64), glm::dvec3(64, 64, 64), 1e-12);
+  EXPECT_EQ(BeamStartPlane(view, 3, far.Corners(0, 0, 8, 8)).s_min, -INFINITY);
   BeamCorners nan = away.Corners(0, 0, 8, 8);
   nan.d[2].x = NAN;
   EXPECT_EQ(BeamStartPlane(view, 3, nan).s_min, -INFINITY);
