@@ -36,6 +36,22 @@
 
 namespace vox {
 
+// A start hint for Traverse (beam start distances: render/beam.h computes one
+// per block of pixels from the resident top). The caller promises: every
+// point P of the ray (grid coordinates) with dot(g, P) < s_min lies more than
+// kStartPlaneMargin voxels (on some axis) away from every occupied cell of
+// the first step's grid (tree level n1; a coarser occupied cell counts for
+// all its first-step cells). Then the ray's first-step DDA jumps, in exact
+// integer arithmetic, to the state it would have on entering the last
+// driving slab before the plane, and the walk goes on from there: the same
+// voxels, hits and t as without the hint, bit for bit (docs/benchmarks.md).
+// s_min == +inf: the ray meets no occupied voxel at all (a miss, no walk).
+struct StartPlane {
+  double g[3] = {0, 0, 0};
+  double s_min = -std::numeric_limits<double>::infinity();
+};
+inline constexpr double kStartPlaneMargin = 1.0;
+
 template <class Fixed = Fixed64, class Real = long double>
 class Tracer {
  public:
@@ -102,9 +118,11 @@ class Tracer {
   // Visits the occupied voxels the ray meets, in order along the ray, calling
   // `visit(const Hit&) -> bool` for each until it returns false. Returns an
   // error for an invalid ray or a brick that cannot be fetched.
+  // `start` (may be null): a StartPlane the ray satisfies.
   template <class Visitor>
-  Status Traverse(const Ray& ray, Visitor&& visit, TraceCounters* counters = nullptr) const {
-    PerRay r{*this, Ctx{ray}};
+  Status Traverse(const Ray& ray, Visitor&& visit, TraceCounters* counters = nullptr,
+                  const StartPlane* start = nullptr) const {
+    PerRay r{*this, Ctx{ray}, start};
     return internal::TraceTwoSteps(tree_, n1_, n2_, ray, r, visit, counters);
   }
 
@@ -172,12 +190,19 @@ class Tracer {
     using Dda = Tracer::Dda;
     const Tracer& t;
     Ctx cx;
+    const StartPlane* start = nullptr;
 
-    bool Setup(const Ray& ray) { return t.Setup(ray, &cx); }
+    bool Setup(const Ray& ray) {
+      if (start != nullptr && start->s_min == std::numeric_limits<double>::infinity())
+        return false;  // the ray's whole beam meets no occupied cell
+      return t.Setup(ray, &cx);
+    }
     Dda FirstStep(const internal::StepLayout& l1, uint64_t* xyz) {
       Real p1[3];
       for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * t.down2_;
-      return t.InitStep(cx, l1, p1, xyz);
+      Dda st = t.InitStep(cx, l1, p1, xyz);
+      if (start != nullptr) t.JumpToPlane(cx, l1, p1, *start, &st, xyz);
+      return st;
     }
     Dda SecondStep(const internal::StepLayout& l1, const internal::StepLayout& l2, uint64_t xyz,
                    uint64_t prev, const Dda& first, uint64_t* xyz2) {
@@ -270,6 +295,67 @@ class Tracer {
     st.limit = Fixed::Floor(std::min(st.l1, st.l2));
     *xyz = lay.Pack(v);
     return st;
+  }
+
+  // Beam start (StartPlane): moves the first step's DDA `st` (start voxel
+  // *xyz, start point p1 in first-step units) to the state it has on
+  // entering driving slab D, one slab before the slab where the ray meets the
+  // plane, if that lies ahead. With l_i0 and q_i a passive axis's first
+  // crossing and slope, the DDA enters slab D (a driving move) once it has
+  // made exactly the k_i crossings with l_i0 + k q_i < D: all integers, so
+  // the state is exact. Every first-step voxel the walk meets before it lies
+  // before the plane, so is empty, and the walk from there visits the same
+  // voxels as from the start. A ray that leaves the grid before slab D meets
+  // nothing: *xyz gets the carry bits (the walk ends at once).
+  void JumpToPlane(const Ctx& cx, const internal::StepLayout& lay, const Real p1[3],
+                   const StartPlane& sp, Dda* st, uint64_t* xyz) const {
+    double s0 = 0, gd = 0;
+    for (int a = 0; a < 3; ++a) {
+      s0 += sp.g[a] * double(cx.p[a]);
+      gd += sp.g[a] * double(cx.D[a]);
+    }
+    if (!(sp.s_min > s0) || !(gd > 0)) return;
+    const int d = cx.d, sd = cx.s[d];
+    const int64_t size = int64_t(1) << lay.n;
+    // The plane's driving coordinate, oriented, in first-step units.
+    const double tau = (sp.s_min - s0) / gd;
+    const double ud = sd * (double(p1[d]) + tau * double(cx.D[d]) * double(down2_));
+    const double end = sd > 0 ? double(size) : 0.0;  // the grid's far face, oriented
+    if (!(ud < end + 2.0)) {  // the ray leaves the grid before the plane (or NaN)
+      if (ud >= end + 2.0) *xyz = lay.carry;
+      return;
+    }
+    const int64_t target = int64_t(std::floor(ud)) - 1;
+    if (target <= st->dprime) return;
+    const int64_t moved = target - st->dprime;
+    int64_t v[3];
+    for (int a = 0; a < 3; ++a) v[a] = lay.Coord(*xyz, a);
+    const Word dw = Fixed::FromInt(target);
+    Word l[2] = {st->l1, st->l2};
+    const Word q[2] = {st->q1, st->q2};
+    uint64_t k[2] = {0, 0};
+    for (int i = 0; i < 2; ++i) {
+      if (l[i] >= dw) continue;
+      const Word n = (dw - l[i] + q[i] - 1) / q[i];  // smallest k with l + k q >= D
+      k[i] = uint64_t(n);
+      l[i] += n * q[i];
+    }
+    v[d] = sd > 0 ? target : -target - 1;
+    v[cx.i1] += cx.s[cx.i1] * int64_t(k[0]);
+    v[cx.i2] += cx.s[cx.i2] * int64_t(k[1]);
+    for (int a = 0; a < 3; ++a)
+      if (v[a] < 0 || v[a] >= size) {  // left the grid before slab D
+        *xyz = lay.carry;
+        return;
+      }
+    st->dprime = target;
+    st->l1 = l[0];
+    st->l2 = l[1];
+    st->limit = Fixed::Floor(std::min(st->l1, st->l2));
+    st->nd += uint64_t(moved);
+    st->n1 += k[0];
+    st->n2 += k[1];
+    *xyz = lay.Pack(v);
   }
 
   // A step's DDA with the ray's slopes and the step's increments.
@@ -422,8 +508,9 @@ class AutoTracer {
   }
 
   template <class Visitor>
-  Status Traverse(const Ray& ray, Visitor&& visit, TraceCounters* counters = nullptr) const {
-    return std::visit([&](const auto& t) { return t.Traverse(ray, visit, counters); }, t_);
+  Status Traverse(const Ray& ray, Visitor&& visit, TraceCounters* counters = nullptr,
+                  const StartPlane* start = nullptr) const {
+    return std::visit([&](const auto& t) { return t.Traverse(ray, visit, counters, start); }, t_);
   }
   StatusOr<std::optional<Hit>> FirstHit(const Ray& ray, TraceCounters* counters = nullptr) const {
     return std::visit([&](const auto& t) { return t.FirstHit(ray, counters); }, t_);

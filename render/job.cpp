@@ -177,6 +177,7 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
 
   RenderOptions ro;
   ro.layers = o.layers;
+  ro.beam = o.beam;
   if (o.single_step && !o.split.empty())
     return InvalidArgumentError("--split and --single-step both choose the split; give one");
   if (o.single_step) {

@@ -53,6 +53,8 @@ struct RenderJobOptions {
   // Read brick records a window of file neighbours at a time
   // (OpenOptions::read_windows); --no-read-windows: each record alone.
   bool read_windows = true;
+  // Beam start distances (RenderOptions::beam); --no-beam: off. Same image.
+  bool beam = true;
   int io_threads = OpenOptions::kDefaultIoThreads;
   int tile_size = 64;
   // --lod F: level of detail over the store's pyramid (render/lod.h); 0: off.

@@ -127,6 +127,9 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
   VOX_ASSIGN_OR_RETURN(GridTransform xf, GridTransform::FromMeta(meta));
   if (!camera.finalized())
     return InvalidArgumentError("camera: not finalised (Camera::Finalize checks it and computes its frame)");
+  if (options.beam && (options.beam_block < 1 || options.beam_block > 4096))
+    return InvalidArgumentError("beam block " + std::to_string(options.beam_block) +
+                                ": must be in 1..4096 pixels");
   const Camera& cam = camera;
   auto r = std::unique_ptr<Renderer>(new Renderer(volume, cam, scene, options, tracer, xf));
   r->ApplyOccupiedBox(&r->tracer_);
@@ -184,7 +187,19 @@ glm::dvec3 Renderer::Background(const glm::dvec3& dir) const {
   return glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
 }
 
-void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out) const {
+BeamCorners Renderer::BlockCorners(double x0, double y0, double x1, double y1) const {
+  BeamCorners b;
+  const double xs[4] = {x0, x1, x1, x0}, ys[4] = {y0, y0, y1, y1};
+  for (int i = 0; i < 4; ++i) {
+    const WorldRay wr = camera_.PixelRay(xs[i], ys[i]);
+    b.o[i] = xf_.WorldToGrid(wr.origin);
+    b.d[i] = xf_.world_to_grid_linear * wr.dir;
+  }
+  return b;
+}
+
+void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out,
+                          const StartPlane* start) const {
   const WorldRay wr = camera_.PixelRay(x, y);
   const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
   ++cx.c->rays[kRayPrimary];
@@ -203,7 +218,7 @@ void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out) const {
   int level = 0;
   if (!(lod ? FindHitLod(gr, primary_cone_, /*skip_start_run=*/false, cx, &h, &level,
                          SurfaceAttrs(&a))
-            : FindHit(gr, /*skip_start_run=*/false, cx, &h, SurfaceAttrs(&a)))) {
+            : FindHit(gr, /*skip_start_run=*/false, cx, &h, SurfaceAttrs(&a), start))) {
     if (!cx.failed()) out->color = Background(wr.dir);
     return;
   }
@@ -248,8 +263,26 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
   // Shades pixel (px, py) of the tile. Ok, an error, or (no-wait mode only)
   // Unavailable: a brick it needs is not in memory; the pixel is untouched
   // and its partial work is not counted.
+  // Beam start distances: one StartPlane per block of the tile.
+  const int bs = std::max(1, options_.beam_block);
+  const int nbx = (rect.w + bs - 1) / bs, nby = (rect.h + bs - 1) / bs;
+  const bool beam = options_.beam && !fog_ && !lod_;
+  std::vector<StartPlane> planes;
+  const bool use_planes = beam;
+  if (use_planes) {
+    planes.resize(size_t(nbx) * size_t(nby));
+    const OctreeView view = volume_->view();
+    for (int by = 0; by < nby; ++by)
+      for (int bx = 0; bx < nbx; ++bx) {
+        const int x0 = rect.x0 + bx * bs, y0 = rect.y0 + by * bs;
+        const int x1 = std::min(x0 + bs, rect.x0 + rect.w);
+        const int y1 = std::min(y0 + bs, rect.y0 + rect.h);
+        planes[by * nbx + bx] = BeamStartPlane(view, tracer_.n1(), BlockCorners(x0, y0, x1, y1));
+      }
+  }
   auto shade = [&](int px, int py) -> Status {
     const int ix = rect.x0 + px, iy = rect.y0 + py;
+    const StartPlane* start = use_planes ? &planes[(py / bs) * nbx + px / bs] : nullptr;
     glm::dvec3 color(0.0), normal(0.0);
     double alpha = 0.0, z = kInf;
     glm::i64vec3 voxel(0);
@@ -261,7 +294,7 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
         oy = RadicalInverse2(uint32_t(k) + 1u);
       }
       Sample s;
-      ShadePixel(ix + ox, iy + oy, cx, &s);
+      ShadePixel(ix + ox, iy + oy, cx, &s, start);
       if (cx.failed()) {
         Status e = std::move(cx.error);
         cx.error = OkStatus();

@@ -55,6 +55,7 @@
 #include "core/ray.h"
 #include "core/status.h"
 #include "core/tracer.h"
+#include "render/beam.h"
 #include "render/camera.h"
 #include "render/exr.h"
 #include "render/lod.h"
@@ -116,6 +117,13 @@ struct RenderOptions {
   // by a voxel) are misses without a walk (Tracer::SetOccupiedBox); the hits
   // are the same either way.
   bool clip_to_occupied = true;
+  // Beam start distances (render/beam.h): per block of beam_block^2 pixels
+  // of a tile, one query of the resident top gives a plane before which the
+  // block's primary rays meet nothing, and they start their walks there
+  // (misses without a walk when the block meets nothing). The hits are the
+  // same either way, bit for bit. Off for fog and LOD.
+  bool beam = true;
+  int beam_block = 8;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -181,7 +189,11 @@ class Renderer {
 
   // renderer.cpp: primary rays and the pixel loop.
   glm::dvec3 Background(const glm::dvec3& dir) const;
-  void ShadePixel(double x, double y, Ctx& cx, Sample* s) const;
+  // `start`: the pixel's block's beam StartPlane (null: none).
+  void ShadePixel(double x, double y, Ctx& cx, Sample* s,
+                  const StartPlane* start = nullptr) const;
+  // The beam corner rays (grid space) of pixels [x0, x1) x [y0, y1).
+  BeamCorners BlockCorners(double x0, double y0, double x1, double y1) const;
 
   // surface.cpp: hits and surfaces.
   // The grid-space ray of every secondary ray: from grid point p_g along
@@ -192,8 +204,9 @@ class Renderer {
   // The first hit along gr (after the run of voxels the ray starts in, if
   // skip_start_run); with `attrs`, also its attributes, read while the
   // traversal pins the brick. False on a miss or an error (cx.failed()).
+  // `start`: a StartPlane gr satisfies (primary rays of a beam block).
   bool FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit,
-               VoxelAttributes* attrs = nullptr) const;
+               VoxelAttributes* attrs = nullptr, const StartPlane* start = nullptr) const;
   // Where surface shading wants the hit's attributes: `a`, or nullptr when
   // the scene needs none.
   VoxelAttributes* SurfaceAttrs(VoxelAttributes* a) const { return needs_attributes_ ? a : nullptr; }

@@ -25,7 +25,7 @@ Ray Renderer::SpawnRay(const glm::dvec3& p_g, const glm::dvec3& dir_w,
 }
 
 bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit,
-                       VoxelAttributes* attrs) const {
+                       VoxelAttributes* attrs, const StartPlane* start) const {
   OccupiedRun run(eps_t_, skip_start_run);
   bool found = false;
   Status s = cx.tracer->Traverse(
@@ -50,7 +50,7 @@ bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit,
         }
         return false;
       },
-      &cx.c->trace);
+      &cx.c->trace, start);
   if (!s.ok()) {
     cx.Fail(s);
     return false;

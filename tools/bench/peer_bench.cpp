@@ -28,9 +28,12 @@
 //
 //   vox-peer-bench IN.vdb [--store DIR] [--cam cam.json | --size WxH]
 //                  [--rounds N] [--threads N] [--tile-size T] [--grid NAME]
-//                  [--no-clip | --ab-clip]
+//                  [--no-clip | --ab-clip] [--no-beam | --ab-beam] [--beam-block N]
 // --ab-clip also times vox without the occupied-box clip (a third renderer in
-// the alternation), for A/B in one run.
+// the alternation), for A/B in one run; --ab-beam likewise vox with the beam
+// start distances toggled (RenderOptions::beam), and checks that both vox
+// frames are bit-identical (exits 3 otherwise). --ab-beam-block N: the other
+// vox has the beam on with N-pixel blocks instead of off.
 #include <nanovdb/NanoVDB.h>
 #include <nanovdb/util/HDDA.h>
 #include <nanovdb/util/OpenToNanoVDB.h>
@@ -44,6 +47,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <functional>
 #include <glm/geometric.hpp>
@@ -73,6 +77,7 @@ using vox::TileRect;
 constexpr char kUsage[] =
     "usage: vox-peer-bench IN.vdb [--store DIR] [--cam cam.json | --size WxH] [--rounds N]\n"
     "                      [--threads N] [--tile-size T] [--grid NAME] [--no-clip | --ab-clip]\n"
+    "                      [--no-beam | --ab-beam] [--beam-block N]\n"
     "  --store      the vox store of IN.vdb (ingested there first when DIR does not exist;\n"
     "               default: a temporary store, removed at the end)\n"
     "  --cam        camera (default: vox-render's default camera, --size pixels, 1024x1024)\n"
@@ -81,7 +86,11 @@ constexpr char kUsage[] =
     "  --tile-size  tile side of both (default 64)\n"
     "  --grid       the level-set grid (default: the file's first float grid)\n"
     "  --no-clip    vox traces without clipping rays to the occupied box\n"
-    "  --ab-clip    time vox with and without the clip, alternating with NanoVDB\n";
+    "  --ab-clip    time vox with and without the clip, alternating with NanoVDB\n"
+    "  --no-beam    vox traces without beam start distances\n"
+    "  --ab-beam    time vox with and without beam start distances, alternating with NanoVDB\n"
+    "  --beam-block pixels per side of a beam block (default 8)\n"
+    "  --ab-beam-block N  with --ab-beam: the other vox has beam blocks of N, not no beam\n";
 
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -198,7 +207,8 @@ int Fail(const std::string& msg) {
 int main(int argc, char** argv) {
   std::string vdb_path, store_path, cam_path, grid_name;
   int rounds = 7, threads = 2, tile = 64, width = 1024, height = 1024;
-  bool clip = true, ab_clip = false;
+  bool clip = true, ab_clip = false, beam = true, ab_beam = false;
+  int beam_block = 8, ab_beam_block = 0;
   vox::FlagReader flags(argc, argv);
   auto usage = [](const std::string& error) {
     if (!error.empty()) fprintf(stderr, "vox-peer-bench: %s\n", error.c_str());
@@ -219,13 +229,22 @@ int main(int argc, char** argv) {
       ab_clip = true;
       continue;
     }
+    if (a == "--no-beam") {
+      beam = false;
+      continue;
+    }
+    if (a == "--ab-beam") {
+      ab_beam = true;
+      continue;
+    }
     if (!flags.IsFlag()) {
       if (!vdb_path.empty()) return usage("more than one input: " + vdb_path + " and " + a);
       vdb_path = a;
       continue;
     }
     if (a != "--store" && a != "--cam" && a != "--size" && a != "--rounds" && a != "--threads" &&
-        a != "--tile-size" && a != "--grid")
+        a != "--tile-size" && a != "--grid" && a != "--beam-block" &&
+        a != "--ab-beam-block")
       return usage("unknown flag " + a);
     const std::optional<std::string> v = flags.Value();
     if (!v) return usage(a + " needs a value");
@@ -240,6 +259,11 @@ int main(int argc, char** argv) {
       ok = vox::ParseInt(*v, 5, 1000, &rounds);
     } else if (a == "--threads") {
       ok = vox::ParseInt(*v, 1, 4096, &threads);
+    } else if (a == "--beam-block") {
+      ok = vox::ParseInt(*v, 1, 4096, &beam_block);
+    } else if (a == "--ab-beam-block") {
+      ok = vox::ParseInt(*v, 1, 4096, &ab_beam_block);
+      ab_beam = ok;
     } else if (a == "--tile-size") {
       ok = vox::ParseInt(*v, vox::kMinTileSize, vox::kMaxTileSize, &tile);
     } else {
@@ -251,6 +275,7 @@ int main(int argc, char** argv) {
     if (!ok) return usage(a + " '" + *v + "': out of range or not a number");
   }
   if (vdb_path.empty()) return usage("no input .vdb given");
+  if (ab_clip && ab_beam) return usage("--ab-clip and --ab-beam: one A/B at a time");
   namespace fs = std::filesystem;
   nlohmann::json out;
   out["vdb"] = vdb_path;
@@ -337,6 +362,8 @@ int main(int argc, char** argv) {
   scene.default_lights = false;  // "lights": [] -- primary rays only
   vox::RenderOptions ro;
   ro.clip_to_occupied = clip;
+  ro.beam = beam;
+  ro.beam_block = beam_block;
   auto renderer = vox::Renderer::Create(store->get(), cam, scene, ro);
   if (!renderer.ok()) return Fail(renderer.status().ToString());
   if (!(*renderer)->passes().ToString().starts_with("primary") || (*renderer)->passes().shadows)
@@ -353,10 +380,15 @@ int main(int argc, char** argv) {
     w.state = (*renderer)->NewThreadState();
     return w;
   });
-  std::unique_ptr<vox::Renderer> plain;  // --ab-clip: vox without the clip
-  if (ab_clip) {
+  std::unique_ptr<vox::Renderer> plain;  // --ab-clip / --ab-beam: vox with it toggled
+  if (ab_clip || ab_beam) {
     vox::RenderOptions po = ro;
-    po.clip_to_occupied = !clip;
+    if (ab_clip) po.clip_to_occupied = !clip;
+    if (ab_beam) po.beam = !beam;
+    if (ab_beam_block > 0) {
+      po.beam = true;
+      po.beam_block = ab_beam_block;
+    }
     auto p = vox::Renderer::Create(store->get(), cam, scene, po);
     if (!p.ok()) return Fail(p.status().ToString());
     plain = std::move(p).value();
@@ -398,6 +430,9 @@ int main(int argc, char** argv) {
   out["tile_size"] = tile;
   out["split"] = (*renderer)->SplitString();
   out["clip_to_occupied"] = clip;
+  out["beam"] = beam;
+  out["beam_block"] = beam_block;
+  if (ab_beam_block > 0) out["other_beam_block"] = ab_beam_block;
   out["vox_seconds"] = vox_s;
   out["nano_seconds"] = nano_s;
   out["vox_median_seconds"] = vm;
@@ -406,7 +441,19 @@ int main(int argc, char** argv) {
   out["nano_rays_per_second"] = pixels / nm;
   out["vox_over_nano"] = nm / vm;
   out["vox_dda_moves_per_ray"] = double(vox_counters.trace.total_moves()) / pixels;
-  if (plain) {
+  if (plain && ab_beam) {
+    const double pm = Median(plain_s);
+    out["vox_other_beam_seconds"] = plain_s;
+    out["vox_other_beam_rays_per_second"] = pixels / pm;
+    out["vox_other_beam_over_nano"] = nm / pm;
+    out["beam_speedup"] = beam ? pm / vm : vm / pm;
+    if (ab_beam_block > 0)
+      fprintf(stderr, "vox with beam blocks of %d: %.2fx the rays/s with blocks of %d\n",
+              beam_block, pm / vm, ab_beam_block);
+    else
+      fprintf(stderr, "vox with beam start distances: %.2fx the rays/s without them\n",
+              beam ? pm / vm : vm / pm);
+  } else if (plain) {
     const double pm = Median(plain_s);
     out["vox_other_clip_seconds"] = plain_s;
     out["vox_other_clip_rays_per_second"] = pixels / pm;
@@ -428,6 +475,22 @@ int main(int argc, char** argv) {
     ni.Put(r, w.buf);
   });
   if (failed) return Fail("vox RenderTile failed in the check");
+  uint64_t ab_differ = 0;  // --ab-beam: pixels whose bits differ between the two vox frames
+  if (plain && ab_beam) {
+    Image pi;
+    pi.Resize(cam.width, cam.height);
+    ForTiles(layout, threads, workers, [&](const TileRect& r, Worker& w) {
+      if (!plain->RenderTile(r, &w.buf, &w.counters, w.state.get()).ok()) failed = true;
+      pi.Put(r, w.buf);
+    });
+    if (failed) return Fail("vox RenderTile failed in the check");
+    for (size_t i = 0; i < vi.hit.size(); ++i)
+      if (vi.hit[i] != pi.hit[i] || std::memcmp(&vi.z[i], &pi.z[i], sizeof vi.z[i]) != 0)
+        ++ab_differ;
+    out["beam_ab_pixels_differ"] = ab_differ;
+    fprintf(stderr, "vox with and without the beam: %llu pixels differ\n",
+            (unsigned long long)ab_differ);
+  }
   const double voxel = (*store)->meta().voxel_size;
   uint64_t vox_hits = 0, nano_hits = 0, both = 0, ring = 0, off_ring = 0;
   std::vector<double> dz;
@@ -474,5 +537,5 @@ int main(int argc, char** argv) {
           "silhouette ring, %llu off it)\n",
           pixels / vm, pixels / nm, nm / vm, off_ring == 0 ? "ok" : "FAILED",
           (unsigned long long)ring, (unsigned long long)off_ring);
-  return off_ring == 0 ? 0 : 3;
+  return off_ring == 0 && ab_differ == 0 ? 0 : 3;
 }

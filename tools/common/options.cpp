@@ -85,7 +85,7 @@ Status CheckIngestCommand(const IngestCommand& c) {
 
 FlagArity RenderFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch", "--float",
-                   "--read-windows", "--no-read-windows"}))
+                   "--read-windows", "--no-read-windows", "--beam", "--no-beam"}))
     return FlagArity::kSwitch;
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
@@ -103,6 +103,8 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->prefetch = a == "--prefetch";
   } else if (a == "--read-windows" || a == "--no-read-windows") {
     o->read_windows = a == "--read-windows";
+  } else if (a == "--beam" || a == "--no-beam") {
+    o->beam = a == "--beam";
   } else if (a == "--lod") {
     VOX_ASSIGN_OR_RETURN(o->lod, ParseLodFactor("--lod", v));
   } else if (a == "--float") {

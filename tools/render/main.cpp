@@ -45,6 +45,8 @@ const char kUsage[] =
     "  --no-read-windows  read each brick record alone, not with its file neighbours\n"
     "               (by default a miss reads the window of records around it, up to 1 MiB,\n"
     "               kept compressed in 1/8 of the brick cache, at most 64 MiB)\n"
+    "  --no-beam    trace every primary ray from its start (no beam start distances;\n"
+    "               the same image, slower)\n"
     "  --threads    render threads (default: all cores)\n"
     "  --tile-size  tile side in pixels (default 64)\n"
     "  --tiles I/N  render only part I (1-based) of N; assemble the parts with vox-merge\n"
