@@ -5,10 +5,9 @@
 #                              (fuzzer-no-link), so the fuzz targets come from the same
 #                              build. Runs CI's set of tests (below; the tests that have run
 #                              clean under this build), or with VOX_ASAN_SUITE=full the whole
-#                              default suite (no "long" tests); then, with
-#                              VOX_FUZZ_SECONDS=N (default 0: none), each libFuzzer target of
-#                              VOX_FUZZ_TARGETS (default store,parse,exr) for N s through
-#                              scripts/fuzz.sh.
+#                              default suite (no "long" tests); then each libFuzzer target
+#                              of VOX_FUZZ_TARGETS (default store,parse) for
+#                              VOX_FUZZ_SECONDS (default 25; 0: none) through scripts/fuzz.sh.
 #   scripts/sanitize.sh tsan   TSan build (gcc) in build-tsan/ of the threaded tests only:
 #                              the brick cache (many threads, tiny budget, injected load
 #                              failures), prefetch, the store writer, tiled rendering
@@ -62,9 +61,9 @@ case "$mode" in
       export LSAN_OPTIONS="suppressions=$PWD/scripts/sanitizer/lsan.supp:${LSAN_OPTIONS:-}"
       ctest --test-dir "$dir" --output-on-failure "${ctest_args[@]}" -j "$jobs" --timeout 1800
     )
-    secs="${VOX_FUZZ_SECONDS:-0}"
+    secs="${VOX_FUZZ_SECONDS:-25}"
     if [ "$secs" -gt 0 ]; then
-      VOX_ASAN_DIR="$dir" scripts/fuzz.sh "${VOX_FUZZ_TARGETS:-store,parse,exr}" "$secs"
+      VOX_ASAN_DIR="$dir" scripts/fuzz.sh "${VOX_FUZZ_TARGETS:-store,parse}" "$secs"
     fi
     ;;
   tsan)
