@@ -15,6 +15,7 @@
 #include <png.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -252,6 +253,8 @@ namespace {
 Status FindAttributeValue(std::istream& f, const std::string& path,
                           const std::map<std::string, std::pair<std::string, uint32_t>>& wanted,
                           std::map<std::string, uint64_t>* found) {
+  f.seekg(0, std::ios::end);
+  const uint64_t file_size = uint64_t(f.tellg());
   f.seekg(8);
   auto read_cstr = [&](std::string* out) -> bool {
     out->clear();
@@ -274,6 +277,9 @@ Status FindAttributeValue(std::istream& f, const std::string& path,
     const uint32_t size =
         uint32_t(sz[0]) | uint32_t(sz[1]) << 8 | uint32_t(sz[2]) << 16 | uint32_t(sz[3]) << 24;
     const uint64_t at = uint64_t(f.tellg());
+    if (at + size > file_size)  // before OpenEXR allocates what the size claims
+      return CorruptionError(path + ": EXR header attribute " + name + " claims " +
+                             std::to_string(size) + " bytes, more than the file holds");
     auto it = wanted.find(name);
     if (it != wanted.end() && it->second.first == type) {
       if (it->second.second != size)
@@ -340,9 +346,22 @@ ExrInfo InfoFromFile(const Imf::TiledInputFile& in) {
   return info;
 }
 
+// Refuses a header whose attribute sizes run past the end of the file (a
+// corrupt or hostile file), which OpenEXR would allocate before reading.
+// Files without EXR's magic number are left to OpenEXR's own error.
+Status CheckHeaderSizes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return IoError(path + ": cannot open: " + std::strerror(errno));
+  char magic[4];
+  if (!f.read(magic, 4) || std::memcmp(magic, "\x76\x2f\x31\x01", 4) != 0) return OkStatus();
+  std::map<std::string, uint64_t> unused;
+  return FindAttributeValue(f, path, {}, &unused);
+}
+
 }  // namespace
 
 StatusOr<ExrInfo> ReadExrInfo(const std::string& path) {
+  VOX_RETURN_IF_ERROR(CheckHeaderSizes(path));
   try {
     Imf::TiledInputFile in(path.c_str());
     return InfoFromFile(in);
@@ -352,6 +371,7 @@ StatusOr<ExrInfo> ReadExrInfo(const std::string& path) {
 }
 
 StatusOr<ExrImage> ReadExr(const std::string& path) {
+  VOX_RETURN_IF_ERROR(CheckHeaderSizes(path));
   try {
     Imf::TiledInputFile in(path.c_str());
     ExrImage img;
@@ -399,6 +419,7 @@ struct PngFile {
 }  // namespace
 
 Status WritePngPreview(const std::string& exr_path, const std::string& png_path) {
+  VOX_RETURN_IF_ERROR(CheckHeaderSizes(exr_path));
   try {
     Imf::TiledInputFile in(exr_path.c_str());
     ExrInfo info = InfoFromFile(in);

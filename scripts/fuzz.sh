@@ -1,30 +1,51 @@
 #!/usr/bin/env bash
-# Runs one libFuzzer target under ASan+UBSan for SECONDS with memory caps.
-#   scripts/fuzz.sh TARGET SECONDS      TARGET: store | parse | exr | vdb
-# Builds with clang into build-fuzz/ (only what the target needs), writes the
-# seed corpus (fuzz_seed_gen) to build-fuzz/fuzz/seeds/, and keeps what the
-# fuzzer finds in build-fuzz/fuzz/corpus/TARGET/ between runs. A crash leaves
-# its input as build-fuzz/fuzz/crash-* and fails the script; replay it with
-#   build-fuzz/tests/fuzz/fuzz_TARGET build-fuzz/fuzz/crash-...
-# A long run: scripts/fuzz.sh store 3600 (docs/robustness.md).
+# Runs libFuzzer targets under ASan+UBSan for SECONDS each, with memory caps.
+#   scripts/fuzz.sh TARGETS SECONDS     TARGETS: store | parse | exr | vdb, a comma list
+#                                       of them (store,parse), or all
+# Builds with clang into build-asan/ (VOX_ASAN_DIR overrides; the same build
+# scripts/sanitize.sh asan makes, of which only what the targets need is
+# built here), writes the seed corpus (fuzz_seed_gen) to DIR/fuzz/seeds/, and
+# keeps what the fuzzer finds in DIR/fuzz/corpus/TARGET/ between runs. A
+# crash leaves its input as DIR/fuzz/crash-* and fails the script; replay it
+# with
+#   build-asan/tests/fuzz/fuzz_TARGET build-asan/fuzz/crash-...
+# CI runs `all` for 25 s each; a long run: scripts/fuzz.sh store 3600
+# (docs/robustness.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 target="${1:-}"
 secs="${2:-60}"
-case "$target" in store|parse|exr|vdb) ;; *) echo "usage: scripts/fuzz.sh store|parse|exr|vdb SECONDS" >&2; exit 2;; esac
-dir=build-fuzz
+[ "$target" = all ] && target=store,parse,exr,vdb
+IFS=, read -ra targets <<<"$target"
+for t in "${targets[@]}"; do
+  case "$t" in
+    store|parse|exr|vdb) ;;
+    *) echo "usage: scripts/fuzz.sh store|parse|exr|vdb[,...]|all SECONDS" >&2; exit 2 ;;
+  esac
+done
+dir="${VOX_ASAN_DIR:-build-asan}"
 gen=()
 command -v ninja >/dev/null && [ ! -f "$dir/CMakeCache.txt" ] && gen=(-G Ninja)
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 cmake -S . -B "$dir" "${gen[@]}" "${launcher[@]}" -DCMAKE_CXX_COMPILER=clang++ \
-  -DCMAKE_BUILD_TYPE=Release -DVOX_SANITIZE=address,undefined,fuzzer-no-link -DVOX_FUZZ=ON >/dev/null
-cmake --build "$dir" -j "${VOX_JOBS:-$(nproc)}" --target "fuzz_$target" fuzz_seed_gen
+  -DCMAKE_BUILD_TYPE=Release -DVOX_SANITIZE=address,undefined,fuzzer-no-link -DVOX_FUZZ=ON \
+  -DVOX_BUILD_BENCH=OFF >/dev/null
+cmake --build "$dir" -j "${VOX_JOBS:-$(nproc)}" --target "${targets[@]/#/fuzz_}" fuzz_seed_gen
 work="$dir/fuzz"
-mkdir -p "$work/corpus/$target"
 "$dir/tests/fuzz/fuzz_seed_gen" "$work/seeds" scripts/demo >/dev/null
 export ASAN_OPTIONS="detect_leaks=1:${ASAN_OPTIONS:-}"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
-"$dir/tests/fuzz/fuzz_$target" -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=1024 \
-  -timeout=20 -print_final_stats=1 -artifact_prefix="$work/" \
-  "$work/corpus/$target" "$work/seeds/$target"
+for t in "${targets[@]}"; do
+  mkdir -p "$work/corpus/$t"
+  t0=$SECONDS
+  "$dir/tests/fuzz/fuzz_$t" -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=1024 \
+    -timeout=20 -print_final_stats=1 -artifact_prefix="$work/" \
+    "$work/corpus/$t" "$work/seeds/$t" 2>"$work/$t.log" || {
+    tail -n 60 "$work/$t.log" >&2
+    echo "fuzz: $t FAILED (log $work/$t.log, input $work/crash-* or timeout-*/oom-*)" >&2
+    exit 1
+  }
+  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$work/$t.log" | grep -o '[0-9]*$' || echo "?")
+  echo "fuzz: $t clean, $runs inputs in $((SECONDS - t0)) s"
+done

@@ -4,9 +4,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <dirent.h>
+#include <signal.h>
+
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <optional>
 #include <utility>
 
@@ -29,6 +33,48 @@ std::string ErrnoText() { return std::strerror(errno); }
 Status SyncFd(int fd, const std::string& what) {
   if (fsync(fd) != 0) return IoError(what + ": fsync failed: " + ErrnoText());
   return OkStatus();
+}
+
+// A process that has exited but not been reaped (its parent gone, and a
+// container's init that does not reap): it holds no files and writes no more.
+bool IsZombie(long pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string stat;
+  if (!std::getline(in, stat)) return false;
+  const size_t paren = stat.rfind(')');  // the command name may hold spaces and parentheses
+  return paren != std::string::npos && paren + 2 < stat.size() && stat[paren + 2] == 'Z';
+}
+
+// Removes the temporaries `.NAME.tmp-PID-XXXXXX` (mkstemp's six characters)
+// of `name` in `dir` whose process is gone: what a killed vox-render or
+// vox-merge left. Only regular files of exactly that pattern are touched; a
+// live process's temporary (another run writing the same output) is kept.
+void RemoveStaleTemporaries(const std::string& dir, const std::string& name) {
+  const std::string prefix = "." + name + ".tmp-";
+  DIR* d = opendir(dir.c_str());
+  if (d == nullptr) return;
+  while (const dirent* e = readdir(d)) {
+    const std::string entry = e->d_name;
+    if (entry.compare(0, prefix.size(), prefix) != 0) continue;
+    const std::string rest = entry.substr(prefix.size());
+    const size_t dash = rest.find('-');
+    if (dash == std::string::npos || dash == 0 || dash > 10 || rest.size() != dash + 7) continue;
+    if (rest.find_first_not_of("0123456789") != dash) continue;
+    bool alnum = true;
+    for (size_t i = dash + 1; i < rest.size(); ++i)
+      alnum = alnum && ((rest[i] >= '0' && rest[i] <= '9') || (rest[i] >= 'a' && rest[i] <= 'z') ||
+                        (rest[i] >= 'A' && rest[i] <= 'Z'));
+    if (!alnum) continue;
+    const long pid = std::strtol(rest.c_str(), nullptr, 10);
+    if (pid <= 0 || pid == long(getpid())) continue;
+    if ((kill(pid_t(pid), 0) == 0 || errno != ESRCH) && !IsZombie(pid))
+      continue;  // alive (or not ours to judge)
+    const std::string path = (dir == "/" ? "" : dir) + "/" + entry;
+    struct stat st;
+    if (lstat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) continue;
+    unlink(path.c_str());
+  }
+  closedir(d);
 }
 
 }  // namespace
@@ -64,6 +110,7 @@ StatusOr<AtomicFile> AtomicFile::Create(const std::string& path) {
                                 "temporary beside it and renamed over it");
   std::string dir, name;
   SplitPath(path, &dir, &name);
+  RemoveStaleTemporaries(dir, name);
   std::string templ =
       (dir == "/" ? "" : dir) + "/." + name + ".tmp-" + std::to_string(long(getpid())) + "-XXXXXX";
   int fd = mkstemp(templ.data());

@@ -2,7 +2,9 @@
 // preview, --stats JSON) is written to a temporary file in the target's
 // directory, named `.NAME.tmp-PID-XXXXXX`, then fsynced and renamed over the
 // target. A failed or interrupted write removes the temporary and leaves any
-// earlier file at the target untouched.
+// earlier file at the target untouched. A process killed outright (SIGKILL,
+// a node lost) cannot remove its temporary: the next AtomicFile for the same
+// target removes such temporaries whose process is gone.
 //
 // Thread safety: thread-compatible (one AtomicFile per output).
 #ifndef VOX_RENDER_INTERNAL_ATOMIC_FILE_H_
@@ -24,7 +26,8 @@ bool SameFile(const std::string& a, const std::string& b);
 
 class AtomicFile {
  public:
-  // Creates the (empty) temporary file beside `path`.
+  // Creates the (empty) temporary file beside `path`, first removing stale
+  // temporaries of `path` (the pattern above) whose process no longer runs.
   static StatusOr<AtomicFile> Create(const std::string& path);
   AtomicFile(AtomicFile&& o) noexcept;
   AtomicFile& operator=(AtomicFile&& o) noexcept;

@@ -23,7 +23,7 @@ BruteContact Brute(const Ray& ray, const Voxel& v) {
   std::optional<mpq_class> tout;
   bool half_open_ok = true;
   for (int a = 0; a < 3; ++a) {
-    mpq_class o(ray.origin[a]), d(ray.dir[a]), lo(double(v[a])), hi(double(v[a] + 1));
+    mpq_class o(ray.origin[a]), d(ray.dir[a]), lo{double(v[a])}, hi{double(v[a] + 1)};
     if (d == 0) {
       if (o < lo || o > hi) return c;
       if (o == hi) half_open_ok = false;
