@@ -10,6 +10,8 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <string>
 
 namespace vox {
 namespace {
@@ -332,6 +334,17 @@ Status SyncDir(const std::string& dir) {
   close(fd);
   if (r != 0) return ErrnoError("cannot fsync directory", dir, err);
   return OkStatus();
+}
+
+bool ProcessGone(long pid) {
+  if (kill(pid_t(pid), 0) != 0 && errno == ESRCH) return true;
+  // A zombie: the state after the command name (which may hold spaces and
+  // parentheses) is 'Z'.
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string stat;
+  if (!std::getline(in, stat)) return false;
+  const size_t paren = stat.rfind(')');
+  return paren != std::string::npos && paren + 2 < stat.size() && stat[paren + 2] == 'Z';
 }
 
 }  // namespace vox

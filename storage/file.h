@@ -124,6 +124,12 @@ Status SyncDir(const std::string& dir);
 // kernel has no per-task I/O accounting.
 StatusOr<uint64_t> ProcessIoBytes();
 
+// Whether process `pid` is gone: there is no such process, or it is a
+// zombie (exited, not reaped: its parent gone and a container's init that
+// does not reap), which holds no files and writes no more. For removing the
+// temporaries of killed writers.
+bool ProcessGone(long pid);
+
 // "<what> '<path>': <strerror(err)>" as an IoError (ResourceExhausted for
 // ENOSPC/EDQUOT/EFBIG, NotFound for ENOENT).
 Status ErrnoError(const std::string& what, const std::string& path, int err);

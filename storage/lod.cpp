@@ -2,7 +2,6 @@
 // reducer and one StoreWriter per level) and LodPyramid::Open.
 #include "storage/lod.h"
 
-#include <signal.h>
 #include <stdio.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -349,7 +348,7 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
     const std::string name = e.path().filename().string();
     if (name.rfind(".lod.tmp-", 0) != 0) continue;
     const long pid = std::atol(name.c_str() + 9);
-    if (pid > 0 && pid != long(getpid()) && kill(pid_t(pid), 0) != 0 && errno == ESRCH)
+    if (pid > 0 && pid != long(getpid()) && ProcessGone(pid))
       fs::remove_all(e.path(), ec);
   }
   const std::string temp = TempName(store_dir);

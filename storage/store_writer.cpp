@@ -1,7 +1,6 @@
 // StoreWriter: streams bricks into a temporary directory beside the target,
 // then writes the index, fsyncs and renames into place (FORMAT.md).
 #include <fcntl.h>
-#include <signal.h>
 #include <stdio.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -12,7 +11,6 @@
 #include <chrono>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <mutex>
 #include <random>
 #include <unordered_set>
@@ -111,16 +109,6 @@ std::string NotAStoreReason(const fs::path& dir) {
   return "";
 }
 
-// A process that has exited but not been reaped (its parent gone, and a
-// container's init that does not reap): it holds no files and writes no more.
-bool IsZombie(long pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-  std::string stat;
-  if (!std::getline(in, stat)) return false;
-  const size_t paren = stat.rfind(')');  // the command name may hold spaces and parentheses
-  return paren != std::string::npos && paren + 2 < stat.size() && stat[paren + 2] == 'Z';
-}
-
 // Removes temporary store directories `.NAME.tmp-PID-XXXXXXXX` (and their
 // `.old` variants) beside `target` left by processes that no longer run.
 void RemoveStaleTemporaries(const fs::path& parent, const std::string& name) {
@@ -138,8 +126,7 @@ void RemoveStaleTemporaries(const fs::path& parent, const std::string& name) {
     if (rest.find_first_not_of("0123456789abcdef", dash + 1) != std::string::npos) continue;
     const long pid = std::stol(rest.substr(0, dash));
     if (pid <= 0 || pid == long(getpid())) continue;
-    if ((kill(pid_t(pid), 0) == 0 || errno != ESRCH) && !IsZombie(pid))
-      continue;  // alive (or not ours to judge)
+    if (!ProcessGone(pid)) continue;  // alive (or not ours to judge)
     if (!e.is_directory(ec) || e.is_symlink(ec)) continue;
     std::error_code rec;
     fs::remove_all(e.path(), rec);

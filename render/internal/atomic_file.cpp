@@ -5,14 +5,14 @@
 #include <unistd.h>
 
 #include <dirent.h>
-#include <signal.h>
 
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <optional>
 #include <utility>
+
+#include "storage/file.h"
 
 namespace vox {
 namespace {
@@ -33,16 +33,6 @@ std::string ErrnoText() { return std::strerror(errno); }
 Status SyncFd(int fd, const std::string& what) {
   if (fsync(fd) != 0) return IoError(what + ": fsync failed: " + ErrnoText());
   return OkStatus();
-}
-
-// A process that has exited but not been reaped (its parent gone, and a
-// container's init that does not reap): it holds no files and writes no more.
-bool IsZombie(long pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-  std::string stat;
-  if (!std::getline(in, stat)) return false;
-  const size_t paren = stat.rfind(')');  // the command name may hold spaces and parentheses
-  return paren != std::string::npos && paren + 2 < stat.size() && stat[paren + 2] == 'Z';
 }
 
 // Removes the temporaries `.NAME.tmp-PID-XXXXXX` (mkstemp's six characters)
@@ -67,8 +57,7 @@ void RemoveStaleTemporaries(const std::string& dir, const std::string& name) {
     if (!alnum) continue;
     const long pid = std::strtol(rest.c_str(), nullptr, 10);
     if (pid <= 0 || pid == long(getpid())) continue;
-    if ((kill(pid_t(pid), 0) == 0 || errno != ESRCH) && !IsZombie(pid))
-      continue;  // alive (or not ours to judge)
+    if (!ProcessGone(pid)) continue;  // alive (or not ours to judge)
     const std::string path = (dir == "/" ? "" : dir) + "/" + entry;
     struct stat st;
     if (lstat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) continue;
