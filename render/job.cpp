@@ -205,9 +205,7 @@ Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
   // more than the minimum cache (a full view of a huge volume uses none of
   // the base's bricks), unless the scene refracts (refraction is exact).
   int first_level = 0;
-  bool refracts = scene.material.transmit > 0;  // refracted rays are traced exactly
-  for (const MaterialRegion& r : scene.regions) refracts = refracts || r.material.transmit > 0;
-  if (o.lod > 0 && !(refracts && scene.max_depth > 0)) {
+  if (o.lod > 0 && !SceneRefracts(scene)) {  // refracted rays are traced exactly
     std::vector<Volume*> levels(lod_stores.begin(), lod_stores.end());
     VOX_ASSIGN_OR_RETURN(const LodTracer lt, LodTracer::Create(volume.get(), levels, o.lod));
     glm::dvec3 lo, hi;

@@ -154,17 +154,16 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
     any_light = true;
     any_shadow = any_shadow || l.shadows;
   }
-  double max_reflect = s.material.reflect, max_transmit = s.material.transmit;
+  double max_reflect = s.material.reflect;
   for (const MaterialRegion& reg : s.regions) {
     max_reflect = std::max(max_reflect, reg.material.reflect);
-    max_transmit = std::max(max_transmit, reg.material.transmit);
   }
   RenderPasses& p = r->passes_;
   p.volume = r->fog_;
   p.shading = !r->fog_;
   p.shadows = !r->fog_ && any_shadow;
   p.reflection = !r->fog_ && s.max_depth > 0 && max_reflect > 0;
-  p.refraction = !r->fog_ && s.max_depth > 0 && max_transmit > 0;
+  p.refraction = !r->fog_ && SceneRefracts(s);
   p.scattering = r->fog_ && any_light && s.volume.scattering > 0;
   r->needs_attributes_ =
       meta.has_color || any_light || p.reflection || p.refraction || options.layers.normal;

@@ -170,6 +170,12 @@ StatusOr<Scene> LoadScene(const std::string& path) {
   return ParseScene(text, path);
 }
 
+bool SceneRefracts(const Scene& scene) {
+  bool transmits = scene.material.transmit > 0;
+  for (const MaterialRegion& r : scene.regions) transmits = transmits || r.material.transmit > 0;
+  return scene.max_depth > 0 && transmits;
+}
+
 std::string Scene::ToJson() const {
   auto v = [](const glm::dvec3& x) { return json::array({x.x, x.y, x.z}); };
   auto mat = [&](const Material& m) {

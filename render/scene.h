@@ -98,6 +98,10 @@ struct Scene {
 StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file);
 StatusOr<Scene> LoadScene(const std::string& path);
 
+// Whether rays refract in `scene`: max_depth > 0 and a material (the
+// default or a region's) transmits. Surfaces only: fog never refracts.
+bool SceneRefracts(const Scene& scene);
+
 }  // namespace vox
 
 #endif  // VOX_RENDER_SCENE_H_

@@ -31,6 +31,7 @@
 #include "render/exr.h"
 #include "render/merge.h"
 #include "tests/common/run_command.h"
+#include "tests/common/spawn.h"
 
 extern char** environ;
 
@@ -45,38 +46,10 @@ std::string Slurp(const std::string& path) {
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
 
-std::vector<std::string> Temporaries(const std::string& dir) {
-  std::vector<std::string> v;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.path().filename().string().find(".tmp-") != std::string::npos)
-      v.push_back(e.path().filename().string());
-  return v;
-}
-
-// Spawns a tool in its own process group, its output to /dev/null.
-pid_t Spawn(const std::vector<std::string>& args) {
-  std::vector<char*> argv;
-  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  posix_spawnattr_t attr;
-  posix_spawnattr_init(&attr);
-  posix_spawnattr_setpgroup(&attr, 0);
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
-  posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
-  pid_t pid = -1;
-  if (posix_spawn(&pid, argv[0], &fa, &attr, argv.data(), environ) != 0) pid = -1;
-  posix_spawn_file_actions_destroy(&fa);
-  posix_spawnattr_destroy(&attr);
-  return pid;
-}
-
 // Runs to the end; returns the wall time in microseconds, or -1 on failure.
 double RunToEnd(const std::vector<std::string>& args) {
   const auto t0 = Clock::now();
-  const pid_t pid = Spawn(args);
+  const pid_t pid = testing::SpawnInGroup(args);
   if (pid <= 0) return -1;
   int status = 0;
   if (waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status) != 0) return -1;
@@ -140,7 +113,7 @@ class Kill : public ::testing::Test {
       const bool had_output = fs::exists(out);
       const auto delay = std::chrono::microseconds(
           int64_t(std::uniform_real_distribution<double>(0.0, 1.1 * run_us)(rng)));
-      const pid_t pid = Spawn(args);
+      const pid_t pid = testing::SpawnInGroup(args);
       ASSERT_GT(pid, 0);
       std::this_thread::sleep_for(delay);
       kill(-pid, SIGKILL);
@@ -150,7 +123,7 @@ class Kill : public ::testing::Test {
       if (WIFEXITED(status)) {
         ASSERT_EQ(WEXITSTATUS(status), 0) << "kill point " << i;
       }
-      left_temps += !Temporaries(dir_).empty();
+      left_temps += !testing::TempEntries(dir_).empty();
       if (!fs::exists(out)) {
         ASSERT_FALSE(had_output) << "kill point " << i << ": the earlier output vanished";
         ++absent;
@@ -192,11 +165,11 @@ class Kill : public ::testing::Test {
     ASSERT_GT(RunToEnd(args), 0);
     for (const auto& k : keep) EXPECT_TRUE(fs::exists(dir_ + "/" + k)) << k << " was removed";
     EXPECT_TRUE(fs::is_directory(dir_ + "/." + name + ".tmp-" + std::to_string(dead) + "-dir123"));
-    std::vector<std::string> temps = Temporaries(dir_);
+    std::vector<std::string> temps = testing::TempEntries(dir_);
     EXPECT_EQ(temps.size(), 4u) << "stale temporaries of " << name << " left after a full run";
     for (const auto& k : keep) fs::remove(dir_ + "/" + k);
     fs::remove(dir_ + "/." + name + ".tmp-" + std::to_string(dead) + "-dir123");
-    EXPECT_TRUE(Temporaries(dir_).empty());
+    EXPECT_TRUE(testing::TempEntries(dir_).empty());
     auto last = read(out);
     ASSERT_TRUE(last.ok());
     EXPECT_EQ(last->pixels, ref->pixels);

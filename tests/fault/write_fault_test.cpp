@@ -24,6 +24,7 @@
 #include "render/tiles.h"
 #include "storage/store.h"
 #include "tests/common/run_command.h"
+#include "tests/common/spawn.h"
 
 namespace vox {
 namespace {
@@ -63,14 +64,6 @@ const std::vector<Fault> kFaults = {
     {"rename", "EIO", 0, "Input/output error"},
 };
 
-std::vector<std::string> Temporaries(const std::string& dir) {
-  std::vector<std::string> v;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.path().filename().string().find(".tmp-") != std::string::npos)
-      v.push_back(e.path().filename().string());
-  return v;
-}
-
 class WriteFault : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -108,13 +101,13 @@ TEST_F(WriteFault, StoreWriterKeepsTheEarlierStore) {
     auto after = Store::Open(store_, {});
     ASSERT_TRUE(after.ok()) << after.status().ToString();
     EXPECT_EQ((*after)->store_id(), id) << "the earlier store is untouched";
-    EXPECT_TRUE(Temporaries(dir_).empty());
+    EXPECT_TRUE(testing::TempEntries(dir_).empty());
   }
   // A new store that fails leaves nothing at its path.
   Result r = RunTool(Shim("write", "/.fresh.tmp-", "ENOSPC", 5000), Gen(dir_ + "/fresh"));
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_FALSE(fs::exists(dir_ + "/fresh"));
-  EXPECT_TRUE(Temporaries(dir_).empty());
+  EXPECT_TRUE(testing::TempEntries(dir_).empty());
   // Short writes: a complete, identical store.
   r = RunTool(Shim("short", "/.short.tmp-", "EIO"), Gen(dir_ + "/short"));
   ASSERT_EQ(r.code, 0) << r.output;
@@ -156,7 +149,7 @@ TEST_F(WriteFault, RenderOutputsKeepTheirEarlierFiles) {
       EXPECT_NE(r.output.find(t.path), std::string::npos) << "the message names the output";
       EXPECT_EQ(Slurp(t.path), t.path == exr ? exr0 : t.path == png ? png0 : stats0)
           << "the earlier output is untouched";
-      EXPECT_TRUE(Temporaries(dir_).empty());
+      EXPECT_TRUE(testing::TempEntries(dir_).empty());
     }
   // Short writes on the EXR: it completes and has the same size (the
   // timings in its header differ, their slot does not).
@@ -186,7 +179,7 @@ TEST_F(WriteFault, MergeKeepsTheEarlierImage) {
     EXPECT_NE(r.output.find(out), std::string::npos);
     EXPECT_EQ(Slurp(out), out0);
     EXPECT_EQ(Slurp(p1), p10);
-    EXPECT_TRUE(Temporaries(dir_).empty());
+    EXPECT_TRUE(testing::TempEntries(dir_).empty());
   }
   Result r = RunTool(Shim("short", ".merged.exr.tmp-", "EIO"), merge);
   ASSERT_EQ(r.code, 0) << r.output;

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "storage/store.h"
+#include "tests/common/spawn.h"
 #include "tests/ingest/ingest_test_util.h"
 
 extern char** environ;
@@ -30,33 +31,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
-
-int Temporaries(const std::string& dir) {
-  int n = 0;
-  for (const auto& e : fs::directory_iterator(dir))
-    n += e.path().filename().string().find(".tmp-") != std::string::npos;
-  return n;
-}
-
-// Spawns vox-ingest in its own process group (so one kill reaches the
-// ingest child too).
-pid_t Spawn(const std::vector<std::string>& args) {
-  std::vector<char*> argv;
-  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  posix_spawnattr_t attr;
-  posix_spawnattr_init(&attr);
-  posix_spawnattr_setpgroup(&attr, 0);
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
-  pid_t pid = -1;
-  if (posix_spawn(&pid, argv[0], &fa, &attr, argv.data(), environ) != 0) pid = -1;
-  posix_spawn_file_actions_destroy(&fa);
-  posix_spawnattr_destroy(&attr);
-  return pid;
-}
 
 // A complete store: opens, and every brick decodes.
 bool Complete(const std::string& dir, uint64_t* id) {
@@ -80,7 +54,7 @@ TEST(IngestKill, SigkillAtRandomPointsNeverLeavesAHalfStore) {
                                          "--threads", "2"};
   // One clean run: how long a run takes bounds the kill points.
   const auto t0 = Clock::now();
-  pid_t pid = Spawn(args);
+  pid_t pid = testing::SpawnInGroup(args);
   ASSERT_GT(pid, 0);
   int status = 0;
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
@@ -98,7 +72,7 @@ TEST(IngestKill, SigkillAtRandomPointsNeverLeavesAHalfStore) {
     const bool had_store = fs::exists(out);
     const auto delay = std::chrono::microseconds(
         int64_t(std::uniform_real_distribution<double>(0.0, 1.1 * run_us)(rng)));
-    pid = Spawn(args);
+    pid = testing::SpawnInGroup(args);
     ASSERT_GT(pid, 0);
     std::this_thread::sleep_for(delay);
     kill(-pid, SIGKILL);
@@ -123,10 +97,10 @@ TEST(IngestKill, SigkillAtRandomPointsNeverLeavesAHalfStore) {
               "%d absent, %d finished before the kill\n",
               points, run_us, kept, replaced, absent, finished_first);
   // A later run cleans up every temporary the kills left.
-  pid = Spawn(args);
+  pid = testing::SpawnInGroup(args);
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
-  EXPECT_EQ(Temporaries(dir.path()), 0);
+  EXPECT_TRUE(testing::TempEntries(dir.path()).empty());
   EXPECT_GT(kept + absent, 0) << "no kill landed mid-run";
 }
 

@@ -54,6 +54,21 @@ TEST(CameraTest, Orthographic) {
   }
 }
 
+// Refraction needs a depth and a transmitting material, the default or a region's.
+TEST(SceneTest, RefractsOnlyWithDepthAndATransmittingMaterial) {
+  const auto refracts = [](const char* json) {
+    auto s = ParseScene(json, "scene.json");
+    EXPECT_TRUE(s.ok()) << s.status().ToString();
+    return s.ok() && SceneRefracts(*s);
+  };
+  EXPECT_FALSE(refracts("{}"));
+  EXPECT_FALSE(refracts(R"({"material": {"transmit": 0.5}, "max_depth": 0})"));
+  EXPECT_TRUE(refracts(R"({"material": {"transmit": 0.5}, "max_depth": 2})"));
+  EXPECT_FALSE(refracts(R"({"material": {"reflect": 0.5}, "max_depth": 2})"));
+  EXPECT_TRUE(refracts(R"({"materials": [{"box": {"min": [0,0,0], "max": [1,1,1]},
+                                          "transmit": 0.2}], "max_depth": 1})"));
+}
+
 TEST(CameraTest, ErrorsNameTheField) {
   ExpectCameraError(R"({"look_at":[0,0,0], "fov_deg":40, "width":4, "height":4})", "position");
   ExpectCameraError(R"({"position":[0,0,1], "fov_deg":40, "width":4, "height":4})", "look_at");

@@ -102,14 +102,27 @@ struct Errors {
 int main(int argc, char** argv) {
   if (argc < 4) return Fail("usage: vox-lod-normals STORE SHAPE SIZE [--cells N] [--seed S]");
   const std::string dir = argv[1], shape_name = argv[2];
-  const uint64_t size = std::strtoull(argv[3], nullptr, 10);
+  // A positive integer, or 0 (refused by the callers below).
+  const auto count = [](const char* text) -> uint64_t {
+    char* end = nullptr;
+    const unsigned long long v = std::strtoull(text, &end, 10);
+    return (*text == '\0' || *end != '\0' || *text == '-') ? 0 : v;
+  };
+  const uint64_t size = count(argv[3]);
+  if (size < 2) return Fail("SIZE '" + std::string(argv[3]) + "': expected the store's grid size");
   size_t max_cells = 20000;
   uint64_t seed = 1;
-  for (int i = 4; i + 1 < argc; i += 2) {
+  for (int i = 4; i < argc; i += 2) {
     const std::string f = argv[i];
-    if (f == "--cells") max_cells = size_t(std::strtoull(argv[i + 1], nullptr, 10));
-    else if (f == "--seed") seed = std::strtoull(argv[i + 1], nullptr, 10);
-    else return Fail("unknown flag " + f);
+    if (i + 1 >= argc) return Fail(f + " needs a value");
+    if (f == "--cells") {
+      max_cells = size_t(count(argv[i + 1]));
+      if (max_cells == 0) return Fail("--cells '" + std::string(argv[i + 1]) + "': expected N > 0");
+    } else if (f == "--seed") {
+      seed = count(argv[i + 1]);
+    } else {
+      return Fail("unknown flag " + f);
+    }
   }
   auto shape = vox::gen::MakeShape(shape_name, size);
   if (!shape.ok()) return Fail(shape.status().ToString());
