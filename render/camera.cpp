@@ -84,9 +84,7 @@ Status Camera::Finalize(std::string_view source) {
   return OkStatus();
 }
 
-WorldRay Camera::PixelRay(double x, double y) const {
-  const double sx = (2.0 * x / double(width) - 1.0) * scale_x_;
-  const double sy = (1.0 - 2.0 * y / double(height)) * scale_y_;
+WorldRay Camera::ScreenRay(double sx, double sy) const {
   WorldRay ray;
   if (projection == Projection::kPerspective) {
     ray.origin = position;

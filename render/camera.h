@@ -55,7 +55,13 @@ class Camera {
 
   // The ray through image position (x, y), in pixels from the top-left
   // corner: pixel (i, j)'s centre is (i + 0.5, j + 0.5). REQUIRES: Finalize().
-  WorldRay PixelRay(double x, double y) const;
+  WorldRay PixelRay(double x, double y) const { return ScreenRay(ScreenX(x), ScreenY(y)); }
+  // PixelRay in two parts, for callers that reuse a row's or a column's
+  // screen coordinate (the same arithmetic, so the same bits): the screen
+  // coordinates of image position x and y, and the ray through them.
+  double ScreenX(double x) const { return (2.0 * x / double(width) - 1.0) * scale_x_; }
+  double ScreenY(double y) const { return (1.0 - 2.0 * y / double(height)) * scale_y_; }
+  WorldRay ScreenRay(double sx, double sy) const;
 
   const glm::dvec3& forward() const { return forward_; }
   const glm::dvec3& right() const { return right_; }

@@ -197,9 +197,8 @@ BeamCorners Renderer::BlockCorners(double x0, double y0, double x1, double y1) c
   return b;
 }
 
-void Renderer::ShadePixel(double x, double y, Ctx& cx, Sample* out,
+void Renderer::ShadePixel(const WorldRay& wr, Ctx& cx, Sample* out,
                           const StartPlane* start) const {
-  const WorldRay wr = camera_.PixelRay(x, y);
   const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
   ++cx.c->rays[kRayPrimary];
   const bool lod = lod_.has_value();
@@ -279,21 +278,30 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
         planes[by * nbx + bx] = BeamStartPlane(view, tracer_.n1(), BlockCorners(x0, y0, x1, y1));
       }
   }
+  // Each sample's screen coordinates, per column and per row of the tile
+  // (Camera::ScreenX/ScreenY: the rays are PixelRay's, bit for bit).
+  std::vector<double> screen_x(size_t(spp) * size_t(rect.w)), screen_y(size_t(spp) * size_t(rect.h));
+  for (int k = 0; k < spp; ++k) {
+    double ox = 0.5, oy = 0.5;
+    if (spp > 1) {
+      ox = (k + 0.5) / spp;
+      oy = RadicalInverse2(uint32_t(k) + 1u);
+    }
+    for (int px = 0; px < rect.w; ++px)
+      screen_x[size_t(k) * rect.w + px] = camera_.ScreenX(rect.x0 + px + ox);
+    for (int py = 0; py < rect.h; ++py)
+      screen_y[size_t(k) * rect.h + py] = camera_.ScreenY(rect.y0 + py + oy);
+  }
   auto shade = [&](int px, int py) -> Status {
-    const int ix = rect.x0 + px, iy = rect.y0 + py;
     const StartPlane* start = use_planes ? &planes[(py / bs) * nbx + px / bs] : nullptr;
     glm::dvec3 color(0.0), normal(0.0);
     double alpha = 0.0, z = kInf;
     glm::i64vec3 voxel(0);
     bool any_hit = false;
     for (int k = 0; k < spp; ++k) {
-      double ox = 0.5, oy = 0.5;
-      if (spp > 1) {
-        ox = (k + 0.5) / spp;
-        oy = RadicalInverse2(uint32_t(k) + 1u);
-      }
       Sample s;
-      ShadePixel(ix + ox, iy + oy, cx, &s, start);
+      ShadePixel(camera_.ScreenRay(screen_x[size_t(k) * rect.w + px], screen_y[size_t(k) * rect.h + py]),
+                 cx, &s, start);
       if (cx.failed()) {
         Status e = std::move(cx.error);
         cx.error = OkStatus();

@@ -189,9 +189,9 @@ class Renderer {
 
   // renderer.cpp: primary rays and the pixel loop.
   glm::dvec3 Background(const glm::dvec3& dir) const;
+  // Shades the primary ray `wr` (Camera::PixelRay of the sample's position).
   // `start`: the pixel's block's beam StartPlane (null: none).
-  void ShadePixel(double x, double y, Ctx& cx, Sample* s,
-                  const StartPlane* start = nullptr) const;
+  void ShadePixel(const WorldRay& wr, Ctx& cx, Sample* s, const StartPlane* start = nullptr) const;
   // The beam corner rays (grid space) of pixels [x0, x1) x [y0, y1).
   BeamCorners BlockCorners(double x0, double y0, double x1, double y1) const;
 

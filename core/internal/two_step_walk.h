@@ -48,9 +48,12 @@ template <class PerRay, class Visitor>
 Status TraceTwoSteps(const OctreeView& tree, int n1, int n2, const Ray& ray, PerRay& per_ray,
                      Visitor& visit, TraceCounters* counters) {
   using Dda = typename PerRay::Dda;
+  if (counters == nullptr) {  // (zeroing a local per ray costs when counters are kept)
+    TraceCounters local;
+    return TraceTwoSteps(tree, n1, n2, ray, per_ray, visit, &local);
+  }
   VOX_RETURN_IF_ERROR(ValidateRay(ray));
-  TraceCounters local;
-  TraceCounters& c = counters ? *counters : local;
+  TraceCounters& c = *counters;
   ++c.rays;
   if (!per_ray.Setup(ray)) return OkStatus();
   const StepLayout l1(n1), l2(n2);

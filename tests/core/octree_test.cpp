@@ -386,7 +386,9 @@ TEST(Octree, LendingSourceTracesLikeFetching) {
       }
     }
     EXPECT_EQ(cf.brick_fetches, cl.brick_fetches);
-    if (n1 < 6) EXPECT_GT(cl.brick_fetches, 0u);
+    if (n1 < 6) {
+      EXPECT_GT(cl.brick_fetches, 0u);
+    }
   }
   EXPECT_EQ(lending.fetches, 0);  // every brick was lent, none fetched
   EXPECT_GT(lending.lends_count, 0);
