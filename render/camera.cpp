@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 #include <glm/geometric.hpp>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -94,6 +97,29 @@ WorldRay Camera::ScreenRay(double sx, double sy) const {
     ray.dir = forward_;
   }
   return ray;
+}
+
+void Camera::ScreenRays(const double* sx, double sy, int n, WorldRay* out) const {
+  int i = 0;
+#if defined(__SSE2__)
+  if (projection == Projection::kPerspective) {
+    // ScreenRay's glm::normalize(v) is v * (1 / sqrt(dot(v, v))): the same
+    // correctly rounded operations, on two lanes.
+    for (; i + 1 < n; i += 2) {
+      const glm::dvec3 v0 = forward_ + sx[i] * right_ + sy * true_up_;
+      const glm::dvec3 v1 = forward_ + sx[i + 1] * right_ + sy * true_up_;
+      const __m128d inv =
+          _mm_div_pd(_mm_set1_pd(1.0), _mm_sqrt_pd(_mm_set_pd(glm::dot(v1, v1), glm::dot(v0, v0))));
+      double s[2];
+      _mm_storeu_pd(s, inv);
+      out[i].origin = position;
+      out[i].dir = v0 * s[0];
+      out[i + 1].origin = position;
+      out[i + 1].dir = v1 * s[1];
+    }
+  }
+#endif
+  for (; i < n; ++i) out[i] = ScreenRay(sx[i], sy);
 }
 
 std::string Camera::ToJson() const {

@@ -62,6 +62,9 @@ class Camera {
   double ScreenX(double x) const { return (2.0 * x / double(width) - 1.0) * scale_x_; }
   double ScreenY(double y) const { return (1.0 - 2.0 * y / double(height)) * scale_y_; }
   WorldRay ScreenRay(double sx, double sy) const;
+  // ScreenRay(sx[i], sy) for i < n into out[i], bit for bit, with the
+  // square roots and divisions of two rays at a time.
+  void ScreenRays(const double* sx, double sy, int n, WorldRay* out) const;
 
   const glm::dvec3& forward() const { return forward_; }
   const glm::dvec3& right() const { return right_; }

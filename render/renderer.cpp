@@ -199,8 +199,15 @@ BeamCorners Renderer::BlockCorners(double x0, double y0, double x1, double y1) c
 
 void Renderer::ShadePixel(const WorldRay& wr, Ctx& cx, Sample* out,
                           const StartPlane* start) const {
-  const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
   ++cx.c->rays[kRayPrimary];
+  if (start != nullptr && start->s_min == kInf) {
+    // The block's beam meets nothing (its corner rays are finite and near:
+    // BeamStartPlane), so this ray is a miss, as its walk would find.
+    ++cx.c->trace.rays;
+    out->color = Background(wr.dir);
+    return;
+  }
+  const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
   const bool lod = lod_.has_value();
   if (fog_) {
     double T = 1.0, first_t = kInf;
@@ -292,7 +299,21 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
     for (int py = 0; py < rect.h; ++py)
       screen_y[size_t(k) * rect.h + py] = camera_.ScreenY(rect.y0 + py + oy);
   }
+  // The primary rays of one row of the tile (all samples), made when the
+  // row's first pixel is shaded.
+  std::vector<WorldRay> row_rays(size_t(spp) * size_t(rect.w));
+  int row_y = -1;
+  auto row = [&](int py) -> const WorldRay* {
+    if (py != row_y) {
+      for (int k = 0; k < spp; ++k)
+        camera_.ScreenRays(&screen_x[size_t(k) * rect.w], screen_y[size_t(k) * rect.h + py], rect.w,
+                           &row_rays[size_t(k) * rect.w]);
+      row_y = py;
+    }
+    return row_rays.data();
+  };
   auto shade = [&](int px, int py) -> Status {
+    const WorldRay* rays = row(py);
     const StartPlane* start = use_planes ? &planes[(py / bs) * nbx + px / bs] : nullptr;
     glm::dvec3 color(0.0), normal(0.0);
     double alpha = 0.0, z = kInf;
@@ -300,8 +321,7 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
     bool any_hit = false;
     for (int k = 0; k < spp; ++k) {
       Sample s;
-      ShadePixel(camera_.ScreenRay(screen_x[size_t(k) * rect.w + px], screen_y[size_t(k) * rect.h + py]),
-                 cx, &s, start);
+      ShadePixel(rays[size_t(k) * rect.w + px], cx, &s, start);
       if (cx.failed()) {
         Status e = std::move(cx.error);
         cx.error = OkStatus();
