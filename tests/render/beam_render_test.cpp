@@ -98,6 +98,10 @@ TEST(BeamRender, SamePixelsWithAndWithoutTheBeam) {
         EXPECT_EQ(off.counters.hit_pixels, on.counters.hit_pixels) << what;
         EXPECT_GT(on.counters.hit_pixels, on.counters.pixels / 20) << what;
         EXPECT_EQ(off.counters.trace.hits, on.counters.trace.hits) << what;
+        // Rays of blocks whose beam meets nothing skip the walk, not the count.
+        EXPECT_EQ(off.counters.trace.rays, on.counters.trace.rays) << what;
+        EXPECT_EQ(off.counters.rays[kRayPrimary], on.counters.rays[kRayPrimary]) << what;
+        EXPECT_EQ(on.counters.rays[kRayPrimary], on.counters.pixels * 3) << what;
         cells_on += on.counters.trace.cells_visited;
         cells_off += off.counters.trace.cells_visited;
         ++k;
