@@ -25,6 +25,7 @@
 
 #include "render/camera.h"
 #include "render/internal/atomic_file.h"
+#include "render/internal/exr_header.h"
 
 namespace vox {
 namespace {
@@ -346,22 +347,10 @@ ExrInfo InfoFromFile(const Imf::TiledInputFile& in) {
   return info;
 }
 
-// Refuses a header whose attribute sizes run past the end of the file (a
-// corrupt or hostile file), which OpenEXR would allocate before reading.
-// Files without EXR's magic number are left to OpenEXR's own error.
-Status CheckHeaderSizes(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) return IoError(path + ": cannot open: " + std::strerror(errno));
-  char magic[4];
-  if (!f.read(magic, 4) || std::memcmp(magic, "\x76\x2f\x31\x01", 4) != 0) return OkStatus();
-  std::map<std::string, uint64_t> unused;
-  return FindAttributeValue(f, path, {}, &unused);
-}
-
 }  // namespace
 
 StatusOr<ExrInfo> ReadExrInfo(const std::string& path) {
-  VOX_RETURN_IF_ERROR(CheckHeaderSizes(path));
+  VOX_RETURN_IF_ERROR(CheckExrHeaders(path));
   try {
     Imf::TiledInputFile in(path.c_str());
     return InfoFromFile(in);
@@ -371,7 +360,7 @@ StatusOr<ExrInfo> ReadExrInfo(const std::string& path) {
 }
 
 StatusOr<ExrImage> ReadExr(const std::string& path) {
-  VOX_RETURN_IF_ERROR(CheckHeaderSizes(path));
+  VOX_RETURN_IF_ERROR(CheckExrHeaders(path));
   try {
     Imf::TiledInputFile in(path.c_str());
     ExrImage img;
@@ -419,7 +408,7 @@ struct PngFile {
 }  // namespace
 
 Status WritePngPreview(const std::string& exr_path, const std::string& png_path) {
-  VOX_RETURN_IF_ERROR(CheckHeaderSizes(exr_path));
+  VOX_RETURN_IF_ERROR(CheckExrHeaders(exr_path));
   try {
     Imf::TiledInputFile in(exr_path.c_str());
     ExrInfo info = InfoFromFile(in);
