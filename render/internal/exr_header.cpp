@@ -8,6 +8,10 @@
 #include <fstream>
 #include <map>
 
+#include "render/camera.h"
+#include "render/frame.h"
+#include "render/tiles.h"
+
 namespace vox {
 namespace {
 
@@ -144,11 +148,49 @@ StatusOr<uint64_t> ParsedSize(Reader& r, const std::string& type, uint32_t size,
   return uint64_t(size);
 }
 
+int32_t I32(const char* p) {
+  return int32_t(uint32_t(uint8_t(p[0])) | uint32_t(uint8_t(p[1])) << 8 |
+                 uint32_t(uint8_t(p[2])) << 16 | uint32_t(uint8_t(p[3])) << 24);
+}
+
+// The image geometry of one header, as far as it was found.
+struct Geometry {
+  bool has_window = false, has_tiles = false;
+  int64_t width = 0, height = 0;
+  uint32_t tile_x = 0, tile_y = 0;
+};
+
+// OpenEXR allocates by the tile description and the data window (a tile's
+// buffer, the table of tile offsets) before reading any pixel: values beyond
+// what vox writes are refused here (the limits of render/frame.h,
+// render/camera.h and render/tiles.h).
+Status CheckGeometry(const Geometry& g, const std::string& path, const std::string& part) {
+  const std::string where = path + ": EXR header" + part + ": ";
+  if (g.has_tiles && (g.tile_x < 1 || g.tile_y < 1 || g.tile_x > uint32_t(kMaxTileSize) ||
+                      g.tile_y > uint32_t(kMaxTileSize)))
+    return CorruptionError(where + "tiles of " + std::to_string(g.tile_x) + " x " +
+                           std::to_string(g.tile_y) + " pixels (vox writes at most " +
+                           std::to_string(kMaxTileSize) + " a side)");
+  if (g.has_window && (g.width < 1 || g.height < 1 || g.width > kMaxImageSide ||
+                       g.height > kMaxImageSide))
+    return CorruptionError(where + "data window of " + std::to_string(g.width) + " x " +
+                           std::to_string(g.height) + " pixels (at most " +
+                           std::to_string(kMaxImageSide) + " a side)");
+  if (g.has_tiles && g.has_window) {
+    const int64_t tiles = (g.width + g.tile_x - 1) / g.tile_x * ((g.height + g.tile_y - 1) / g.tile_y);
+    if (tiles > kMaxTiles)
+      return CorruptionError(where + std::to_string(tiles) + " tiles, more than " +
+                             std::to_string(kMaxTiles));
+  }
+  return OkStatus();
+}
+
 // One header; *attributes counts its attributes (0: the empty header that
 // ends a multi-part file's list).
 Status CheckHeader(Reader& r, const std::string& path, const std::string& part,
                    int* attributes) {
   *attributes = 0;
+  Geometry geometry;
   const std::string truncated = path + ": EXR header truncated" + part;
   std::string name, type;
   for (;;) {
@@ -156,7 +198,7 @@ Status CheckHeader(Reader& r, const std::string& path, const std::string& part,
     if (got == 1) return CorruptionError(truncated);
     if (got == 2)
       return CorruptionError(path + ": EXR header attribute name longer than 255 bytes" + part);
-    if (name.empty()) return OkStatus();
+    if (name.empty()) return CheckGeometry(geometry, path, part);
     ++*attributes;
     got = r.Name(&type);
     if (got == 1) return CorruptionError(truncated);
@@ -175,7 +217,18 @@ Status CheckHeader(Reader& r, const std::string& path, const std::string& part,
     auto fixed = FixedSizes().find(type);
     if (fixed != FixedSizes().end()) {
       parsed = fixed->second;
-      if (parsed == size && !r.Skip(size)) return CorruptionError(truncated);
+      char v[128];  // the largest fixed size (m44d)
+      if (parsed == size && !r.Read(v, size)) return CorruptionError(truncated);
+      if (parsed == size && name == "tiles" && type == "tiledesc") {
+        geometry.has_tiles = true;
+        geometry.tile_x = uint32_t(I32(v));
+        geometry.tile_y = uint32_t(I32(v + 4));
+      }
+      if (parsed == size && name == "dataWindow" && type == "box2i") {
+        geometry.has_window = true;
+        geometry.width = int64_t(I32(v + 8)) - I32(v) + 1;
+        geometry.height = int64_t(I32(v + 12)) - I32(v + 4) + 1;
+      }
     } else {
       auto p = ParsedSize(r, type, size, where);
       if (!p.ok()) return p.status();

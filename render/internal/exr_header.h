@@ -9,7 +9,9 @@
 // parses the value of every attribute type OpenEXR itself reads, and refuses
 // a value whose parsed size differs from its declared size, a size running
 // past the end of the file, and names or values OpenEXR would misread.
-// Attributes of unknown types are bounded by the file size only.
+// Attributes of unknown types are bounded by the file size only. It also
+// refuses a tile description or data window beyond the limits of the images
+// vox writes, by which OpenEXR would allocate before reading any pixel.
 //
 // Thread safety: thread-safe (no shared state).
 #ifndef VOX_RENDER_INTERNAL_EXR_HEADER_H_

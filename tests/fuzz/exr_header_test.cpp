@@ -224,6 +224,33 @@ TEST(ExrHeader, VariableSizeTypesAreParsed) {
   EXPECT_TRUE(Has(Check("trunc", Magic(0x200) + Attr("i", "int", U32(1))), "truncated"));
 }
 
+std::string Box(int32_t x0, int32_t y0, int32_t x1, int32_t y1) {
+  return U32(uint32_t(x0)) + U32(uint32_t(y0)) + U32(uint32_t(x1)) + U32(uint32_t(y1));
+}
+std::string Tiles(uint32_t x, uint32_t y) { return U32(x) + U32(y) + '\0'; }
+
+// The exr fuzz target's next finding: a consistent header whose tile
+// description (8 x 16056328 pixels for a 24 x 16 image) makes OpenEXR
+// allocate a 1.5 GB tile buffer. Tiles and data windows beyond what vox
+// writes are refused; vox's own geometry passes.
+TEST(ExrHeader, TilesAndDataWindowsBeyondVoxLimitsAreRefused) {
+  auto header = [](const std::string& window, const std::string& tiles) {
+    return File(Magic(0x200) + Attr("dataWindow", "box2i", window) +
+                Attr("tiles", "tiledesc", tiles) + '\0');
+  };
+  EXPECT_TRUE(Check("geo", header(Box(0, 0, 23, 15), Tiles(64, 64))).ok());
+  EXPECT_TRUE(Check("geo", header(Box(-5, 7, 1919, 1086), Tiles(4096, 8))).ok());
+  Status s = Check("geo", header(Box(0, 0, 23, 15), Tiles(8, 16056328)));
+  EXPECT_TRUE(Has(s, "tiles of 8 x 16056328 pixels (vox writes at most 4096")) << s.ToString();
+  EXPECT_TRUE(Has(Check("geo", header(Box(0, 0, 23, 15), Tiles(0, 8))), "tiles of 0 x 8"));
+  s = Check("geo", header(Box(0, 0, -3, 15), Tiles(8, 8)));
+  EXPECT_TRUE(Has(s, "data window of -2 x 16 pixels")) << s.ToString();
+  s = Check("geo", header(Box(INT32_MIN, 0, INT32_MAX, 0), Tiles(8, 8)));
+  EXPECT_TRUE(Has(s, "data window of 4294967296 x 1 pixels")) << s.ToString();
+  s = Check("geo", header(Box(0, 0, (1 << 20) - 1, (1 << 20) - 1), Tiles(8, 8)));
+  EXPECT_TRUE(Has(s, "17179869184 tiles, more than 4194304")) << s.ToString();
+}
+
 // Multi-part files: every part's header is checked, up to the empty header.
 TEST(ExrHeader, EveryPartOfAMultiPartFileIsChecked) {
   const std::string part0 = Attr("channels", "chlist", Channels({"R"})) + Attr("i", "int", U32(1));
