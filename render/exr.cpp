@@ -347,12 +347,23 @@ ExrInfo InfoFromFile(const Imf::TiledInputFile& in) {
   return info;
 }
 
+// vox writes square tiles, and its readers (vox-merge's tile buffers) size
+// them by ExrInfo::tile: a file with other tiles is not vox's.
+Status CheckSquareTiles(const Imf::TiledInputFile& in, const std::string& path) {
+  if (in.tileXSize() != in.tileYSize())
+    return CorruptionError(path + ": tiles of " + std::to_string(in.tileXSize()) + " x " +
+                           std::to_string(in.tileYSize()) +
+                           " pixels; vox writes square tiles");
+  return OkStatus();
+}
+
 }  // namespace
 
 StatusOr<ExrInfo> ReadExrInfo(const std::string& path) {
   VOX_RETURN_IF_ERROR(CheckExrHeaders(path));
   try {
     Imf::TiledInputFile in(path.c_str());
+    VOX_RETURN_IF_ERROR(CheckSquareTiles(in, path));
     return InfoFromFile(in);
   } catch (const std::exception& e) {
     return IoError(path + ": cannot read as a tiled EXR: " + e.what());
@@ -363,6 +374,7 @@ StatusOr<ExrImage> ReadExr(const std::string& path) {
   VOX_RETURN_IF_ERROR(CheckExrHeaders(path));
   try {
     Imf::TiledInputFile in(path.c_str());
+    VOX_RETURN_IF_ERROR(CheckSquareTiles(in, path));
     ExrImage img;
     img.info = InfoFromFile(in);
     if (!img.info.complete)

@@ -22,12 +22,19 @@ cd "$(dirname "$0")/.."
 mode="${1:-}"
 jobs="${VOX_JOBS:-$(nproc)}"
 
-# The executables of the default tests carrying label $2 in build dir $1.
+# The build targets of the default tests carrying label $2 in build dir $1:
+# each test's executable (ctest names it once built; before, the test's name,
+# which vox_test gives its executable too), kept if the build knows it.
 label_targets() {
-  ctest --test-dir "$1" -N -L "$2" -LE long --show-only=json-v1 | python3 -c '
+  local known
+  known="$(cmake --build "$1" --target help | sed -n 's/^\(\.\.\. \)\{0,1\}\([A-Za-z0-9_.+-]*\):\{0,1\} .*$/\2/p')"
+  ctest --test-dir "$1" -N -L "$2" -LE long --show-only=json-v1 | KNOWN="$known" python3 -c '
 import json, os, sys
-tests = json.load(sys.stdin)["tests"]
-print(" ".join(sorted({os.path.basename(t["command"][0]) for t in tests if t.get("command")})))'
+known = set(os.environ["KNOWN"].split())
+names = set()
+for t in json.load(sys.stdin)["tests"]:
+    names.add(os.path.basename(t["command"][0]) if t.get("command") else t["name"])
+print(" ".join(sorted(names & known)))'
 }
 
 case "$mode" in
@@ -39,7 +46,8 @@ case "$mode" in
       labels=()
     else
       read -ra targets <<<"$(label_targets "$dir" asan)"
-      cmake --build "$dir" -j "$jobs" --target "${targets[@]}"
+      # fuzz_seed_gen: the seed corpus the fuzz replays read (test fuzz_seeds).
+      cmake --build "$dir" -j "$jobs" --target "${targets[@]}" fuzz_seed_gen
       labels=(-L asan)
     fi
     (

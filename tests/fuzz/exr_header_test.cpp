@@ -310,6 +310,25 @@ TEST(ExrHeader, HeadersOpenExrWritesPass) {
   std::remove(path.c_str());
 }
 
+// The exr target's third finding: a part with tiles of 8 x 1032 pixels
+// merged with one of 8 x 8 (the same tile width) overran vox-merge's 8 x 8
+// tile buffer. vox writes square tiles; its readers refuse others.
+TEST(ExrHeader, NonSquareTilesAreRefused) {
+  const std::string path = TempPath("rect");
+  Imf::Header h(24, 16);
+  h.channels().insert("R", Imf::Channel(Imf::FLOAT));
+  h.setTileDescription(Imf::TileDescription(8, 32));
+  { Imf::TiledOutputFile out(path.c_str(), h); }
+  EXPECT_TRUE(CheckExrHeaders(path).ok());  // a valid EXR, just not vox's
+  auto info = ReadExrInfo(path);
+  ASSERT_FALSE(info.ok());
+  EXPECT_TRUE(Has(info.status(), path + ": tiles of 8 x 32 pixels; vox writes square tiles"))
+      << info.status().ToString();
+  EXPECT_FALSE(ReadExr(path).ok());
+  EXPECT_FALSE(MergeParts({path}, path + ".out.exr").ok());
+  std::remove(path.c_str());
+}
+
 // vox's own files, every compression it writes, still read.
 TEST(ExrHeader, VoxFilesOfEveryCompressionRead) {
   for (const char* name : {"zip", "zips", "piz", "rle", "none"}) {

@@ -12,7 +12,7 @@
 // child did not choose other than a signal or a sanitizer report (a crash in
 // OpenVDB, or the watchdog). Limits keep hostile but valid grids short:
 // 256 MiB of ingest budget, at most 1e7 voxels from tiles, one thread, a
-// 20 s alarm in the child; libFuzzer's -malloc_limit_mb applies in the child
+// 15 s alarm in the child; libFuzzer's -malloc_limit_mb applies in the child
 // too: an allocation over it ends the child with libFuzzer's out-of-memory
 // exit (71, its stack in the log). OpenVDB's reader allocates sizes it reads
 // from the file (a metadata string of 1.9 GB, found here), which vox-ingest
@@ -116,7 +116,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         std::fprintf(stderr, "fuzz_vdb: an exception escaped the ingest\n");
         _exit(kBroken);
       });
-      alarm(20);
+      // The watchdog: SIGALRM's default action ends the child (libFuzzer's
+      // own -timeout handler, inherited, would exit with its code instead),
+      // before the parent's libFuzzer -timeout (20 s in scripts/fuzz.sh).
+      signal(SIGALRM, SIG_DFL);
+      alarm(15);
       const int c = IngestAndCheck(input, output);
       std::fflush(nullptr);
       _exit(c);
