@@ -40,6 +40,7 @@ for t in "${targets[@]}"; do
     echo "fuzz: $t FAILED (log $work/$t.log, input $work/crash-* or timeout-*/oom-*)" >&2
     exit 1
   }
-  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$work/$t.log" | grep -o '[0-9]*$' || echo "?")
+  # The last count is the fuzzer's own (vdb's forked children print theirs too).
+  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$work/$t.log" | grep -o '[0-9]*$' | tail -n 1 || echo "?")
   echo "fuzz: $t clean, $runs inputs in $((SECONDS - t0)) s"
 done
