@@ -25,6 +25,7 @@
 
 #include "render/camera.h"
 #include "render/internal/atomic_file.h"
+#include "render/internal/exr_header.h"
 
 namespace vox {
 namespace {
@@ -346,24 +347,23 @@ ExrInfo InfoFromFile(const Imf::TiledInputFile& in) {
   return info;
 }
 
-// Refuses a header whose attribute sizes run past the end of the file (a
-// corrupt or hostile file), which OpenEXR would allocate before reading.
-// Files without EXR's magic number are left to OpenEXR's own error.
-Status CheckHeaderSizes(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) return IoError(path + ": cannot open: " + std::strerror(errno));
-  char magic[4];
-  if (!f.read(magic, 4) || std::memcmp(magic, "\x76\x2f\x31\x01", 4) != 0) return OkStatus();
-  std::map<std::string, uint64_t> unused;
-  return FindAttributeValue(f, path, {}, &unused);
+// vox writes square tiles, and its readers (vox-merge's tile buffers) size
+// them by ExrInfo::tile: a file with other tiles is not vox's.
+Status CheckSquareTiles(const Imf::TiledInputFile& in, const std::string& path) {
+  if (in.tileXSize() != in.tileYSize())
+    return CorruptionError(path + ": tiles of " + std::to_string(in.tileXSize()) + " x " +
+                           std::to_string(in.tileYSize()) +
+                           " pixels; vox writes square tiles");
+  return OkStatus();
 }
 
 }  // namespace
 
 StatusOr<ExrInfo> ReadExrInfo(const std::string& path) {
-  VOX_RETURN_IF_ERROR(CheckHeaderSizes(path));
+  VOX_RETURN_IF_ERROR(CheckExrHeaders(path));
   try {
     Imf::TiledInputFile in(path.c_str());
+    VOX_RETURN_IF_ERROR(CheckSquareTiles(in, path));
     return InfoFromFile(in);
   } catch (const std::exception& e) {
     return IoError(path + ": cannot read as a tiled EXR: " + e.what());
@@ -371,9 +371,10 @@ StatusOr<ExrInfo> ReadExrInfo(const std::string& path) {
 }
 
 StatusOr<ExrImage> ReadExr(const std::string& path) {
-  VOX_RETURN_IF_ERROR(CheckHeaderSizes(path));
+  VOX_RETURN_IF_ERROR(CheckExrHeaders(path));
   try {
     Imf::TiledInputFile in(path.c_str());
+    VOX_RETURN_IF_ERROR(CheckSquareTiles(in, path));
     ExrImage img;
     img.info = InfoFromFile(in);
     if (!img.info.complete)
@@ -419,7 +420,7 @@ struct PngFile {
 }  // namespace
 
 Status WritePngPreview(const std::string& exr_path, const std::string& png_path) {
-  VOX_RETURN_IF_ERROR(CheckHeaderSizes(exr_path));
+  VOX_RETURN_IF_ERROR(CheckExrHeaders(exr_path));
   try {
     Imf::TiledInputFile in(exr_path.c_str());
     ExrInfo info = InfoFromFile(in);

@@ -9,7 +9,7 @@
 # crash leaves its input as DIR/fuzz/crash-* and fails the script; replay it
 # with
 #   build-asan/tests/fuzz/fuzz_TARGET build-asan/fuzz/crash-...
-# CI runs `all` for 25 s each; a long run: scripts/fuzz.sh store 3600
+# CI runs `all` for 25 s each (scripts/sanitize.sh asan); a long run: scripts/fuzz.sh store 3600
 # (docs/robustness.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -24,13 +24,7 @@ for t in "${targets[@]}"; do
   esac
 done
 dir="${VOX_ASAN_DIR:-build-asan}"
-gen=()
-command -v ninja >/dev/null && [ ! -f "$dir/CMakeCache.txt" ] && gen=(-G Ninja)
-launcher=()
-command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-cmake -S . -B "$dir" "${gen[@]}" "${launcher[@]}" -DCMAKE_CXX_COMPILER=clang++ \
-  -DCMAKE_BUILD_TYPE=Release -DVOX_SANITIZE=address,undefined,fuzzer-no-link -DVOX_FUZZ=ON \
-  -DVOX_BUILD_BENCH=OFF >/dev/null
+scripts/sanitizer/configure.sh asan "$dir"
 cmake --build "$dir" -j "${VOX_JOBS:-$(nproc)}" --target "${targets[@]/#/fuzz_}" fuzz_seed_gen
 work="$dir/fuzz"
 "$dir/tests/fuzz/fuzz_seed_gen" "$work/seeds" scripts/demo >/dev/null
@@ -46,6 +40,7 @@ for t in "${targets[@]}"; do
     echo "fuzz: $t FAILED (log $work/$t.log, input $work/crash-* or timeout-*/oom-*)" >&2
     exit 1
   }
-  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$work/$t.log" | grep -o '[0-9]*$' || echo "?")
+  # The last count is the fuzzer's own (vdb's forked children print theirs too).
+  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$work/$t.log" | grep -o '[0-9]*$' | tail -n 1 || echo "?")
   echo "fuzz: $t clean, $runs inputs in $((SECONDS - t0)) s"
 done

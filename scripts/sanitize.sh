@@ -1,23 +1,18 @@
 #!/usr/bin/env bash
 # Sanitizer builds and their tests (run by .ci/run after the normal suite).
+# Which tests each stage runs is a ctest label set in each test's CMakeLists
+# (docs/robustness.md lists the sets and why a test is left out):
 #   scripts/sanitize.sh asan   ASan + UBSan build with clang in build-asan/ (every finding
 #                              fatal). It also carries libFuzzer's coverage instrumentation
 #                              (fuzzer-no-link), so the fuzz targets come from the same
-#                              build. Runs CI's set of tests (below; the tests that have run
-#                              clean under this build), or with VOX_ASAN_SUITE=full the whole
-#                              default suite (no "long" tests); then each libFuzzer target
-#                              of VOX_FUZZ_TARGETS (default store,parse) for
-#                              VOX_FUZZ_SECONDS (default 25; 0: none) through scripts/fuzz.sh.
-#   scripts/sanitize.sh tsan   TSan build (gcc) in build-tsan/ of the threaded tests only:
-#                              the brick cache (many threads, tiny budget, injected load
-#                              failures), prefetch, the store writer, tiled rendering
-#                              and vox-render/vox-merge. tools_gen_test is left out: its
-#                              brute-force checks are single-threaded and TSan slows
-#                              them past the test's time limit (docs/robustness.md).
-# The OpenVDB ingest tests are left out of TSan: OpenVDB and TBB are not built
-# with TSan, so their internal synchronisation is invisible to it (false
-# reports), and each OpenVDB test takes minutes to build instrumented. ASan
-# covers them.
+#                              build. Builds and runs the tests labelled `asan`
+#                              (VOX_ASAN_SUITE=full: everything but the benchmarks and the
+#                              Python module, and every default test), then each libFuzzer target of
+#                              VOX_FUZZ_TARGETS (default store,parse,exr,vdb) for
+#                              VOX_FUZZ_SECONDS each (default 25; 0: none) through
+#                              scripts/fuzz.sh.
+#   scripts/sanitize.sh tsan   TSan build (gcc) in build-tsan/ of the tests labelled `tsan`
+#                              (the threaded ones): builds their executables and runs them.
 # Tests that measure memory (RSS, cgroups) or tight time limits check
 # VOX_SANITIZED and skip those checks: shadow memory and quarantine change
 # what they measure.
@@ -26,57 +21,53 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 mode="${1:-}"
 jobs="${VOX_JOBS:-$(nproc)}"
-gen=()
-command -v ninja >/dev/null && gen=(-G Ninja)
-launcher=()
-command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+
+# The build targets of the default tests carrying label $2 in build dir $1:
+# each test's executable (ctest names it once built; before, the test's name,
+# which vox_test gives its executable too), kept if the build knows it.
+label_targets() {
+  local known
+  known="$(cmake --build "$1" --target help | sed -n 's/^\(\.\.\. \)\{0,1\}\([A-Za-z0-9_.+-]*\):\{0,1\} .*$/\2/p')"
+  ctest --test-dir "$1" -N -L "$2" -LE long --show-only=json-v1 | KNOWN="$known" python3 -c '
+import json, os, sys
+known = set(os.environ["KNOWN"].split())
+names = set()
+for t in json.load(sys.stdin)["tests"]:
+    names.add(os.path.basename(t["command"][0]) if t.get("command") else t["name"])
+print(" ".join(sorted(names & known)))'
+}
 
 case "$mode" in
   asan)
     dir="${VOX_ASAN_DIR:-build-asan}"
-    [ -f "$dir/CMakeCache.txt" ] && gen=()
-    cmake -S . -B "$dir" "${gen[@]}" "${launcher[@]}" -DCMAKE_CXX_COMPILER=clang++ \
-      -DCMAKE_BUILD_TYPE=Release -DVOX_SANITIZE=address,undefined,fuzzer-no-link -DVOX_FUZZ=ON \
-      -DVOX_BUILD_BENCH=OFF
+    scripts/sanitizer/configure.sh asan "$dir"
     if [ "${VOX_ASAN_SUITE:-ci}" = full ]; then
-      # The whole default suite. python_module_test is left out: an instrumented
-      # module cannot load into the uninstrumented python3 (the ASan runtime must
-      # come first); the libraries it wraps are tested directly.
       cmake --build "$dir" -j "$jobs"
-      ctest_args=(-LE long -E '^python_module_test$')
+      labels=()
     else
-      # CI's set (docs/robustness.md): the tests that have run clean under this
-      # build within CI's time budget.
-      tests=(storage_roundtrip_test storage_cache_test storage_corruption_test storage_writer_test
-             storage_force_test storage_codec_test storage_memory_budget_test storage_info_test
-             storage_brick_table_test storage_prefetch_test storage_lod_test
-             storage_brick_limit_test storage_cache_stress_test core_fixed_point_test
-             core_octree_test core_progress_test core_variants_test)
-      cmake --build "$dir" -j "$jobs" --target "${tests[@]}"
-      ctest_args=(-LE long -R "^($(IFS='|'; echo "${tests[*]}"))\$")
+      read -ra targets <<<"$(label_targets "$dir" asan)"
+      # fuzz_seed_gen: the seed corpus the fuzz replays read (test fuzz_seeds).
+      cmake --build "$dir" -j "$jobs" --target "${targets[@]}" fuzz_seed_gen
+      labels=(-L asan)
     fi
     (
       export ASAN_OPTIONS="detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=0:check_initialization_order=1:${ASAN_OPTIONS:-}"
       export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
       export LSAN_OPTIONS="suppressions=$PWD/scripts/sanitizer/lsan.supp:${LSAN_OPTIONS:-}"
-      ctest --test-dir "$dir" --output-on-failure "${ctest_args[@]}" -j "$jobs" --timeout 1800
+      ctest --test-dir "$dir" --output-on-failure "${labels[@]}" -LE long -j "$jobs" --timeout 1800
     )
     secs="${VOX_FUZZ_SECONDS:-25}"
     if [ "$secs" -gt 0 ]; then
-      VOX_ASAN_DIR="$dir" scripts/fuzz.sh "${VOX_FUZZ_TARGETS:-store,parse}" "$secs"
+      VOX_ASAN_DIR="$dir" scripts/fuzz.sh "${VOX_FUZZ_TARGETS:-store,parse,exr,vdb}" "$secs"
     fi
     ;;
   tsan)
     dir=build-tsan
-    [ -f "$dir/CMakeCache.txt" ] && gen=()
-    tests=(storage_cache_test storage_cache_stress_test storage_prefetch_test storage_writer_test
-           render_frame_test render_cli_test render_memory_budget_test)
-    cmake -S . -B "$dir" "${gen[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=Release \
-      -DVOX_SANITIZE=thread -DVOX_BUILD_BENCH=OFF
-    cmake --build "$dir" -j "$jobs" --target "${tests[@]}"
+    scripts/sanitizer/configure.sh tsan "$dir"
+    read -ra targets <<<"$(label_targets "$dir" tsan)"
+    cmake --build "$dir" -j "$jobs" --target "${targets[@]}"
     export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/scripts/sanitizer/tsan.supp:${TSAN_OPTIONS:-}"
-    regex="^($(IFS='|'; echo "${tests[*]}"))\$"
-    ctest --test-dir "$dir" --output-on-failure -R "$regex" -j "$jobs" --timeout 1800
+    ctest --test-dir "$dir" --output-on-failure -L tsan -LE long -j "$jobs" --timeout 1800
     ;;
   *)
     echo "usage: scripts/sanitize.sh asan|tsan" >&2
