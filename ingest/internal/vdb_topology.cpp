@@ -21,6 +21,57 @@ namespace {
 using openvdb::Coord;
 using openvdb::CoordBBox;
 
+// OpenVDB's bloscFromStream and unzipFromStream read a chunk stored
+// uncompressed (a negative size) into the caller's buffer before comparing
+// its size with the buffer's: a corrupt size overflows the buffer (found by
+// fuzzing). This reads ahead what io::readCompressedValues(is, buf, count,
+// value_mask, half) will read, up to the chunk's size, and throws IoError
+// when the chunk would not fit: an uncompressed one of another size than
+// the values need, or a compressed one longer than the rest of the stream.
+// The stream is left where it was. (Files of format >= 222 only, as read
+// here: each value array starts with its metadata byte.)
+template <class ValueT, class MaskT>
+void CheckValueChunk(std::istream& is, openvdb::Index count, const MaskT& value_mask, bool half) {
+  namespace io = openvdb::io;
+  const uint32_t compression = io::getDataCompression(is);
+  if (!(compression & (io::COMPRESS_BLOSC | io::COMPRESS_ZIP))) return;  // read as it is
+  const std::streampos start = is.tellg();
+  int8_t metadata = io::NO_MASK_AND_ALL_VALS;
+  is.read(reinterpret_cast<char*>(&metadata), 1);
+  if (metadata == io::NO_MASK_AND_ONE_INACTIVE_VAL || metadata == io::MASK_AND_ONE_INACTIVE_VAL)
+    is.seekg(std::streamoff(sizeof(ValueT)), std::ios_base::cur);
+  if (metadata == io::MASK_AND_TWO_INACTIVE_VALS)
+    is.seekg(std::streamoff(2 * sizeof(ValueT)), std::ios_base::cur);
+  if (metadata == io::MASK_AND_NO_INACTIVE_VALS || metadata == io::MASK_AND_ONE_INACTIVE_VAL ||
+      metadata == io::MASK_AND_TWO_INACTIVE_VALS) {
+    MaskT selection;
+    selection.load(is);
+  }
+  openvdb::Index stored = count;
+  if ((compression & io::COMPRESS_ACTIVE_MASK) && metadata != io::NO_MASK_AND_ALL_VALS)
+    stored = value_mask.countOn();
+  const uint64_t want = uint64_t(stored) * (half ? 2 : sizeof(ValueT));
+  int64_t chunk = 0;
+  is.read(reinterpret_cast<char*>(&chunk), 8);
+  if (!is.good()) {  // truncated: OpenVDB's reader fails on it without writing
+    is.clear();
+    is.seekg(start);
+    return;
+  }
+  const std::streampos here = is.tellg();
+  is.seekg(0, std::ios_base::end);
+  const uint64_t left = uint64_t(is.tellg() - here);
+  is.seekg(start);
+  if (chunk <= 0 ? uint64_t(0) - uint64_t(chunk) != want : uint64_t(chunk) > left)
+    throw openvdb::IoError(
+        "corrupt value chunk at byte " + std::to_string(uint64_t(here) - 8) + ": " +
+        (chunk <= 0 ? "stored uncompressed as " + std::to_string(uint64_t(0) - uint64_t(chunk)) +
+                          " bytes where its " + std::to_string(stored) + " values take " +
+                          std::to_string(want)
+                    : std::to_string(chunk) + " compressed bytes where the file has " +
+                          std::to_string(left) + " left"));
+}
+
 // Bytes [base, base + size) of the file, held at `data`, as a seekable
 // stream whose positions are file offsets.
 class MemoryBuf : public std::streambuf {
@@ -102,6 +153,7 @@ class CompactTopology<ValueT>::Parser {
     child_mask.load(is_);
     value_mask.load(is_);
     std::unique_ptr<ValueT[]> values(new ValueT[kNum]);
+    CheckValueChunk<ValueT>(is_, kNum, value_mask, t_.half_);
     openvdb::io::readCompressedValues(is_, values.get(), kNum, value_mask, t_.half_);
     Check("internal node");
     Node node;
@@ -379,6 +431,7 @@ void CompactTopology<ValueT>::ReadLeaf(size_t i, ValueT values[512], Mask* mask,
   openvdb::io::setDataCompression(is, compression_);
   openvdb::io::setGridBackgroundValuePtr(is, &background_);
   mask->load(is);
+  CheckValueChunk<ValueT>(is, 512, *mask, half_);
   openvdb::io::readCompressedValues<ValueT, Mask>(is, values, 512, *mask, half_);
   if (is.fail())
     throw openvdb::IoError(path_ + ": corrupt leaf values at byte " + std::to_string(begin));
