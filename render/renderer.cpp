@@ -167,6 +167,7 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
   p.reflection = !r->fog_ && s.max_depth > 0 && max_reflect > 0;
   p.refraction = !r->fog_ && SceneRefracts(s);
   p.scattering = r->fog_ && any_light && s.volume.scattering > 0;
+  r->needs_normal_ = any_light || p.reflection || p.refraction || options.layers.normal;
   r->needs_attributes_ =
       meta.has_color || any_light || p.reflection || p.refraction || options.layers.normal;
   r->eps_t_ = 1e-7 * std::max(meta.voxel_size, 1e-300);

@@ -256,6 +256,9 @@ class Renderer {
   RenderPasses passes_;
   bool fog_ = false;
   bool needs_attributes_ = true;  // surfaces: shading reads normals or colours
+  // Surfaces: something reads the shading normal (a light, a reflection or
+  // refraction, or the normal layer); without, hits are shaded without it.
+  bool needs_normal_ = true;
   double eps_t_ = 1e-9;           // t tolerance for "touching" voxels, in world units
   std::optional<LodTracer> lod_;  // --lod
   Cone primary_cone_;             // the primary rays' cone (pixel width), when lod_

@@ -100,8 +100,11 @@ glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const 
   if (lod != nullptr && lod->level == 0) lod = nullptr;
   const double lift = lod != nullptr ? std::ldexp(1.0, lod->level) : 1.0;
   const Cone cone = lod != nullptr ? SecondaryCone(lod->cone, h.t) : Cone{};
-  const glm::dvec3 n_out = WorldNormal(gr, h, attrs, lod != nullptr ? lod->level : 0);
-  const glm::dvec3 n = glm::dot(n_out, dir_w) > 0 ? -n_out : n_out;  // facing the viewer
+  glm::dvec3 n(0.0);  // unused without lights, reflection, refraction and the normal layer
+  if (needs_normal_) {
+    const glm::dvec3 n_out = WorldNormal(gr, h, attrs, lod != nullptr ? lod->level : 0);
+    n = glm::dot(n_out, dir_w) > 0 ? -n_out : n_out;  // facing the viewer
+  }
   if (normal_out) *normal_out = n;
   const Material& m = scene_.MaterialAt(p_w);
   const glm::dvec3 base = volume_->meta().has_color ? glm::dvec3(attrs.color) : m.color;
