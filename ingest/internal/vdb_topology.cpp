@@ -50,6 +50,10 @@ void CheckValueChunk(std::istream& is, openvdb::Index count, const MaskT& value_
   openvdb::Index stored = count;
   if ((compression & io::COMPRESS_ACTIVE_MASK) && metadata != io::NO_MASK_AND_ALL_VALS)
     stored = value_mask.countOn();
+  if (half && stored == 0) {  // OpenVDB's half reader reads no chunk for no values
+    is.seekg(start);
+    return;
+  }
   const uint64_t want = uint64_t(stored) * (half ? 2 : sizeof(ValueT));
   int64_t chunk = 0;
   is.read(reinterpret_cast<char*>(&chunk), 8);
