@@ -253,7 +253,8 @@ def test_ingest_progress_exception_is_raised(vdb, workdir):
 
 
 def test_render_in_a_thread_does_not_block_python(store, files):
-    camera = dict(files["camera"], width=640, height=480)
+    # Large enough that one thread takes well over 0.2 s on a fast machine.
+    camera = dict(files["camera"], width=1600, height=1200)
     result = {}
     worker = threading.Thread(target=lambda: result.update(
         vox.render(store, camera, files["scene"], threads=1)))
@@ -268,7 +269,7 @@ def test_render_in_a_thread_does_not_block_python(store, files):
         time.sleep(0.001)
     worker.join()
     elapsed = time.perf_counter() - start
-    assert result["rgba"].shape == (480, 640, 4)
+    assert result["rgba"].shape == (1200, 1600, 4)
     assert elapsed > 0.2, "the render was too short to tell"
     # Python ran all along: no gap near the render's length.
     assert worst < 0.25 * elapsed, (worst, elapsed)
