@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <glm/vec3.hpp>
 #include <string>
 
@@ -26,6 +27,16 @@ Status ValidateRay(const Ray& ray);
 // The largest |origin component| a ray may have: 2^1000 (about 1.07e301),
 // so the far-origin clipping's exact products stay finite.
 inline constexpr double kMaxOriginMagnitude = 0x1p1000;
+
+// Whether ValidateRay accepts the ray, without building a Status (the
+// per-ray check of a traversal; ValidateRay says why when it does not).
+inline bool IsValidRay(const Ray& ray) {
+  bool ok = ray.dir.x != 0 || ray.dir.y != 0 || ray.dir.z != 0;
+  for (int a = 0; a < 3; ++a)  // NaN fails both comparisons
+    ok = ok && std::fabs(ray.origin[a]) <= kMaxOriginMagnitude &&
+         std::fabs(ray.dir[a]) <= std::numeric_limits<double>::max();
+  return ok;
+}
 
 // Origins farther than this many grid sizes from 0 on some axis are clipped
 // by ClipFarRay: the usual clipping, t = (plane - o) / D in long double,

@@ -184,11 +184,6 @@ std::string Renderer::SplitString() const {
                                : std::to_string(tracer_.n1()) + "+" + std::to_string(tracer_.n2());
 }
 
-glm::dvec3 Renderer::Background(const glm::dvec3& dir) const {
-  double u = 0.5 * (glm::dot(dir, camera_.true_up()) + 1.0);
-  return glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
-}
-
 BeamCorners Renderer::BlockCorners(double x0, double y0, double x1, double y1) const {
   BeamCorners b;
   const double xs[4] = {x0, x1, x1, x0}, ys[4] = {y0, y0, y1, y1};
@@ -304,22 +299,57 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
     for (int py = 0; py < rect.h; ++py)
       screen_y[size_t(k) * rect.h + py] = camera_.ScreenY(rect.y0 + py + oy);
   }
-  // The primary rays of one row of the tile (all samples), made when the
-  // row's first pixel is shaded.
+  // The primary rays of one row of the tile (all samples), and the row's
+  // beam blocks, made when the row's first pixel is shaded.
   std::vector<WorldRay> row_rays(size_t(spp) * size_t(rect.w));
+  std::vector<int> block_x(size_t(rect.w));
+  for (int px = 0; px < rect.w; ++px) block_x[px] = px / bs;
   int row_y = -1;
+  const StartPlane* row_planes = nullptr;
   auto row = [&](int py) -> const WorldRay* {
     if (py != row_y) {
       for (int k = 0; k < spp; ++k)
         camera_.ScreenRays(&screen_x[size_t(k) * rect.w], screen_y[size_t(k) * rect.h + py], rect.w,
                            &row_rays[size_t(k) * rect.w]);
+      if (use_planes) row_planes = &planes[size_t(py / bs) * nbx];
       row_y = py;
     }
     return row_rays.data();
   };
+  const double inv_spp = 1.0 / spp;
+  auto store = [&](int px, int py, const glm::dvec3& color, double alpha, double z,
+                   const glm::dvec3& normal, bool any_hit, const glm::i64vec3& voxel) {
+    ++counters->pixels;
+    if (any_hit) ++counters->hit_pixels;
+    *buf->at(kChR, px, py) = float(color.r * inv_spp);
+    *buf->at(kChG, px, py) = float(color.g * inv_spp);
+    *buf->at(kChB, px, py) = float(color.b * inv_spp);
+    *buf->at(kChA, px, py) = float(alpha * inv_spp);
+    *buf->at(kChZ, px, py) = z < kInf ? float(z) : inf;
+    if (layers.normal) {
+      *buf->at(kChNx, px, py) = float(normal.x);
+      *buf->at(kChNy, px, py) = float(normal.y);
+      *buf->at(kChNz, px, py) = float(normal.z);
+    }
+    if (layers.voxel) {
+      *buf->at(kChVi, px, py) = any_hit ? float(voxel.x) : 0.0f;
+      *buf->at(kChVj, px, py) = any_hit ? float(voxel.y) : 0.0f;
+      *buf->at(kChVk, px, py) = any_hit ? float(voxel.z) : 0.0f;
+    }
+  };
   auto shade = [&](int px, int py) -> Status {
     const WorldRay* rays = row(py);
-    const StartPlane* start = use_planes ? &planes[(py / bs) * nbx + px / bs] : nullptr;
+    const StartPlane* start = use_planes ? &row_planes[block_x[px]] : nullptr;
+    if (start != nullptr && start->s_min == kInf) {
+      // The block's beam meets nothing: each sample is a miss, as
+      // ShadePixel's own fast path finds, without its per-sample set-up.
+      glm::dvec3 color(0.0);
+      for (int k = 0; k < spp; ++k) color += Background(rays[size_t(k) * rect.w + px].dir);
+      counters->rays[kRayPrimary] += uint64_t(spp);
+      counters->trace.rays += uint64_t(spp);
+      store(px, py, color, 0.0, kInf, glm::dvec3(0.0), false, glm::i64vec3(0));
+      return OkStatus();
+    }
     glm::dvec3 color(0.0), normal(0.0);
     double alpha = 0.0, z = kInf;
     glm::i64vec3 voxel(0);
@@ -341,24 +371,7 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
       }
       any_hit = any_hit || s.hit;
     }
-    ++counters->pixels;
-    if (any_hit) ++counters->hit_pixels;
-    const double inv = 1.0 / spp;
-    *buf->at(kChR, px, py) = float(color.r * inv);
-    *buf->at(kChG, px, py) = float(color.g * inv);
-    *buf->at(kChB, px, py) = float(color.b * inv);
-    *buf->at(kChA, px, py) = float(alpha * inv);
-    *buf->at(kChZ, px, py) = z < kInf ? float(z) : inf;
-    if (layers.normal) {
-      *buf->at(kChNx, px, py) = float(normal.x);
-      *buf->at(kChNy, px, py) = float(normal.y);
-      *buf->at(kChNz, px, py) = float(normal.z);
-    }
-    if (layers.voxel) {
-      *buf->at(kChVi, px, py) = any_hit ? float(voxel.x) : 0.0f;
-      *buf->at(kChVj, px, py) = any_hit ? float(voxel.y) : 0.0f;
-      *buf->at(kChVk, px, py) = any_hit ? float(voxel.z) : 0.0f;
-    }
+    store(px, py, color, alpha, z, normal, any_hit, voxel);
     return OkStatus();
   };
 

@@ -44,6 +44,7 @@
 #ifndef VOX_RENDER_RENDERER_H_
 #define VOX_RENDER_RENDERER_H_
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -51,6 +52,9 @@
 #include <optional>
 #include <string>
 #include <vector>
+
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
 
 #include "core/ray.h"
 #include "core/status.h"
@@ -188,7 +192,12 @@ class Renderer {
       : volume_(volume), camera_(camera), scene_(scene), options_(o), tracer_(tracer), xf_(xf) {}
 
   // renderer.cpp: primary rays and the pixel loop.
-  glm::dvec3 Background(const glm::dvec3& dir) const;
+  // The sky's gradient along the camera's up vector (inline: every pixel of
+  // a block its beam shows empty costs just this).
+  glm::dvec3 Background(const glm::dvec3& dir) const {
+    const double u = 0.5 * (glm::dot(dir, camera_.true_up()) + 1.0);
+    return glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
+  }
   // Shades the primary ray `wr` (Camera::PixelRay of the sample's position).
   // `start`: the pixel's block's beam StartPlane (null: none).
   void ShadePixel(const WorldRay& wr, Ctx& cx, Sample* s, const StartPlane* start = nullptr) const;

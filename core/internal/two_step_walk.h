@@ -52,7 +52,8 @@ Status TraceTwoSteps(const OctreeView& tree, int n1, int n2, const Ray& ray, Per
     TraceCounters local;
     return TraceTwoSteps(tree, n1, n2, ray, per_ray, visit, &local);
   }
-  VOX_RETURN_IF_ERROR(ValidateRay(ray));
+  if (!IsValidRay(ray)) [[unlikely]]
+    return ValidateRay(ray);
   TraceCounters& c = *counters;
   ++c.rays;
   if (!per_ray.Setup(ray)) return OkStatus();
