@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "tests/core/test_util.h"
 #include "tools/study/reference.h"
@@ -132,6 +133,29 @@ TEST(FarOrigins, TheProbeRayOfTheReport) {
       EXPECT_EQ((*hit)->voxel, glm::i64vec3(14, 100, 100)) << x;
     }
   }
+}
+
+// IsValidRay (the traversal's inline check) accepts exactly the rays
+// ValidateRay accepts, on every component at and around each limit.
+TEST(FarOrigins, InlineRayCheckAgreesWithValidateRay) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const double values[] = {0.0, -0.0, 1.0, -1.0, 1e-310, 0x1p1000, -0x1p1000,
+                           std::nextafter(0x1p1000, inf), -std::nextafter(0x1p1000, inf),
+                           1e302, std::numeric_limits<double>::max(), inf, -inf,
+                           std::numeric_limits<double>::quiet_NaN()};
+  int accepted = 0, refused = 0;
+  for (int axis = 0; axis < 3; ++axis)
+    for (bool in_dir : {false, true})
+      for (double v : values) {
+        Ray r{{0.5, 0.5, 0.5}, {0.0, 0.0, 0.0}};
+        r.dir[(axis + 1) % 3] = in_dir && v == 0.0 ? 0.0 : 1.0;  // (0, 0, 0) when v is zero
+        (in_dir ? r.dir : r.origin)[axis] = v;
+        const bool ok = ValidateRay(r).ok();
+        EXPECT_EQ(IsValidRay(r), ok) << RayString(r);
+        (ok ? accepted : refused)++;
+      }
+  EXPECT_GT(accepted, 20);
+  EXPECT_GT(refused, 10);
 }
 
 TEST(FarOrigins, OriginsBeyondTheDocumentedRangeAreRefused) {
