@@ -97,21 +97,7 @@ struct FixedPoint {
     if (shift < -64) return 0;
     unsigned __int128 q = 0;
     if (shift >= 0 && shift <= 127 - 53) {
-      const unsigned __int128 n = static_cast<unsigned __int128>(mn) << shift;
-#if defined(__x86_64__)
-      const uint64_t hi = uint64_t(n >> 64), lo = uint64_t(n);
-      if (hi < md) {
-        // The quotient fits in 64 bits: one divq (the same integer quotient
-        // as the division below, which calls libgcc's __udivti3).
-        uint64_t quo, rem;
-        __asm__("divq %4" : "=a"(quo), "=d"(rem) : "a"(lo), "d"(hi), "rm"(md) : "cc");
-        q = quo;
-      } else {
-        q = n / md;
-      }
-#else
-      q = n / md;  // one 128-bit division
-#endif
+      q = (static_cast<unsigned __int128>(mn) << shift) / md;  // one 128-bit division
     } else {
       // Long division, one quotient bit per step (128-bit words).
       unsigned __int128 rem = mn;
