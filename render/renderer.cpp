@@ -198,13 +198,6 @@ BeamCorners Renderer::BlockCorners(double x0, double y0, double x1, double y1) c
 void Renderer::ShadePixel(const WorldRay& wr, Ctx& cx, Sample* out,
                           const StartPlane* start) const {
   ++cx.c->rays[kRayPrimary];
-  if (start != nullptr && start->s_min == kInf) {
-    // The block's beam meets nothing (its corner rays are finite and near:
-    // BeamStartPlane), so this ray is a miss, as its walk would find.
-    ++cx.c->trace.rays;
-    out->color = Background(wr.dir);
-    return;
-  }
   const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
   const bool lod = lod_.has_value();
   if (fog_) {
@@ -341,8 +334,9 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
     const WorldRay* rays = row(py);
     const StartPlane* start = use_planes ? &row_planes[block_x[px]] : nullptr;
     if (start != nullptr && start->s_min == kInf) {
-      // The block's beam meets nothing: each sample is a miss, as
-      // ShadePixel's own fast path finds, without its per-sample set-up.
+      // The block's beam meets nothing (its corner rays are finite and near:
+      // BeamStartPlane), so each sample is a miss, as its walk would find:
+      // no walk, no per-sample set-up (ShadePixel is not called).
       glm::dvec3 color(0.0);
       for (int k = 0; k < spp; ++k) color += Background(rays[size_t(k) * rect.w + px].dir);
       counters->rays[kRayPrimary] += uint64_t(spp);

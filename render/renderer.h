@@ -199,7 +199,8 @@ class Renderer {
     return glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
   }
   // Shades the primary ray `wr` (Camera::PixelRay of the sample's position).
-  // `start`: the pixel's block's beam StartPlane (null: none).
+  // `start`: the pixel's block's beam StartPlane (null: none); a block whose
+  // beam meets nothing (s_min == +inf) is written by RenderTile without it.
   void ShadePixel(const WorldRay& wr, Ctx& cx, Sample* s, const StartPlane* start = nullptr) const;
   // The beam corner rays (grid space) of pixels [x0, x1) x [y0, y1).
   BeamCorners BlockCorners(double x0, double y0, double x1, double y1) const;
