@@ -122,7 +122,7 @@ class Tracer {
   template <class Visitor>
   Status Traverse(const Ray& ray, Visitor&& visit, TraceCounters* counters = nullptr,
                   const StartPlane* start = nullptr) const {
-    PerRay r{*this, Ctx{ray}, start};
+    PerRay r{*this, ScaledRay{ray}, start};
     return internal::TraceTwoSteps(tree_, n1_, n2_, ray, r, visit, counters);
   }
 
@@ -162,8 +162,8 @@ class Tracer {
       }
       limit = Fixed::Floor(l1 < l2 ? l1 : l2);
     }
-    template <class CtxT>
-    void AddTo(const CtxT& cx, TraceCounters* c) const {
+    template <class RayT>
+    void AddTo(const RayT& cx, TraceCounters* c) const {
       c->moves[cx.d] += nd;
       c->moves[cx.i1] += n1;
       c->moves[cx.i2] += n2;
@@ -176,8 +176,8 @@ class Tracer {
   // Setup sets every field before any use (and a ray it refuses is not
   // walked), so the constructor leaves them unset: zeroing them cost a
   // measurable share of a frame's per-ray work.
-  struct Ctx {
-    explicit Ctx(const Ray& r) : ray(r) {}
+  struct ScaledRay {
+    explicit ScaledRay(const Ray& r) : ray(r) {}
     const Ray& ray;
     Real D[3];  // direction scaled so that max |D| is in [1, 2)
     Real p[3];  // start point in voxel units: origin, or entry point on the grid
@@ -193,7 +193,7 @@ class Tracer {
   struct PerRay {
     using Dda = Tracer::Dda;
     const Tracer& t;
-    Ctx cx;
+    ScaledRay cx;
     const StartPlane* start = nullptr;
 
     bool Setup(const Ray& ray) {
@@ -217,7 +217,7 @@ class Tracer {
 
   // Scales the direction, picks the axes, computes the slopes and clips the
   // ray to the grid. Returns false when the ray misses the grid.
-  bool Setup(const Ray& ray, Ctx* cx) const {
+  bool Setup(const Ray& ray, ScaledRay* cx) const {
     using std::fabs;
     double D[3];
     internal::ScaleDirection(ray.dir, D);
@@ -284,7 +284,7 @@ class Tracer {
   // docs/algorithm.md, section 3: a step's DDA state from a start point in
   // the step's units, and its start voxel packed per `lay`. Axes in the bit
   // mask `before` take BeforeVoxel instead of StartVoxel.
-  Dda InitStep(const Ctx& cx, const internal::StepLayout& lay, const Real p[3], uint64_t* xyz,
+  Dda InitStep(const ScaledRay& cx, const internal::StepLayout& lay, const Real p[3], uint64_t* xyz,
                unsigned before = 0) const {
     int64_t size = int64_t(1) << lay.n;
     int64_t v[3];
@@ -311,7 +311,7 @@ class Tracer {
   // before the plane, so is empty, and the walk from there visits the same
   // voxels as from the start. A ray that leaves the grid before slab D meets
   // nothing: *xyz gets the carry bits (the walk ends at once).
-  void JumpToPlane(const Ctx& cx, const internal::StepLayout& lay, const Real p1[3],
+  void JumpToPlane(const ScaledRay& cx, const internal::StepLayout& lay, const Real p1[3],
                    const StartPlane& sp, Dda* st, uint64_t* xyz) const {
     double s0 = 0, gd = 0;
     for (int a = 0; a < 3; ++a) {
@@ -363,7 +363,7 @@ class Tracer {
   }
 
   // A step's DDA with the ray's slopes and the step's increments.
-  static Dda NewDda(const Ctx& cx, const internal::StepLayout& lay) {
+  static Dda NewDda(const ScaledRay& cx, const internal::StepLayout& lay) {
     Dda st;
     st.q1 = cx.q1;
     st.q2 = cx.q2;
@@ -378,7 +378,7 @@ class Tracer {
   // follow section 6).
   // `prev` is XYZ before the last first-step move (== xyz when none). Sets
   // *xyz2 to the second step's start voxel.
-  Dda Transition(Ctx& cx, const internal::StepLayout& lay1, const internal::StepLayout& lay2,
+  Dda Transition(ScaledRay& cx, const internal::StepLayout& lay1, const internal::StepLayout& lay2,
                  uint64_t xyz, uint64_t prev, const Dda& first, uint64_t* xyz2) const {
     const int n2 = n2_;
     const int64_t size2 = int64_t(1) << n2;

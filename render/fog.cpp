@@ -13,7 +13,7 @@ using render_internal::kInf;
 using render_internal::kMinTransmittance;
 using render_internal::kScatterStepVoxels;
 
-double Renderer::Transmittance(const Ray& gr, double t_max, Ctx& cx, const Cone* cone) const {
+double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone) const {
   ++cx.c->rays[kRayVolume];
   const double sigma_t = scene_.volume.absorption + scene_.volume.scattering;
   const bool has_density = volume_->meta().has_density;
@@ -51,7 +51,7 @@ double Renderer::Transmittance(const Ray& gr, double t_max, Ctx& cx, const Cone*
 }
 
 // The density of fog voxel `h` (stops the frame with the error on failure).
-bool Renderer::Density(const Hit& h, Ctx& cx, double* rho, Volume* volume) const {
+bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume) const {
   ++cx.c->attribute_lookups;
   auto a = (volume != nullptr ? volume : volume_)->HitAttributes(h);  // called by visitors: h's brick is pinned
   if (!a.ok()) {
@@ -62,7 +62,7 @@ bool Renderer::Density(const Hit& h, Ctx& cx, double* rho, Volume* volume) const
   return true;
 }
 
-glm::dvec3 Renderer::Fog(const Ray& gr, Ctx& cx, double* transmittance, double* first_t,
+glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance, double* first_t,
                          const Cone* cone) const {
   const VolumeMedium& v = scene_.volume;
   const double sigma_t = v.absorption + v.scattering;

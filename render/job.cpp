@@ -34,6 +34,10 @@ nlohmann::json LodStatsJson(const Renderer& r, const FrameStats& st,
   j["factor"] = r.lod()->factor();
   j["levels"] = r.lod()->max_level();
   j["exact_rays"] = st.counters.lod.exact_rays;
+  j["antialias"] = r.antialias();
+  j["refined_pixels"] = st.counters.lod.refined_pixels;
+  j["refine_rays"] = st.counters.lod.refine_rays;
+  j["border_rays"] = st.counters.lod.border_rays;
   nlohmann::json stops = nlohmann::json::object(), paged = nlohmann::json::array(),
                  bytes = nlohmann::json::array();
   for (int l = 0; l <= kMaxLevels; ++l)
@@ -57,10 +61,9 @@ nlohmann::json LodStatsJson(const Renderer& r, const FrameStats& st,
   return j;
 }
 
-// Without --lod: when the voxels where the volume begins are much smaller
-// than a pixel of the central ray, says once that --lod 1 would read about
-// N times fewer bricks (N from the pyramid's brick counts at the level the
-// central pixel's cone picks there).
+// An exact frame of a store without a pyramid: when the voxels where the
+// volume begins are much smaller than a pixel of the central ray, says once
+// that level of detail would read fewer bricks, and how to add the pyramid.
 void LodHint(const std::string& dir, Store& base, const Camera& cam, FILE* log) {
   const StoreMeta& m = base.meta();
   if (m.voxel_count == 0 || !(m.voxel_size > 0)) return;
@@ -77,246 +80,318 @@ void LodHint(const std::string& dir, Store& base, const Camera& cam, FILE* log) 
     pixel = cam.ortho_width / cam.width;
   const double voxels = pixel / m.voxel_size;
   if (!(voxels >= 4.0)) return;  // "much smaller": at least level 2
-  const int want = std::min(std::ilogb(voxels), LodMaxLevel(m.levels));
-  if (want < 1) return;
-  std::string estimate = "fewer";
-  if (HasLod(dir)) {
-    OpenOptions oo;
-    oo.cache_bytes = 4 << 20;
-    auto p = LodPyramid::Open(dir, base, oo);
-    if (p.ok() && (*p)->max_level() >= want) {
-      const std::vector<uint64_t> n = (*p)->brick_counts();
-      if (n[size_t(want)] > 0) {
-        char b[64];
-        snprintf(b, sizeof b, "about %.0fx fewer", double(n[0]) / double(n[size_t(want)]));
-        estimate = b;
-      }
-    }
-  }
+  if (LodMaxLevel(m.levels) < 1) return;
   fprintf(log,
-          "vox-render: about %.1f voxels fall across a pixel at the volume's front; --lod 1 would "
-          "read %s bricks%s\n",
-          voxels, estimate.c_str(),
-          HasLod(dir) ? "" : (" (add the pyramid first: vox-ingest --add-lod " + dir + ")").c_str());
+          "vox-render: about %.1f voxels fall across a pixel at the volume's front; with a "
+          "level-of-detail pyramid (vox-ingest --add-lod %s) the frame would read fewer bricks\n",
+          voxels, dir.c_str());
 }
 
-}  // namespace
-
-Status RunRenderJob(const RenderJobOptions& o, RenderJobOutput* out) {
-  const Stopwatch total;
-  Stopwatch phase;
-  if (!o.preview_path.empty() && o.exr_path.empty())
+// The options that need no file: refused before anything is opened.
+Status CheckJobOptions(const RenderJobOptions& options) {
+  if (!options.preview_path.empty() && options.exr_path.empty())
     return InvalidArgumentError("--preview needs an EXR output (-o)");
-  if (!o.preview_path.empty() && !o.part.whole())
+  if (!options.preview_path.empty() && !options.part.whole())
     return InvalidArgumentError(
         "--preview needs the whole image; with --tiles, preview the vox-merge output");
   // Output paths are checked before any work: a bad one fails in a moment,
   // not after the render. The files are written atomically at the end.
-  for (const std::string* out : {&o.exr_path, &o.preview_path, &o.stats_path})
-    if (!out->empty()) VOX_RETURN_IF_ERROR(CheckOutputPath(*out));
-  if (o.threads < 0)
-    return InvalidArgumentError("threads " + std::to_string(o.threads) +
+  for (const std::string* path : {&options.exr_path, &options.preview_path, &options.stats_path})
+    if (!path->empty()) VOX_RETURN_IF_ERROR(CheckOutputPath(*path));
+  if (options.threads < 0)
+    return InvalidArgumentError("threads " + std::to_string(options.threads) +
                                 ": must not be negative (0: all cores)");
-  VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(o.memory_bytes));
-  OpenOptions open;
-  // The budget bounds the cache (BudgetStore sets it once the resident top
-  // is known); opening with it gives the cache its number of shards.
-  open.cache_bytes = o.cache_mb > 0 ? o.cache_mb << 20 : process.bytes;
-  if (o.io_threads < 1 || o.io_threads > kMaxIoThreads)
-    return InvalidArgumentError("--io-threads " + std::to_string(o.io_threads) + ": must be 1.." +
-                                std::to_string(kMaxIoThreads));
-  // Each I/O thread holds a run of bricks in its buffer and in the page
-  // cache (2 x kPrefetchRunBytes): at most one per 32 MiB of budget, so a
-  // small budget keeps its memory for the cache.
-  const int io_threads = o.prefetch ? int(std::clamp<uint64_t>(process.bytes / (32 * kMiB), 1,
-                                                               uint64_t(o.io_threads)))
-                                    : 0;
-  open.io_threads = std::max(io_threads, 1);
-  open.read_windows = o.read_windows;
-  if (o.lod != 0.0 && !(o.lod > 0 && std::isfinite(o.lod)))
-    return InvalidArgumentError("--lod " + std::to_string(o.lod) + ": must be finite and > 0");
-  VOX_ASSIGN_OR_RETURN(auto volume, Store::Open(o.store_dir, open));
-  std::unique_ptr<LodPyramid> pyramid;
-  std::vector<Store*> lod_stores;
-  if (o.lod > 0) {
-    OpenOptions lo = open;
-    auto p = LodPyramid::Open(o.store_dir, *volume, lo);
-    if (!p.ok()) return p.status().WithContext("--lod");
-    pyramid = std::move(p).value();
-    for (int l = 1; l <= pyramid->max_level(); ++l) lod_stores.push_back(pyramid->level(l));
+  if (options.io_threads < 1 || options.io_threads > kMaxIoThreads)
+    return InvalidArgumentError("--io-threads " + std::to_string(options.io_threads) +
+                                ": must be 1.." + std::to_string(kMaxIoThreads));
+  if (options.lod && !(*options.lod >= 0 && std::isfinite(*options.lod)))
+    return InvalidArgumentError("--lod " + std::to_string(*options.lod) +
+                                ": must be finite and >= 0 (0: exact)");
+  if (options.single_step && !options.split.empty())
+    return InvalidArgumentError("--split and --single-step both choose the split; give one");
+  return OkStatus();
+}
+
+// The camera: --cam's file, the camera JSON text, or the default framing of
+// the volume's world box.
+StatusOr<Camera> JobCamera(const RenderJobOptions& options, const StoreMeta& meta) {
+  glm::dvec3 lo, hi;
+  WorldBounds(meta, &lo, &hi);
+  if (options.camera_path.empty() && options.camera_json.empty())
+    return DefaultCamera(lo, hi, options.default_width, options.default_height);
+  if (options.camera_path.empty()) {
+    VOX_ASSIGN_OR_RETURN(Camera camera, ParseCamera(options.camera_json, "camera"));
+    VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext("camera"));
+    return camera;
+  }
+  VOX_ASSIGN_OR_RETURN(Camera camera, LoadCamera(options.camera_path));
+  VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext(options.camera_path));
+  return camera;
+}
+
+StatusOr<Scene> JobScene(const RenderJobOptions& options) {
+  if (!options.scene_path.empty()) return LoadScene(options.scene_path);
+  if (!options.scene_json.empty()) return ParseScene(options.scene_json, "scene");
+  return Scene();
+}
+
+// The I/O threads reading ahead (--prefetch): each holds a run of bricks in
+// its buffer and in the page cache (2 x kPrefetchRunBytes), so at most one
+// per 32 MiB of budget, and a small budget keeps its memory for the cache.
+int IoThreadsFor(const RenderJobOptions& options, const ProcessBudget& process) {
+  if (!options.prefetch) return 0;
+  return int(std::clamp<uint64_t>(process.bytes / (32 * kMiB), 1, uint64_t(options.io_threads)));
+}
+
+// The memory budget's split between the stores, the threads' pinned bricks
+// and the buffers. With LOD, the levels finer than any ray of this camera can
+// stop at get no more than the minimum cache (a full view of a huge volume
+// uses none of the base's bricks), unless the scene refracts (refraction is
+// exact); silhouette antialiasing stops kRefineGrid times finer.
+StatusOr<MemoryBudget> JobBudget(const RenderJobOptions& options, const RenderStores& stores,
+                                 const Camera& camera, const Scene& scene,
+                                 const ProcessBudget& process, int threads, int io_threads) {
+  BudgetInputs inputs;
+  inputs.image_width = camera.width;
+  inputs.image_height = camera.height;
+  inputs.tile_size = std::clamp(options.tile_size, kMinTileSize, kMaxTileSize);
+  inputs.threads = threads;
+  inputs.channels = 5 + (options.layers.normal ? 3 : 0) + (options.layers.voxel ? 3 : 0);
+  inputs.cache_override = uint64_t(options.cache_mb) << 20;
+  inputs.io_threads = io_threads;
+  inputs.read_window_bytes = options.read_windows ? kMaxReadWindowBytes : 0;
+  if (options.keep_image)
+    inputs.process_base += uint64_t(camera.width) * uint64_t(camera.height) *
+                           uint64_t(inputs.channels) * sizeof(float);
+  int first_level = 0;
+  if (stores.lod > 0 && !SceneRefracts(scene)) {
+    std::vector<Volume*> levels(stores.levels.begin(), stores.levels.end());
+    VOX_ASSIGN_OR_RETURN(const LodTracer tracer,
+                         LodTracer::Create(stores.base.get(), levels, stores.lod));
+    glm::dvec3 lo, hi;
+    WorldBounds(stores.base->meta(), &lo, &hi);
+    const Cone cone = PrimaryConeOf(camera, stores.base->meta().voxel_size);
+    first_level = tracer.FirstLevelSeen(camera, cone, lo, hi);
+    if (options.antialias) first_level = std::max(0, first_level - std::ilogb(kRefineGrid));
+  }
+  return BudgetStores(stores.base.get(), stores.levels, process.bytes, inputs, first_level);
+}
+
+StatusOr<RenderOptions> JobRenderOptions(const RenderJobOptions& options, const RenderStores& stores,
+                                         const MemoryBudget& budget) {
+  RenderOptions render;
+  render.layers = options.layers;
+  render.beam = options.beam;
+  const int levels = stores.base->meta().levels;
+  if (options.single_step) {
+    render.n1 = levels;
+  } else if (!options.split.empty()) {
+    VOX_ASSIGN_OR_RETURN(render.n1, ParseSplit(options.split, levels));
+  }
+  int slot_bits = 0;
+  while ((2 << slot_bits) <= budget.pins_per_thread) ++slot_bits;
+  render.table_slot_bits = slot_bits;
+  if (options.prefetch) {
+    Store* store = stores.base.get();
+    render.read_ahead = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+  }
+  render.lod = stores.lod;
+  render.antialias = options.antialias;
+  for (Store* level : stores.levels) render.lod_levels.push_back(level);
+  return render;
+}
+
+// The level-of-detail setting in effect, as the EXR header and --stats
+// name it: "0 (exact)" or "F" with how it was chosen and whether
+// silhouettes are antialiased. vox-merge refuses parts that differ in it.
+std::string LodSetting(const RenderStores& stores, const Renderer& renderer) {
+  if (renderer.lod() == nullptr)
+    return stores.lod_default ? "0 (exact: the store has no pyramid)" : "0 (exact)";
+  char factor[32];
+  snprintf(factor, sizeof factor, "%g", stores.lod);
+  return std::string(factor) + (stores.lod_default ? " (default)" : "") +
+         (renderer.antialias() ? ", antialiased silhouettes" : "");
+}
+
+FrameOptions JobFrameOptions(const RenderJobOptions& options, const RenderStores& stores,
+                             const Renderer& renderer, const MemoryBudget& budget, int threads) {
+  FrameOptions frame;
+  frame.exr_path = options.exr_path;
+  frame.threads = threads;
+  if (options.prefetch) {
+    Store* store = stores.base.get();
+    frame.prefetch = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+    frame.prefetch_backlog = [store] { return store->PrefetchBacklog(); };
+    // Half the cache may hold bricks read ahead (Store::Prefetch); the scout
+    // waits at a quarter so the store seldom has to drop requests.
+    frame.prefetch_limit = budget.brick_cache / 4;
+  }
+  frame.tile_size = options.tile_size;
+  frame.part = options.part;
+  frame.compression = options.compression;
+  frame.progress = ChooseProgressMode(options.log, options.quiet);
+  frame.progress_out = options.log;
+  frame.attrs["vox:store"] = options.store_dir;
+  char id[17];
+  snprintf(id, sizeof id, "%016llx", (unsigned long long)stores.base->store_id());
+  frame.attrs["vox:storeId"] = id;  // vox-merge refuses parts of different stores
+  const StoreMeta& meta = stores.base->meta();
+  frame.attrs["vox:grid"] = meta.grid_name;
+  frame.attrs["vox:source"] = meta.source_file;
+  frame.attrs["vox:lod"] = LodSetting(stores, renderer);
+  return frame;
+}
+
+// Keeps the rendered pixels in `out` (RenderJobOutput), tile by tile.
+void KeepImage(const Camera& camera, const ImageLayers& layers, RenderJobOutput* out,
+               FrameOptions* frame) {
+  const size_t pixels = size_t(camera.width) * size_t(camera.height);
+  out->width = camera.width;
+  out->height = camera.height;
+  out->rgba.assign(pixels * 4, 0.0f);
+  out->z.assign(pixels, std::numeric_limits<float>::infinity());
+  out->normal.assign(layers.normal ? pixels * 3 : 0, 0.0f);
+  out->voxel.assign(layers.voxel ? pixels * 3 : 0, 0.0f);
+  // Tiles do not overlap: the render threads write disjoint pixels.
+  frame->on_tile = [out, layers](const TileRect& r, const TileBuffer& b) -> Status {
+    auto at = [&b](int c, int x, int y) { return b.ch[c][size_t(y) * size_t(b.size) + x]; };
+    for (int y = 0; y < r.h; ++y)
+      for (int x = 0; x < r.w; ++x) {
+        const size_t p = size_t(r.y0 + y) * size_t(out->width) + size_t(r.x0 + x);
+        for (int c = 0; c < 4; ++c) out->rgba[p * 4 + c] = at(kChR + c, x, y);
+        out->z[p] = at(kChZ, x, y);
+        for (int c = 0; layers.normal && c < 3; ++c) out->normal[p * 3 + c] = at(kChNx + c, x, y);
+        for (int c = 0; layers.voxel && c < 3; ++c) out->voxel[p * 3 + c] = at(kChVi + c, x, y);
+      }
+    return OkStatus();
+  };
+}
+
+// The --stats document: the frame's (StatsJson), the memory budget and the
+// level of detail in effect.
+std::string JobStatsJson(const Renderer& renderer, const FrameStats& stats,
+                         const RenderStores& stores, const std::vector<CacheStats>& lod_start,
+                         const ProcessBudget& process, const MemoryBudget& budget,
+                         int slot_bits, int io_threads,
+                         const std::vector<std::pair<std::string, double>>& timings) {
+  nlohmann::json json = nlohmann::json::parse(StatsJson(renderer, stats, timings));
+  nlohmann::json memory = nlohmann::json::parse(budget.ToJson());
+  memory["source"] = process.source;
+  memory["table_slots"] = 1 << slot_bits;
+  memory["io_threads"] = io_threads;
+  memory["max_brick_bytes"] = stores.base->brick_sizes().max_decoded;
+  json["memory"] = memory;
+  nlohmann::json lod = {{"factor", stores.lod}, {"default", stores.lod_default},
+                        {"setting", LodSetting(stores, renderer)}};
+  if (renderer.lod() != nullptr) lod.update(LodStatsJson(renderer, stats, stores.levels, lod_start));
+  json["lod"] = lod;
+  return json.dump(2);
+}
+
+void PrintSummary(const RenderJobOptions& options, const Renderer& renderer,
+                  const FrameStats& stats) {
+  const Camera& camera = renderer.camera();
+  uint64_t rays = 0;
+  for (int k = 0; k < kNumRayKinds; ++k) rays += stats.counters.rays[k];
+  fprintf(options.log,
+          "vox-render: %s (%dx%d, part %s, split %s, passes %s, lod %s): %.3f s, %llu rays, "
+          "%.2fM rays/s\n",
+          options.exr_path.c_str(), camera.width, camera.height, options.part.ToString().c_str(),
+          renderer.SplitString().c_str(), renderer.passes().ToString().c_str(),
+          renderer.lod() ? "on" : "off (exact)", stats.render_seconds, (unsigned long long)rays,
+          stats.render_seconds > 0 ? rays / stats.render_seconds / 1e6 : 0.0);
+}
+
+}  // namespace
+
+StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<double> lod,
+                                        const OpenOptions& open) {
+  RenderStores stores;
+  VOX_ASSIGN_OR_RETURN(stores.base, Store::Open(dir, open));
+  stores.lod_default = !lod.has_value();
+  if (lod) {
+    stores.lod = *lod;
+  } else if (HasLod(dir)) {
+    stores.lod = kDefaultLodFactor;
+  }
+  if (stores.lod > 0) {
+    auto pyramid = LodPyramid::Open(dir, *stores.base, open);
+    if (!pyramid.ok())
+      return pyramid.status().WithContext(stores.lod_default ? "level of detail (--lod 0: exact)"
+                                                             : "--lod");
+    stores.pyramid = std::move(pyramid).value();
+    for (int l = 1; l <= stores.pyramid->max_level(); ++l)
+      stores.levels.push_back(stores.pyramid->level(l));
   }
   // Open's scratch (the index blocks, as large as the resident top) is
   // free but stays in the main heap, which the render threads' allocator
   // arenas do not reuse: give it back so the budget's estimate holds.
   malloc_trim(0);
+  return stores;
+}
+
+Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
+  const Stopwatch total;
+  Stopwatch phase;
+  VOX_RETURN_IF_ERROR(CheckJobOptions(options));
+  VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(options.memory_bytes));
+  const int io_threads = IoThreadsFor(options, process);
+  OpenOptions open;
+  // The budget bounds the cache (BudgetStore sets it once the resident top
+  // is known); opening with it gives the cache its number of shards.
+  open.cache_bytes = options.cache_mb > 0 ? options.cache_mb << 20 : process.bytes;
+  open.io_threads = std::max(io_threads, 1);
+  open.read_windows = options.read_windows;
+  VOX_ASSIGN_OR_RETURN(RenderStores stores, OpenRenderStores(options.store_dir, options.lod, open));
   const double open_seconds = phase.Lap();
-  const StoreMeta& meta = volume->meta();
 
-  Camera camera;
-  if (o.camera_path.empty() && !o.camera_json.empty()) {
-    VOX_ASSIGN_OR_RETURN(camera, ParseCamera(o.camera_json, "camera"));
-    glm::dvec3 lo, hi;
-    WorldBounds(meta, &lo, &hi);
-    VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext("camera"));
-  } else if (o.camera_path.empty()) {
-    glm::dvec3 lo, hi;
-    WorldBounds(meta, &lo, &hi);
-    camera = DefaultCamera(lo, hi, o.default_width, o.default_height);
-  } else {
-    VOX_ASSIGN_OR_RETURN(camera, LoadCamera(o.camera_path));
-    glm::dvec3 lo, hi;
-    WorldBounds(meta, &lo, &hi);
-    VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext(o.camera_path));
-  }
-  Scene scene;
-  if (!o.scene_path.empty()) {
-    VOX_ASSIGN_OR_RETURN(scene, LoadScene(o.scene_path));
-  } else if (!o.scene_json.empty()) {
-    VOX_ASSIGN_OR_RETURN(scene, ParseScene(o.scene_json, "scene"));
-  }
-
-  RenderOptions ro;
-  ro.layers = o.layers;
-  ro.beam = o.beam;
-  if (o.single_step && !o.split.empty())
-    return InvalidArgumentError("--split and --single-step both choose the split; give one");
-  if (o.single_step) {
-    ro.n1 = meta.levels;
-  } else if (!o.split.empty()) {
-    VOX_ASSIGN_OR_RETURN(ro.n1, ParseSplit(o.split, meta.levels));
-  }
+  VOX_ASSIGN_OR_RETURN(const Camera camera, JobCamera(options, stores.base->meta()));
+  VOX_ASSIGN_OR_RETURN(const Scene scene, JobScene(options));
+  const int threads =
+      options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
   // The budget's split, before any output exists: a store whose resident
   // top does not fit fails here, saying how much it needs.
-  const int threads =
-      o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-  BudgetInputs bi;
-  bi.image_width = camera.width;
-  bi.image_height = camera.height;
-  bi.tile_size = std::clamp(o.tile_size, kMinTileSize, kMaxTileSize);
-  bi.threads = threads;
-  bi.channels = 5 + (o.layers.normal ? 3 : 0) + (o.layers.voxel ? 3 : 0);
-  bi.cache_override = uint64_t(o.cache_mb) << 20;
-  bi.io_threads = io_threads;
-  bi.read_window_bytes = o.read_windows ? kMaxReadWindowBytes : 0;
-  const bool keep = o.keep_image && out != nullptr;
-  const size_t pixels = size_t(camera.width) * size_t(camera.height);
-  if (keep) bi.process_base += uint64_t(pixels) * uint64_t(bi.channels) * sizeof(float);
-  // --lod: the levels finer than any ray of this camera can stop at get no
-  // more than the minimum cache (a full view of a huge volume uses none of
-  // the base's bricks), unless the scene refracts (refraction is exact).
-  int first_level = 0;
-  if (o.lod > 0 && !SceneRefracts(scene)) {  // refracted rays are traced exactly
-    std::vector<Volume*> levels(lod_stores.begin(), lod_stores.end());
-    VOX_ASSIGN_OR_RETURN(const LodTracer lt, LodTracer::Create(volume.get(), levels, o.lod));
-    glm::dvec3 lo, hi;
-    WorldBounds(meta, &lo, &hi);
-    first_level = lt.FirstLevelSeen(camera, PrimaryConeOf(camera, meta.voxel_size), lo, hi);
-  }
-  VOX_ASSIGN_OR_RETURN(const MemoryBudget budget,
-                       BudgetStores(volume.get(), lod_stores, process.bytes, bi, first_level));
-  int slot_bits = 0;
-  while ((2 << slot_bits) <= budget.pins_per_thread) ++slot_bits;
-  ro.table_slot_bits = slot_bits;
-  if (!o.quiet)
-    fprintf(o.log, "vox-render: memory %s; %s\n", process.ToString().c_str(),
+  const bool keep = options.keep_image && out != nullptr;
+  RenderJobOptions budgeted = options;
+  budgeted.keep_image = keep;
+  VOX_ASSIGN_OR_RETURN(const MemoryBudget budget, JobBudget(budgeted, stores, camera, scene,
+                                                           process, threads, io_threads));
+  if (!options.quiet)
+    fprintf(options.log, "vox-render: memory %s; %s\n", process.ToString().c_str(),
             budget.ToString().c_str());
-  if (o.prefetch) {
-    Store* store = volume.get();
-    ro.read_ahead = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
-  }
-  ro.lod = o.lod;
-  for (Store* s : lod_stores) ro.lod_levels.push_back(s);
-  VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(volume.get(), camera, scene, ro));
-  if (o.lod == 0.0 && !o.quiet) LodHint(o.store_dir, *volume, camera, o.log);
+  VOX_ASSIGN_OR_RETURN(const RenderOptions render_options, JobRenderOptions(options, stores, budget));
+  VOX_ASSIGN_OR_RETURN(auto renderer,
+                       Renderer::Create(stores.base.get(), camera, scene, render_options));
+  if (stores.lod == 0.0 && stores.lod_default && !options.quiet)
+    LodHint(options.store_dir, *stores.base, camera, options.log);
   const double setup_seconds = phase.Lap();
   std::vector<CacheStats> lod_start;
-  for (Store* s : lod_stores) lod_start.push_back(s->cache_stats());
+  for (Store* level : stores.levels) lod_start.push_back(level->cache_stats());
 
-  FrameOptions fo;
-  fo.exr_path = o.exr_path;
-  fo.threads = threads;
-  if (o.prefetch) {
-    Store* store = volume.get();
-    fo.prefetch = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
-    fo.prefetch_backlog = [store] { return store->PrefetchBacklog(); };
-    // Half the cache may hold bricks read ahead (Store::Prefetch); the scout
-    // waits at a quarter so the store seldom has to drop requests.
-    fo.prefetch_limit = budget.brick_cache / 4;
-  }
-  fo.tile_size = o.tile_size;
-  fo.part = o.part;
-  fo.compression = o.compression;
-  fo.progress = ChooseProgressMode(o.log, o.quiet);
-  fo.progress_out = o.log;
-  fo.attrs["vox:store"] = o.store_dir;
-  {
-    char id[17];
-    snprintf(id, sizeof id, "%016llx", (unsigned long long)volume->store_id());
-    fo.attrs["vox:storeId"] = id;  // vox-merge refuses parts of different stores
-  }
-  fo.attrs["vox:grid"] = meta.grid_name;
-  fo.attrs["vox:source"] = meta.source_file;
-  if (keep) {
-    out->width = camera.width;
-    out->height = camera.height;
-    out->rgba.assign(pixels * 4, 0.0f);
-    out->z.assign(pixels, std::numeric_limits<float>::infinity());
-    out->normal.assign(o.layers.normal ? pixels * 3 : 0, 0.0f);
-    out->voxel.assign(o.layers.voxel ? pixels * 3 : 0, 0.0f);
-    // Tiles do not overlap: the render threads write disjoint pixels.
-    fo.on_tile = [out, &o](const TileRect& r, const TileBuffer& b) -> Status {
-      auto at = [&b](int c, int x, int y) { return b.ch[c][size_t(y) * size_t(b.size) + x]; };
-      for (int y = 0; y < r.h; ++y)
-        for (int x = 0; x < r.w; ++x) {
-          const size_t p = size_t(r.y0 + y) * size_t(out->width) + size_t(r.x0 + x);
-          for (int c = 0; c < 4; ++c) out->rgba[p * 4 + c] = at(kChR + c, x, y);
-          out->z[p] = at(kChZ, x, y);
-          for (int c = 0; o.layers.normal && c < 3; ++c)
-            out->normal[p * 3 + c] = at(kChNx + c, x, y);
-          for (int c = 0; o.layers.voxel && c < 3; ++c)
-            out->voxel[p * 3 + c] = at(kChVi + c, x, y);
-        }
-      return OkStatus();
-    };
-  }
+  FrameOptions frame = JobFrameOptions(options, stores, *renderer, budget, threads);
+  if (keep) KeepImage(camera, options.layers, out, &frame);
   FrameStats stats;
-  VOX_RETURN_IF_ERROR(RenderFrame(*renderer, fo, &stats));
+  VOX_RETURN_IF_ERROR(RenderFrame(*renderer, frame, &stats));
   const double frame_seconds = phase.Lap();
-  if (!o.preview_path.empty()) {
+  if (!options.preview_path.empty()) {
     SetExrThreads(threads);  // the preview reads a row of tiles per call: decoded in parallel
-    VOX_RETURN_IF_ERROR(WritePngPreview(o.exr_path, o.preview_path));
+    VOX_RETURN_IF_ERROR(WritePngPreview(options.exr_path, options.preview_path));
   }
   const double preview_seconds = phase.Lap();
-  if (!o.stats_path.empty() || out != nullptr) {
-    nlohmann::json json = nlohmann::json::parse(
-        StatsJson(*renderer, stats,
-                  {{"open_seconds", open_seconds},
-                   {"setup_seconds", setup_seconds},
-                   {"frame_seconds", frame_seconds},
-                   {"preview_seconds", preview_seconds},
-                   {"total_seconds", total.Seconds()}}));
-    nlohmann::json memory = nlohmann::json::parse(budget.ToJson());
-    memory["source"] = process.source;
-    memory["table_slots"] = 1 << slot_bits;
-    memory["io_threads"] = io_threads;
-    memory["max_brick_bytes"] = volume->brick_sizes().max_decoded;
-    json["memory"] = memory;
-    if (renderer->lod() != nullptr) json["lod"] = LodStatsJson(*renderer, stats, lod_stores, lod_start);
-    if (out) out->stats_json = json.dump(2);
-    if (!o.stats_path.empty())
-      VOX_RETURN_IF_ERROR(WriteFileAtomically(o.stats_path, json.dump(2) + "\n"));
+  if (!options.stats_path.empty() || out != nullptr) {
+    const std::string json = JobStatsJson(
+        *renderer, stats, stores, lod_start, process, budget, render_options.table_slot_bits,
+        io_threads,
+        {{"open_seconds", open_seconds},
+         {"setup_seconds", setup_seconds},
+         {"frame_seconds", frame_seconds},
+         {"preview_seconds", preview_seconds},
+         {"total_seconds", total.Seconds()}});
+    if (out) out->stats_json = json;
+    if (!options.stats_path.empty())
+      VOX_RETURN_IF_ERROR(WriteFileAtomically(options.stats_path, json + "\n"));
   }
-  if (!o.quiet) {
-    uint64_t total = 0;
-    for (int k = 0; k < kNumRayKinds; ++k) total += stats.counters.rays[k];
-    fprintf(
-        o.log,
-        "vox-render: %s (%dx%d, part %s, split %s, passes %s): %.3f s, %llu rays, %.2fM rays/s\n",
-        o.exr_path.c_str(), camera.width, camera.height, o.part.ToString().c_str(),
-        renderer->SplitString().c_str(), renderer->passes().ToString().c_str(),
-        stats.render_seconds, (unsigned long long)total,
-        stats.render_seconds > 0 ? total / stats.render_seconds / 1e6 : 0.0);
-  }
+  if (!options.quiet) PrintSummary(options, *renderer, stats);
   return OkStatus();
 }
 

@@ -12,6 +12,7 @@
 
 #include <cstddef>
 #include <cstdio>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -19,6 +20,7 @@
 #include "core/status.h"
 #include "render/exr.h"
 #include "render/tiles.h"
+#include "storage/lod.h"
 #include "storage/store.h"
 
 namespace vox {
@@ -45,10 +47,8 @@ struct RenderJobOptions {
   // (OpenOptions::io_threads): the next tiles' first bricks
   // (FrameOptions::prefetch) and, instead of waiting, the bricks a pixel
   // misses (RenderOptions::read_ahead). Same pixels either way. Off by
-  // default: on an idle machine (8192^3 sphere, cold, 2 threads) it was
-  // no faster without a memory limit and 1.05x faster in a 256 MiB cgroup,
-  // where it read 1.13x the bytes (pages shared by neighbouring bricks read
-  // again); on a loaded machine it was 1.2-1.6x faster (docs/benchmarks.md).
+  // default: on an idle machine it gained little (docs/benchmarks.md, "Out
+  // of core").
   bool prefetch = false;
   // Read brick records a window of file neighbours at a time
   // (OpenOptions::read_windows); --no-read-windows: each record alone.
@@ -57,8 +57,13 @@ struct RenderJobOptions {
   bool beam = true;
   int io_threads = OpenOptions::kDefaultIoThreads;
   int tile_size = 64;
-  // --lod F: level of detail over the store's pyramid (render/lod.h); 0: off.
-  double lod = 0.0;
+  // --lod F: level of detail over the store's pyramid (render/lod.h); 0:
+  // the exact frame. Unset: kDefaultLodFactor when the store has a pyramid,
+  // else exact (the setting in effect goes into --stats and the EXR header).
+  std::optional<double> lod;
+  // With LOD: antialiased coarse silhouettes (RenderOptions::antialias);
+  // --no-silhouette-aa: off.
+  bool antialias = true;
   PartSpec part;
   ImageLayers layers;  // layers.float_color: --float
   std::optional<ExrCompression> compression;  // --compression; default: FrameOptions'
@@ -80,6 +85,22 @@ struct RenderJobOutput {
   int width = 0, height = 0;
   std::vector<float> rgba, z, normal, voxel;
 };
+
+// The stores a render reads: the base and, when level of detail is in
+// effect, its pyramid (storage/lod.h).
+struct RenderStores {
+  std::unique_ptr<Store> base;
+  std::unique_ptr<LodPyramid> pyramid;
+  std::vector<Store*> levels;  // pyramid levels 1 .., owned by `pyramid`
+  double lod = 0.0;            // the factor in effect; 0: the exact frame
+  bool lod_default = false;    // chosen by default, not by --lod
+};
+
+// Opens the store at `dir` and, when level of detail is in effect (`lod` >
+// 0, or unset and the store has a pyramid: kDefaultLodFactor), its pyramid.
+// vox-render and the benchmarks choose the same way.
+StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<double> lod,
+                                        const OpenOptions& open);
 
 // `output` may be null.
 Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* output = nullptr);

@@ -77,9 +77,9 @@ StatusOr<double> ParseLodFactor(const std::string& flag, const std::string& text
   char* end = nullptr;
   const double f = std::strtod(text.c_str(), &end);
   if (text.empty() || end == nullptr || *end != '\0' || errno == ERANGE)
-    return InvalidArgumentError(flag + " '" + text + "': expected a number > 0");
+    return InvalidArgumentError(flag + " '" + text + "': expected a number >= 0 (0: exact)");
   if (!std::isfinite(f)) return InvalidArgumentError(flag + " '" + text + "': must be finite");
-  if (!(f > 0)) return InvalidArgumentError(flag + " '" + text + "': must be > 0");
+  if (!(f >= 0)) return InvalidArgumentError(flag + " '" + text + "': must be >= 0 (0: exact)");
   return f;
 }
 

@@ -52,16 +52,33 @@ struct Cone {
 // in world units), an orthographic one does not.
 Cone PrimaryConeOf(const Camera& camera, double voxel_size);
 
-// Parses --lod's factor: a finite number > 0; errors name `flag`.
+// Parses --lod's factor: a finite number >= 0 (0: the exact frame, no level
+// of detail); errors name `flag`.
 StatusOr<double> ParseLodFactor(const std::string& flag, const std::string& text);
+
+// The factor vox-render uses when --lod is not given: 1 (a cell no wider
+// than the pixel's cone) when the store has a pyramid, 0 (exact) without.
+inline constexpr double kDefaultLodFactor = 1.0;
+
+// Silhouette antialiasing of a LOD frame (Renderer, docs/lod.md): a pixel
+// whose primary ray stops at a coarse cell next to a pixel whose ray misses
+// is shaded again with kRefineGrid^2 sub-pixel rays, each carrying a cone
+// kRefineGrid times narrower; its alpha is the fraction of them that hit.
+inline constexpr int kRefineGrid = 4;
 
 // Counts of LOD stops (first hits) by level, and of rays traced exactly.
 struct LodCounters {
   uint64_t stops[kMaxLevels + 1] = {};
   uint64_t exact_rays = 0;  // rays whose level stayed 0 within the volume
+  uint64_t refined_pixels = 0;  // silhouette pixels shaded again with sub-pixel rays
+  uint64_t refine_rays = 0;     // their sub-pixel primary rays
+  uint64_t border_rays = 0;     // rays of the neighbouring tiles' pixels, traced to classify
   void Add(const LodCounters& o) {
     for (int l = 0; l <= kMaxLevels; ++l) stops[l] += o.stops[l];
     exact_rays += o.exact_rays;
+    refined_pixels += o.refined_pixels;
+    refine_rays += o.refine_rays;
+    border_rays += o.border_rays;
   }
 };
 

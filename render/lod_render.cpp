@@ -6,7 +6,7 @@
 
 namespace vox {
 
-bool Renderer::FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, Ctx& cx,
+bool Renderer::FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, TraceContext& cx,
                           Hit* hit, int* level, VoxelAttributes* attrs) const {
   if (lod_->Exact(gr, cone)) {
     ++cx.c->lod.exact_rays;
@@ -31,7 +31,7 @@ bool Renderer::FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, 
   return true;
 }
 
-bool Renderer::OccludedLod(const Ray& gr, double t_max, const Cone& cone, Ctx& cx) const {
+bool Renderer::OccludedLod(const Ray& gr, double t_max, const Cone& cone, TraceContext& cx) const {
   ++cx.c->rays[kRayShadow];
   Hit h;
   int level = 0;
@@ -40,7 +40,7 @@ bool Renderer::OccludedLod(const Ray& gr, double t_max, const Cone& cone, Ctx& c
 }
 
 glm::dvec3 Renderer::RadianceLod(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
-                                 const Cone& cone, Ctx& cx) const {
+                                 const Cone& cone, TraceContext& cx) const {
   ++cx.c->rays[kind];
   Hit h;
   VoxelAttributes a;

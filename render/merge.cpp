@@ -66,7 +66,8 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
                                     " were rendered from different stores (store_id " + vb +
                                     " vs " + va + "; was the store re-ingested between parts?)");
     }
-    for (const char* key : {"vox:camera", "vox:scene", "vox:split", "vox:store", "vox:passes"}) {
+    for (const char* key :
+         {"vox:camera", "vox:scene", "vox:split", "vox:store", "vox:passes", "vox:lod"}) {
       auto a = ref.attrs.find(key), b = o.attrs.find(key);
       std::string va = a == ref.attrs.end() ? "<none>" : a->second;
       std::string vb = b == o.attrs.end() ? "<none>" : b->second;

@@ -1,7 +1,8 @@
 // vox::MergeParts: assembles the partial EXRs of a split render
 // (`vox-render --tiles I/N`) into one complete tiled EXR, tile by tile
 // (bounded memory). Refuses parts that do not belong together: different
-// image size, tile size, channels, camera, scene, split or store; a part
+// image size, tile size, channels, camera, scene, split, store or
+// level-of-detail setting; a part
 // index given twice (overlap) or missing; a part whose tiles are not all
 // present (an unfinished render). Errors name the files.
 //

@@ -128,6 +128,12 @@ struct RenderOptions {
   // same either way, bit for bit. Off for fog and LOD.
   bool beam = true;
   int beam_block = 8;
+  // With LOD: pixels at a coarse silhouette (a coarse stop next to a miss)
+  // are shaded again from kRefineGrid^2 sub-pixel rays with cones as much
+  // narrower (render/lod.h), so their alpha is the fraction covered instead
+  // of a whole dilated cell. Surfaces only: fog already integrates the
+  // cells' optical depth.
+  bool antialias = true;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -155,7 +161,10 @@ class Renderer {
   std::unique_ptr<ThreadState, ThreadStateDeleter> NewThreadState() const;
 
   // Renders `rect` into `buf` (pixel (x, y) of the image at buf(x - x0, y - y0)).
-  // Counts put-aside pixels' retries in counters->deferred_pixels.
+  // Counts put-aside pixels' retries in counters->deferred_pixels. A pixel's
+  // value depends on the pixel alone (and, with silhouette antialiasing, on
+  // its neighbours' primary rays, traced again across the tile's border), never
+  // on the tiling.
   Status RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
                     ThreadState* ts = nullptr) const;
 
@@ -174,13 +183,18 @@ class Renderer {
   // --lod: the pyramid's tracer (nullptr when LOD is off), and the cone of
   // the primary ray through the image centre at ray parameter t.
   const LodTracer* lod() const { return lod_ ? &*lod_ : nullptr; }
+  // Whether coarse silhouettes are antialiased (RenderOptions::antialias,
+  // with LOD, on surfaces).
+  bool antialias() const { return lod_.has_value() && options_.antialias && !fog_; }
   Cone PrimaryCone() const { return primary_cone_; }
   int n2() const { return tracer_.n2(); }
   std::string SplitString() const;
 
  private:
-  struct Ctx;
+  struct TraceContext;
   struct Sample;
+  struct PixelValue;  // a pixel's samples, summed (tile_render.cpp)
+  class TileRays;     // a tile's primary rays, a row at a time (tile_render.cpp)
   // The cone a ray carries and the level of the cell it stopped at; for
   // secondary rays of a coarse hit (a level-0 hit's are traced exactly).
   struct LodRay {
@@ -201,7 +215,32 @@ class Renderer {
   // Shades the primary ray `wr` (Camera::PixelRay of the sample's position).
   // `start`: the pixel's block's beam StartPlane (null: none); a block whose
   // beam meets nothing (s_min == +inf) is written by RenderTile without it.
-  void ShadePixel(const WorldRay& wr, Ctx& cx, Sample* s, const StartPlane* start = nullptr) const;
+  // `cone`: with LOD, the ray's cone (null: primary_cone_).
+  void ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* s,
+                  const StartPlane* start = nullptr, const Cone* cone = nullptr) const;
+  // The LOD level of the first stop of the primary ray `wr` with `cone`
+  // (-1: a miss), without shading.
+  int PrimaryStopLevel(const WorldRay& wr, const Cone& cone, TraceContext& cx) const;
+
+  // tile_render.cpp: the tile loop.
+  // The beam StartPlane of each beam block of `rect`, row-major.
+  std::vector<StartPlane> BeamPlanes(const TileRect& rect) const;
+  // Shades pixel (px, py) of the tile (all its samples) into *value.
+  Status ShadeTilePixel(int px, int py, TileRays& rays, TraceContext& cx, PixelValue* value) const;
+  // Every pixel of the tile, waiting for each brick.
+  Status ShadeTileWaiting(const TileRect& rect, TileRays& rays, TraceContext& cx,
+                          TileBuffer* buf, std::vector<int8_t>* levels) const;
+  // Every pixel of the tile, putting aside those whose bricks are not in
+  // memory (RenderOptions::read_ahead) and shading them in later passes.
+  Status ShadeTileDeferred(const TileRect& rect, TileRays& rays, TraceContext& cx,
+                           LendingBrickTable* table, TileBuffer* buf,
+                           std::vector<int8_t>* levels) const;
+  // The silhouette pixels of the tile (antialias()), shaded again from
+  // sub-pixel rays. `levels`: each pixel's stop level (-1: a miss).
+  Status RefineSilhouettes(const TileRect& rect, const std::vector<int8_t>& levels,
+                           TraceContext& cx, TileBuffer* buf) const;
+  // Writes `value` as pixel (px, py) of `buf`.
+  void WritePixel(const PixelValue& value, int px, int py, TileBuffer* buf) const;
   // The beam corner rays (grid space) of pixels [x0, x1) x [y0, y1).
   BeamCorners BlockCorners(double x0, double y0, double x1, double y1) const;
 
@@ -215,7 +254,7 @@ class Renderer {
   // skip_start_run); with `attrs`, also its attributes, read while the
   // traversal pins the brick. False on a miss or an error (cx.failed()).
   // `start`: a StartPlane gr satisfies (primary rays of a beam block).
-  bool FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit,
+  bool FindHit(const Ray& gr, bool skip_start_run, TraceContext& cx, Hit* hit,
                VoxelAttributes* attrs = nullptr, const StartPlane* start = nullptr) const;
   // Where surface shading wants the hit's attributes: `a`, or nullptr when
   // the scene needs none.
@@ -226,33 +265,33 @@ class Renderer {
   // `attrs`: the hit voxel's attributes (default ones when the scene needs
   // none: unlit, no stored colour, no normal layer).
   glm::dvec3 ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
-                          const VoxelAttributes& attrs, int depth, Ctx& cx,
+                          const VoxelAttributes& attrs, int depth, TraceContext& cx,
                           glm::dvec3* normal_out, const LodRay* lod = nullptr) const;
   // The colour seen along secondary ray gr (world direction dir_w).
   glm::dvec3 Radiance(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
-                      Ctx& cx) const;
+                      TraceContext& cx) const;
   // The colour seen through the object that refracted ray gr enters at
   // world point origin_w (the start of gr).
   glm::dvec3 Refract(const Ray& gr, const glm::dvec3& origin_w, const glm::dvec3& dir_w,
-                     int depth, Ctx& cx) const;
-  bool Occluded(const Ray& gr, double t_max, Ctx& cx) const;
+                     int depth, TraceContext& cx) const;
+  bool Occluded(const Ray& gr, double t_max, TraceContext& cx) const;
 
   // lod_render.cpp: level-of-detail versions of the above (render/lod.h).
   // The first hit along gr with the cone; *level its LOD level.
-  bool FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, Ctx& cx, Hit* hit,
+  bool FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, TraceContext& cx, Hit* hit,
                   int* level, VoxelAttributes* attrs) const;
-  bool OccludedLod(const Ray& gr, double t_max, const Cone& cone, Ctx& cx) const;
+  bool OccludedLod(const Ray& gr, double t_max, const Cone& cone, TraceContext& cx) const;
   glm::dvec3 RadianceLod(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
-                         const Cone& cone, Ctx& cx) const;
+                         const Cone& cone, TraceContext& cx) const;
   // The cone of a secondary ray leaving a hit at ray parameter t of a ray with `cone`.
   static Cone SecondaryCone(const Cone& cone, double t) { return Cone{cone.Width(t), cone.spread}; }
 
   // fog.cpp: volumes.
   // `cone`: trace with LOD (nullptr: exactly).
-  glm::dvec3 Fog(const Ray& gr, Ctx& cx, double* transmittance, double* first_t,
+  glm::dvec3 Fog(const Ray& gr, TraceContext& cx, double* transmittance, double* first_t,
                  const Cone* cone = nullptr) const;
-  bool Density(const Hit& h, Ctx& cx, double* rho, Volume* volume = nullptr) const;
-  double Transmittance(const Ray& gr, double t_max, Ctx& cx, const Cone* cone = nullptr) const;
+  bool Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume = nullptr) const;
+  double Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone = nullptr) const;
 
   // tracer_'s occupied box (options_.clip_to_occupied), on `t` too.
   void ApplyOccupiedBox(RenderTracer* t) const;

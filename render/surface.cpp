@@ -24,7 +24,7 @@ Ray Renderer::SpawnRay(const glm::dvec3& p_g, const glm::dvec3& dir_w,
   return Ray{origin, xf_.world_to_grid_linear * dir_w};
 }
 
-bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit,
+bool Renderer::FindHit(const Ray& gr, bool skip_start_run, TraceContext& cx, Hit* hit,
                        VoxelAttributes* attrs, const StartPlane* start) const {
   OccupiedRun run(eps_t_, skip_start_run);
   bool found = false;
@@ -59,7 +59,7 @@ bool Renderer::FindHit(const Ray& gr, bool skip_start_run, Ctx& cx, Hit* hit,
   return found;
 }
 
-bool Renderer::Occluded(const Ray& gr, double t_max, Ctx& cx) const {
+bool Renderer::Occluded(const Ray& gr, double t_max, TraceContext& cx) const {
   ++cx.c->rays[kRayShadow];
   Hit h;
   if (!FindHit(gr, /*skip_start_run=*/true, cx, &h)) return false;
@@ -91,7 +91,7 @@ glm::dvec3 Renderer::WorldNormal(const Ray& gr, const Hit& h, const VoxelAttribu
 }
 
 glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
-                                  const VoxelAttributes& attrs, int depth, Ctx& cx,
+                                  const VoxelAttributes& attrs, int depth, TraceContext& cx,
                                   glm::dvec3* normal_out, const LodRay* lod) const {
   const glm::dvec3 origin_w = xf_.GridToWorld(gr.origin);
   const glm::dvec3 p_w = origin_w + h.t * dir_w;
@@ -152,7 +152,7 @@ glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const 
 }
 
 glm::dvec3 Renderer::Radiance(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
-                              Ctx& cx) const {
+                              TraceContext& cx) const {
   ++cx.c->rays[kind];
   Hit h;
   VoxelAttributes a;
@@ -162,7 +162,7 @@ glm::dvec3 Renderer::Radiance(const Ray& gr, const glm::dvec3& dir_w, int depth,
 }
 
 glm::dvec3 Renderer::Refract(const Ray& gr, const glm::dvec3& origin_w, const glm::dvec3& dir,
-                             int depth, Ctx& cx) const {
+                             int depth, TraceContext& cx) const {
   ++cx.c->rays[kRayRefraction];
   OccupiedRun run(eps_t_, /*started=*/false);
   bool exited = false;

@@ -3,7 +3,7 @@
 // lights that reach a point, and the state machine of a contiguous run of
 // occupied voxels along a ray. Private to render/.
 //
-// Thread safety: OccupiedRun and Renderer::Ctx belong to one call of one
+// Thread safety: OccupiedRun and Renderer::TraceContext belong to one call of one
 // thread; the rest is stateless.
 #ifndef VOX_RENDER_INTERNAL_TRACING_H_
 #define VOX_RENDER_INTERNAL_TRACING_H_
@@ -17,11 +17,12 @@
 #include "core/status.h"
 #include "render/renderer.h"
 #include "render/scene.h"
+#include "storage/brick_table.h"
 
 namespace vox {
 
 // Per-call state: the thread's tracer and counters, and the first error.
-struct Renderer::Ctx {
+struct Renderer::TraceContext {
   const RenderTracer* tracer;
   RenderCounters* c;
   Status error;
@@ -30,6 +31,26 @@ struct Renderer::Ctx {
   void Fail(const Status& s) {
     if (error.ok()) error = s;
   }
+};
+
+// A render thread's own tracer and pinned-brick tables.
+struct Renderer::ThreadState {
+  std::unique_ptr<LendingBrickTable> bricks;
+  RenderTracer tracer;
+  std::unique_ptr<LodThread> lod;  // --lod: the coarse levels' tracers and table
+};
+
+// One primary sample's result (ShadePixel).
+struct Renderer::Sample {
+  glm::dvec3 color{0.0};
+  double alpha = 0.0;
+  double z = std::numeric_limits<double>::infinity();
+  bool hit = false;
+  int level = 0;  // with hit: the LOD level of the stop (0: a voxel)
+  // Set with hit = true only (left unset otherwise: zeroing the whole
+  // sample per ray cost 3% of a frame).
+  glm::dvec3 normal;
+  glm::i64vec3 voxel;
 };
 
 namespace render_internal {

@@ -8,6 +8,7 @@
 #include <png.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cstring>
 #include <map>
 #include <filesystem>
@@ -496,7 +497,14 @@ TEST_F(FrameTest, ReadingAheadChangesNoPixelAndNoCounter) {
       RenderOptions ro;
       ro.layers.normal = true;
       ro.layers.voxel = true;
-      if (ahead) ro.read_ahead = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
+      // Bricks asked for ahead: whether the I/O threads read them before a
+      // waiting pass does depends on the machine's load, the asking does not.
+      std::atomic<uint64_t> asked{0};
+      if (ahead)
+        ro.read_ahead = [store, &asked](std::span<const uint32_t> ids) {
+          asked += ids.size();
+          store->Prefetch(ids);
+        };
       auto r = Renderer::Create(store, cam, scene_, ro);  // shadows: secondary rays too
       ASSERT_TRUE(r.ok()) << r.status().ToString();
       FrameOptions fo;
@@ -513,7 +521,7 @@ TEST_F(FrameTest, ReadingAheadChangesNoPixelAndNoCounter) {
       ASSERT_TRUE(s.ok()) << s.ToString();
       counters[ahead] = stats.counters;
       if (ahead) {
-        EXPECT_GT(stats.cache_end.prefetched, 0u) << "cache " << cache;
+        EXPECT_GT(asked.load(), 0u) << "cache " << cache;
         EXPECT_GT(stats.counters.deferred_pixels, 0u) << "cache " << cache;
       } else {
         EXPECT_EQ(stats.counters.deferred_pixels, 0u);

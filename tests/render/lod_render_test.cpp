@@ -1,7 +1,8 @@
 // Level of detail (render/lod.h) over a real pyramid: a tiny factor and a
 // close-up change nothing, LOD stops never come finer than the cone allows
 // or later than the exact hit, a far view reads fewer bricks with the same
-// silhouette, and vox-render's --lod errors name the flag.
+// silhouette, and vox-render's --lod errors name the flag (the default and
+// antialiasing: lod_default_test).
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -72,6 +73,7 @@ class LodRender : public ::testing::Test {
   StatusOr<std::unique_ptr<Renderer>> Make(const Camera& cam, double lod) {
     RenderOptions ro;
     ro.lod = lod;
+    ro.antialias = false;  // the stops themselves (lod_default_test: antialiasing)
     if (lod > 0) ro.lod_levels = levels_;
     return Renderer::Create(base_.get(), cam, Scene{}, ro);
   }
@@ -251,7 +253,7 @@ using RunResult = testing::CommandResult;
 TEST_F(LodRender, BadLodFlagsNameTheFlag) {
   const std::string bin = VOX_RENDER_BIN;
   const std::string out = " -o " + Path("x.exr") + " --size 16x16 --quiet";
-  for (const char* bad : {"0", "-1", "nan", "inf", "abc", "1e999", ""}) {
+  for (const char* bad : {"-1", "-0.5", "nan", "inf", "abc", "1e999", ""}) {
     RunResult r = testing::RunCommand(bin + " " + Path("store") + " --lod '" + bad + "'" + out);
     EXPECT_EQ(r.code, 2) << bad << ": " << r.output;
     EXPECT_NE(r.output.find("--lod"), std::string::npos) << r.output;

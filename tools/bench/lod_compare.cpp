@@ -1,7 +1,10 @@
 // vox-lod-compare: compares a render against a full-resolution reference
 // (docs/lod.md): mean absolute RGB difference (linear values, and 8-bit
 // sRGB levels) over all pixels and over the pixels either image covers,
-// and the silhouette IoU (alpha > 0); optionally writes a PNG of a crop of
+// the root mean square RGB and alpha differences (linear), the silhouette
+// pixels wrong (alpha differs by more than 1/2: a pixel a coverage test
+// would call covered in one image and not in the other) and the silhouette
+// IoU (alpha > 0); optionally writes a PNG of a crop of
 // both side by side (reference left), magnified, to show moire.
 //   vox-lod-compare REF.exr TEST.exr [--crop X,Y,W,H --png OUT.png [--zoom Z]]
 #include <png.h>
@@ -75,15 +78,19 @@ int main(int argc, char** argv) {
   if (rb->info.width != w || rb->info.height != h) return Fail("image sizes differ");
   const auto& A = ra->pixels;
   const auto& B = rb->pixels;
-  double lin = 0, srgb = 0, lin_cov = 0, srgb_cov = 0;
-  uint64_t inter = 0, uni = 0, n = uint64_t(w) * h;
+  double lin = 0, srgb = 0, lin_cov = 0, srgb_cov = 0, sq_rgb = 0, sq_alpha = 0;
+  uint64_t inter = 0, uni = 0, wrong = 0, n = uint64_t(w) * h;
   for (size_t i = 0; i < n; ++i) {
     double dl = 0, ds = 0;
     for (const char* c : {"R", "G", "B"}) {
       const double a = A.at(c)[i], b = B.at(c)[i];
       dl += std::fabs(a - b);
       ds += std::fabs(ToSrgb8(a) - ToSrgb8(b));
+      sq_rgb += (a - b) * (a - b);
     }
+    const double da = double(A.at("A")[i]) - double(B.at("A")[i]);
+    sq_alpha += da * da;
+    wrong += std::fabs(da) > 0.5;
     lin += dl / 3;
     srgb += ds / 3;
     const bool ia = A.at("A")[i] > 0, ib = B.at("A")[i] > 0;
@@ -97,10 +104,12 @@ int main(int argc, char** argv) {
   std::printf(
       "{\"pixels\": %llu, \"mean_abs_rgb\": %.6f, \"mean_abs_srgb8\": %.4f, "
       "\"mean_abs_rgb_covered\": %.6f, \"mean_abs_srgb8_covered\": %.4f, \"covered_pixels\": %llu, "
-      "\"silhouette_iou\": %.6f}\n",
+      "\"silhouette_iou\": %.6f, \"rmse_rgb\": %.6f, \"rmse_alpha\": %.6f, "
+      "\"silhouette_wrong\": %llu}\n",
       (unsigned long long)n, lin / double(n), srgb / double(n), uni ? lin_cov / double(uni) : 0.0,
       uni ? srgb_cov / double(uni) : 0.0, (unsigned long long)uni,
-      uni ? double(inter) / double(uni) : 1.0);
+      uni ? double(inter) / double(uni) : 1.0, std::sqrt(sq_rgb / (3.0 * double(n))),
+      std::sqrt(sq_alpha / double(n)), (unsigned long long)wrong);
   if (!png.empty()) {
     if (cw == 0 || cx < 0 || cy < 0 || cx + cw > w || cy + ch > h) return Fail("--png needs a --crop inside the image");
     const int gap = 4, ow = (2 * cw) * zoom + gap, oh = ch * zoom;

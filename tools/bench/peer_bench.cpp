@@ -61,6 +61,8 @@
 #include "ingest/ingest.h"
 #include "render/camera.h"
 #include "render/frame.h"
+#include "render/job.h"
+#include "render/lod.h"
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "render/tiles.h"
@@ -77,7 +79,7 @@ using vox::TileRect;
 constexpr char kUsage[] =
     "usage: vox-peer-bench IN.vdb [--store DIR] [--cam cam.json | --size WxH] [--rounds N]\n"
     "                      [--threads N] [--tile-size T] [--grid NAME] [--no-clip | --ab-clip]\n"
-    "                      [--no-beam | --ab-beam] [--beam-block N]\n"
+    "                      [--no-beam | --ab-beam] [--beam-block N] [--lod F]\n"
     "  --store      the vox store of IN.vdb (ingested there first when DIR does not exist;\n"
     "               default: a temporary store, removed at the end)\n"
     "  --cam        camera (default: vox-render's default camera, --size pixels, 1024x1024)\n"
@@ -90,7 +92,9 @@ constexpr char kUsage[] =
     "  --no-beam    vox traces without beam start distances\n"
     "  --ab-beam    time vox with and without beam start distances, alternating with NanoVDB\n"
     "  --beam-block pixels per side of a beam block (default 8)\n"
-    "  --ab-beam-block N  with --ab-beam: the other vox has beam blocks of N, not no beam\n";
+    "  --ab-beam-block N  with --ab-beam: the other vox has beam blocks of N, not no beam\n"
+    "  --lod F      vox's level of detail, as vox-render's (default: 1 when the store has a\n"
+    "               pyramid, else 0); --lod 0: the exact frame, for exact comparisons\n";
 
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -209,6 +213,7 @@ int main(int argc, char** argv) {
   int rounds = 7, threads = 2, tile = 64, width = 1024, height = 1024;
   bool clip = true, ab_clip = false, beam = true, ab_beam = false;
   int beam_block = 8, ab_beam_block = 0;
+  std::optional<double> lod;  // unset: vox-render's default (OpenRenderStores)
   vox::FlagReader flags(argc, argv);
   auto usage = [](const std::string& error) {
     if (!error.empty()) fprintf(stderr, "vox-peer-bench: %s\n", error.c_str());
@@ -244,7 +249,7 @@ int main(int argc, char** argv) {
     }
     if (a != "--store" && a != "--cam" && a != "--size" && a != "--rounds" && a != "--threads" &&
         a != "--tile-size" && a != "--grid" && a != "--beam-block" &&
-        a != "--ab-beam-block")
+        a != "--ab-beam-block" && a != "--lod")
       return usage("unknown flag " + a);
     const std::optional<std::string> v = flags.Value();
     if (!v) return usage(a + " needs a value");
@@ -266,6 +271,10 @@ int main(int argc, char** argv) {
       ab_beam = ok;
     } else if (a == "--tile-size") {
       ok = vox::ParseInt(*v, vox::kMinTileSize, vox::kMaxTileSize, &tile);
+    } else if (a == "--lod") {
+      auto f = vox::ParseLodFactor("--lod", *v);
+      if (!f.ok()) return usage(f.status().message());
+      lod = *f;
     } else {
       const size_t x = v->find('x');
       ok = x != std::string::npos &&
@@ -342,8 +351,9 @@ int main(int argc, char** argv) {
   clock.Lap();
   vox::OpenOptions oo;
   oo.cache_bytes = size_t(4) << 30;
-  auto store = vox::Store::Open(store_path, oo);
-  if (!store.ok()) return Fail(store.status().ToString());
+  auto stores = vox::OpenRenderStores(store_path, lod, oo);
+  if (!stores.ok()) return Fail(stores.status().ToString());
+  vox::Store* store = stores->base.get();
   out["store"] = store_path;
   out["store_open_seconds"] = clock.Lap();
 
@@ -354,7 +364,7 @@ int main(int argc, char** argv) {
     cam = *c;
   } else {
     glm::dvec3 lo, hi;
-    vox::WorldBounds((*store)->meta(), &lo, &hi);
+    vox::WorldBounds(store->meta(), &lo, &hi);
     cam = vox::DefaultCamera(lo, hi, width, height);
   }
   out["camera"] = nlohmann::json::parse(cam.ToJson());
@@ -364,7 +374,10 @@ int main(int argc, char** argv) {
   ro.clip_to_occupied = clip;
   ro.beam = beam;
   ro.beam_block = beam_block;
-  auto renderer = vox::Renderer::Create(store->get(), cam, scene, ro);
+  ro.lod = stores->lod;
+  for (vox::Store* level : stores->levels) ro.lod_levels.push_back(level);
+  out["lod"] = stores->lod;
+  auto renderer = vox::Renderer::Create(store, cam, scene, ro);
   if (!renderer.ok()) return Fail(renderer.status().ToString());
   if (!(*renderer)->passes().ToString().starts_with("primary") || (*renderer)->passes().shadows)
     return Fail("expected a level set rendered with primary rays only, got " +
@@ -389,7 +402,7 @@ int main(int argc, char** argv) {
       po.beam = true;
       po.beam_block = ab_beam_block;
     }
-    auto p = vox::Renderer::Create(store->get(), cam, scene, po);
+    auto p = vox::Renderer::Create(store, cam, scene, po);
     if (!p.ok()) return Fail(p.status().ToString());
     plain = std::move(p).value();
   }
@@ -491,7 +504,7 @@ int main(int argc, char** argv) {
     fprintf(stderr, "vox with and without the beam: %llu pixels differ\n",
             (unsigned long long)ab_differ);
   }
-  const double voxel = (*store)->meta().voxel_size;
+  const double voxel = store->meta().voxel_size;
   uint64_t vox_hits = 0, nano_hits = 0, both = 0, ring = 0, off_ring = 0;
   std::vector<double> dz;
   auto near = [](const Image& img, int x, int y, uint8_t want) {

@@ -18,6 +18,8 @@
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "render/frame.h"
+#include "render/job.h"
+#include "render/lod.h"
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "storage/store.h"
@@ -25,13 +27,16 @@
 
 int main(int argc, char** argv) {
   std::string store, cam_path, scene_path, split, exr;
+  std::optional<double> lod;  // unset: vox-render's default (OpenRenderStores)
   int runs = 5, threads = 2, tile_size = 64;
   size_t cache_mb = 2048;
   vox::FlagReader flags(argc, argv);
   auto usage = [] {
     fprintf(stderr,
             "usage: vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N] "
-            "[--threads N] [--split S] [--exr out.exr] [--cache-mb M] [--tile-size T]\n");
+            "[--threads N] [--split S] [--exr out.exr] [--cache-mb M] [--tile-size T] [--lod F]\n"
+            "  --lod F: as vox-render's (default: 1 when the store has a pyramid, else 0;\n"
+            "           --lod 0 is the exact frame, for comparisons with peers)\n");
     return 2;
   };
   while (flags.Next()) {
@@ -42,7 +47,7 @@ int main(int argc, char** argv) {
       continue;
     }
     if (a != "--cam" && a != "--scene" && a != "--split" && a != "--exr" && a != "--runs" &&
-        a != "--threads" && a != "--tile-size" && a != "--cache-mb")
+        a != "--threads" && a != "--tile-size" && a != "--cache-mb" && a != "--lod")
       return usage();
     const std::optional<std::string> v = flags.Value();
     if (!v) {
@@ -59,6 +64,14 @@ int main(int argc, char** argv) {
       split = *v;
     else if (a == "--exr")
       exr = *v;
+    else if (a == "--lod") {
+      auto f = vox::ParseLodFactor("--lod", *v);
+      if (!f.ok()) {
+        fprintf(stderr, "vox-render-bench: %s\n", f.status().ToString().c_str());
+        return 2;
+      }
+      lod = *f;
+    }
     else if (a == "--runs")
       ok = vox::ParseInt(*v, -1000000, 1000000, &runs);
     else if (a == "--threads")
@@ -84,8 +97,9 @@ int main(int argc, char** argv) {
   };
   vox::OpenOptions oo;
   oo.cache_bytes = cache_mb << 20;
-  auto vol = vox::Store::Open(store, oo);
-  if (!vol.ok()) return fail(vol.status());
+  auto stores = vox::OpenRenderStores(store, lod, oo);
+  if (!stores.ok()) return fail(stores.status());
+  vox::Store* vol = stores->base.get();
   auto cam = vox::LoadCamera(cam_path);
   if (!cam.ok()) return fail(cam.status());
   vox::Scene scene;
@@ -95,12 +109,14 @@ int main(int argc, char** argv) {
     scene = *s;
   }
   vox::RenderOptions ro;
+  ro.lod = stores->lod;
+  for (vox::Store* level : stores->levels) ro.lod_levels.push_back(level);
   if (!split.empty()) {
-    auto n1 = vox::ParseSplit(split, (*vol)->meta().levels);
+    auto n1 = vox::ParseSplit(split, vol->meta().levels);
     if (!n1.ok()) return fail(n1.status());
     ro.n1 = *n1;
   }
-  auto renderer = vox::Renderer::Create(vol->get(), *cam, scene, ro);
+  auto renderer = vox::Renderer::Create(vol, *cam, scene, ro);
   if (!renderer.ok()) return fail(renderer.status());
   auto cpu_now = [] {
     rusage ru;
@@ -142,6 +158,8 @@ int main(int argc, char** argv) {
   j["tile_size"] = tile_size;
   j["split"] = (*renderer)->SplitString();
   j["passes"] = (*renderer)->passes().ToString();
+  j["lod"] = stores->lod;
+  j["lod_default"] = stores->lod_default;
   j["write_exr"] = !exr.empty();
   j["cold_seconds"] = secs[0];
   j["warm_seconds"] = warm;

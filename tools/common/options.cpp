@@ -85,7 +85,8 @@ Status CheckIngestCommand(const IngestCommand& c) {
 
 FlagArity RenderFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch", "--float",
-                   "--read-windows", "--no-read-windows", "--beam", "--no-beam"}))
+                   "--read-windows", "--no-read-windows", "--beam", "--no-beam",
+                   "--no-silhouette-aa"}))
     return FlagArity::kSwitch;
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
@@ -107,6 +108,8 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->beam = a == "--beam";
   } else if (a == "--lod") {
     VOX_ASSIGN_OR_RETURN(o->lod, ParseLodFactor("--lod", v));
+  } else if (a == "--no-silhouette-aa") {
+    o->antialias = false;
   } else if (a == "--float") {
     o->layers.float_color = true;
   } else if (a == "--compression") {
