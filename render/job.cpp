@@ -34,7 +34,7 @@ nlohmann::json LodStatsJson(const Renderer& r, const FrameStats& st,
   j["factor"] = r.lod()->factor();
   j["levels"] = r.lod()->max_level();
   j["exact_rays"] = st.counters.lod.exact_rays;
-  j["antialias"] = r.antialias();
+  j["silhouette_grid"] = r.silhouette_grid();
   j["refined_pixels"] = st.counters.lod.refined_pixels;
   j["refine_rays"] = st.counters.lod.refine_rays;
   j["border_rays"] = st.counters.lod.border_rays;
@@ -107,6 +107,9 @@ Status CheckJobOptions(const RenderJobOptions& options) {
   if (options.lod && !(*options.lod >= 0 && std::isfinite(*options.lod)))
     return InvalidArgumentError("--lod " + std::to_string(*options.lod) +
                                 ": must be finite and >= 0 (0: exact)");
+  if (options.silhouette_grid < 0 || options.silhouette_grid > kMaxSilhouetteGrid)
+    return InvalidArgumentError("--silhouette-aa " + std::to_string(options.silhouette_grid) +
+                                ": must be 0 (off) or 1.." + std::to_string(kMaxSilhouetteGrid));
   if (options.single_step && !options.split.empty())
     return InvalidArgumentError("--split and --single-step both choose the split; give one");
   return OkStatus();
@@ -147,7 +150,7 @@ int IoThreadsFor(const RenderJobOptions& options, const ProcessBudget& process) 
 // and the buffers. With LOD, the levels finer than any ray of this camera can
 // stop at get no more than the minimum cache (a full view of a huge volume
 // uses none of the base's bricks), unless the scene refracts (refraction is
-// exact); silhouette antialiasing stops kRefineGrid times finer.
+// exact); silhouette antialiasing stops G times finer.
 StatusOr<MemoryBudget> JobBudget(const RenderJobOptions& options, const RenderStores& stores,
                                  const Camera& camera, const Scene& scene,
                                  const ProcessBudget& process, int threads, int io_threads) {
@@ -172,7 +175,8 @@ StatusOr<MemoryBudget> JobBudget(const RenderJobOptions& options, const RenderSt
     WorldBounds(stores.base->meta(), &lo, &hi);
     const Cone cone = PrimaryConeOf(camera, stores.base->meta().voxel_size);
     first_level = tracer.FirstLevelSeen(camera, cone, lo, hi);
-    if (options.antialias) first_level = std::max(0, first_level - std::ilogb(kRefineGrid));
+    if (options.silhouette_grid > 0)
+      first_level = std::max(0, first_level - std::ilogb(options.silhouette_grid));
   }
   return BudgetStores(stores.base.get(), stores.levels, process.bytes, inputs, first_level);
 }
@@ -196,7 +200,7 @@ StatusOr<RenderOptions> JobRenderOptions(const RenderJobOptions& options, const 
     render.read_ahead = [store](std::span<const uint32_t> ids) { store->Prefetch(ids); };
   }
   render.lod = stores.lod;
-  render.antialias = options.antialias;
+  render.silhouette_grid = options.silhouette_grid;
   for (Store* level : stores.levels) render.lod_levels.push_back(level);
   return render;
 }
@@ -209,8 +213,10 @@ std::string LodSetting(const RenderStores& stores, const Renderer& renderer) {
     return stores.lod_default ? "0 (exact: the store has no pyramid)" : "0 (exact)";
   char factor[32];
   snprintf(factor, sizeof factor, "%g", stores.lod);
+  const int g = renderer.silhouette_grid();
   return std::string(factor) + (stores.lod_default ? " (default)" : "") +
-         (renderer.antialias() ? ", antialiased silhouettes" : "");
+         (g > 0 ? ", silhouettes from " + std::to_string(g) + "x" + std::to_string(g) + " rays"
+                : "");
 }
 
 FrameOptions JobFrameOptions(const RenderJobOptions& options, const RenderStores& stores,

@@ -19,6 +19,7 @@
 
 #include "core/status.h"
 #include "render/exr.h"
+#include "render/lod.h"
 #include "render/tiles.h"
 #include "storage/lod.h"
 #include "storage/store.h"
@@ -61,9 +62,9 @@ struct RenderJobOptions {
   // the exact frame. Unset: kDefaultLodFactor when the store has a pyramid,
   // else exact (the setting in effect goes into --stats and the EXR header).
   std::optional<double> lod;
-  // With LOD: antialiased coarse silhouettes (RenderOptions::antialias);
-  // --no-silhouette-aa: off.
-  bool antialias = true;
+  // With LOD: coarse silhouettes antialiased from G x G sub-pixel rays
+  // (RenderOptions::silhouette_grid); --silhouette-aa G, 0: off.
+  int silhouette_grid = kDefaultSilhouetteGrid;
   PartSpec part;
   ImageLayers layers;  // layers.float_color: --float
   std::optional<ExrCompression> compression;  // --compression; default: FrameOptions'

@@ -62,9 +62,11 @@ inline constexpr double kDefaultLodFactor = 1.0;
 
 // Silhouette antialiasing of a LOD frame (Renderer, docs/lod.md): a pixel
 // whose primary ray stops at a coarse cell next to a pixel whose ray misses
-// is shaded again with kRefineGrid^2 sub-pixel rays, each carrying a cone
-// kRefineGrid times narrower; its alpha is the fraction of them that hit.
-inline constexpr int kRefineGrid = 4;
+// is shaded again from G x G sub-pixel rays, each carrying a cone G times
+// narrower; its alpha is the fraction of them that hit. The default G and
+// its limits (--silhouette-aa G; 0: off).
+inline constexpr int kDefaultSilhouetteGrid = 2;
+inline constexpr int kMaxSilhouetteGrid = 8;
 
 // Counts of LOD stops (first hits) by level, and of rays traced exactly.
 struct LodCounters {

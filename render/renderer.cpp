@@ -205,11 +205,13 @@ void Renderer::ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* out,
   out->color = ShadeSurface(gr, wr.dir, h, a, 0, cx, &out->normal, lod ? &lr : nullptr);
 }
 
-int Renderer::PrimaryStopLevel(const WorldRay& wr, const Cone& cone, TraceContext& cx) const {
+int Renderer::PrimaryStopLevel(const WorldRay& wr, const Cone& cone, TraceContext& cx,
+                               double* t) const {
   const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
   Hit h;
   int level = 0;
   if (!FindHitLod(gr, cone, /*skip_start_run=*/false, cx, &h, &level, nullptr)) return -1;
+  if (t != nullptr) *t = h.t;
   return level;
 }
 

@@ -129,11 +129,11 @@ struct RenderOptions {
   bool beam = true;
   int beam_block = 8;
   // With LOD: pixels at a coarse silhouette (a coarse stop next to a miss)
-  // are shaded again from kRefineGrid^2 sub-pixel rays with cones as much
-  // narrower (render/lod.h), so their alpha is the fraction covered instead
-  // of a whole dilated cell. Surfaces only: fog already integrates the
-  // cells' optical depth.
-  bool antialias = true;
+  // are shaded again from silhouette_grid^2 sub-pixel rays with cones as
+  // many times narrower (render/lod.h), so their alpha is the fraction
+  // covered instead of a whole dilated cell; 0: off. Surfaces only: fog
+  // already integrates the cells' optical depth.
+  int silhouette_grid = kDefaultSilhouetteGrid;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to
@@ -183,9 +183,10 @@ class Renderer {
   // --lod: the pyramid's tracer (nullptr when LOD is off), and the cone of
   // the primary ray through the image centre at ray parameter t.
   const LodTracer* lod() const { return lod_ ? &*lod_ : nullptr; }
-  // Whether coarse silhouettes are antialiased (RenderOptions::antialias,
-  // with LOD, on surfaces).
-  bool antialias() const { return lod_.has_value() && options_.antialias && !fog_; }
+  // Whether coarse silhouettes are antialiased (RenderOptions::
+  // silhouette_grid, with LOD, on surfaces), and from how many rays a side.
+  bool antialias() const { return lod_.has_value() && options_.silhouette_grid > 0 && !fog_; }
+  int silhouette_grid() const { return antialias() ? options_.silhouette_grid : 0; }
   Cone PrimaryCone() const { return primary_cone_; }
   int n2() const { return tracer_.n2(); }
   std::string SplitString() const;
@@ -219,8 +220,9 @@ class Renderer {
   void ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* s,
                   const StartPlane* start = nullptr, const Cone* cone = nullptr) const;
   // The LOD level of the first stop of the primary ray `wr` with `cone`
-  // (-1: a miss), without shading.
-  int PrimaryStopLevel(const WorldRay& wr, const Cone& cone, TraceContext& cx) const;
+  // (-1: a miss), without shading; *t (optional) its ray parameter.
+  int PrimaryStopLevel(const WorldRay& wr, const Cone& cone, TraceContext& cx,
+                       double* t = nullptr) const;
 
   // tile_render.cpp: the tile loop.
   // The beam StartPlane of each beam block of `rect`, row-major.

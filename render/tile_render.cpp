@@ -1,7 +1,7 @@
 // The Renderer's tile loop: the tile's primary rays a row at a time, beam
 // blocks answered without a walk, deferred passes for pixels whose bricks
 // are still being read, and the antialiasing of coarse silhouettes
-// (RenderOptions::antialias).
+// (RenderOptions::silhouette_grid).
 #include <algorithm>
 #include <limits>
 
@@ -311,7 +311,8 @@ Status Renderer::RefineSilhouettes(const TileRect& rect, const std::vector<int8_
         if ((dx != 0 || dy != 0) && level_at(px + dx, py + dy) == kMissLevel) return true;
     return false;
   };
-  const Cone cone{primary_cone_.w0 / kRefineGrid, primary_cone_.spread / kRefineGrid};
+  const int grid = options_.silhouette_grid;
+  const Cone cone{primary_cone_.w0 / grid, primary_cone_.spread / grid};
   for (int py = 0; py < rect.h; ++py)
     for (int px = 0; px < rect.w; ++px) {
       if (!silhouette(px, py)) {
@@ -319,25 +320,22 @@ Status Renderer::RefineSilhouettes(const TileRect& rect, const std::vector<int8_
         continue;
       }
       PixelValue v;
-      v.weight = 1.0 / (kRefineGrid * kRefineGrid);
-      for (int j = 0; j < kRefineGrid; ++j)
-        for (int i = 0; i < kRefineGrid; ++i) {
+      v.weight = 1.0 / (grid * grid);
+      for (int j = 0; j < grid; ++j)
+        for (int i = 0; i < grid; ++i) {
           Sample s;
-          ShadePixel(camera_.PixelRay(rect.x0 + px + (i + 0.5) / kRefineGrid,
-                                      rect.y0 + py + (j + 0.5) / kRefineGrid),
+          ShadePixel(camera_.PixelRay(rect.x0 + px + (i + 0.5) / grid,
+                                      rect.y0 + py + (j + 0.5) / grid),
                      cx, &s, nullptr, &cone);
           if (cx.failed()) return cx.error;
           v.Add(s);
         }
       ++cx.c->lod.refined_pixels;
-      cx.c->lod.refine_rays += uint64_t(kRefineGrid * kRefineGrid);
-      const bool was_hit = levels[size_t(py) * rect.w + px] != kMissLevel;
-      if (v.any_hit != was_hit) {
-        if (v.any_hit) ++cx.c->hit_pixels;
-        else --cx.c->hit_pixels;
-      }
+      cx.c->lod.refine_rays += uint64_t(grid * grid);
+      if (!v.any_hit) --cx.c->hit_pixels;  // the pixel's own stop was a hit
       WritePixel(v, px, py, buf);
     }
   return OkStatus();
 }
+
 }  // namespace vox

@@ -73,7 +73,7 @@ class LodRender : public ::testing::Test {
   StatusOr<std::unique_ptr<Renderer>> Make(const Camera& cam, double lod) {
     RenderOptions ro;
     ro.lod = lod;
-    ro.antialias = false;  // the stops themselves (lod_default_test: antialiasing)
+    ro.silhouette_grid = 0;  // the stops themselves (lod_default_test: antialiasing)
     if (lod > 0) ro.lod_levels = levels_;
     return Renderer::Create(base_.get(), cam, Scene{}, ro);
   }

@@ -11,8 +11,9 @@ background, with the default light, in four modes:
 
   reference  --lod 0 with 16 samples a pixel (the exact frame, supersampled)
   exact      --lod 0, one sample a pixel (the paper's frame)
-  default    no --lod flag (level of detail, antialiased silhouettes)
-  whole      --no-silhouette-aa (level of detail, coarse silhouettes whole cells)
+  default    no --lod flag (level of detail, silhouettes from 2x2 sub-pixel rays)
+  aa4        --silhouette-aa 4 (silhouettes from 4x4 sub-pixel rays)
+  whole      --silhouette-aa 0 (level of detail, coarse silhouettes whole cells)
 
 and compares each with the reference (build/tools/bench/vox-lod-compare): RMSE
 of RGB and of alpha, and silhouette pixels wrong (alpha off by more than 1/2).
@@ -37,7 +38,8 @@ CAMERAS = {
 MODES = {
     "exact": ["--lod", "0"],
     "default": [],
-    "whole": ["--no-silhouette-aa"],
+    "aa4": ["--silhouette-aa", "4"],
+    "whole": ["--silhouette-aa", "0"],
 }
 
 

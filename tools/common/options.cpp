@@ -85,12 +85,11 @@ Status CheckIngestCommand(const IngestCommand& c) {
 
 FlagArity RenderFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch", "--float",
-                   "--read-windows", "--no-read-windows", "--beam", "--no-beam",
-                   "--no-silhouette-aa"}))
+                   "--read-windows", "--no-read-windows", "--beam", "--no-beam"}))
     return FlagArity::kSwitch;
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
-                   "--io-threads", "--lod", "--compression"}))
+                   "--io-threads", "--lod", "--silhouette-aa", "--compression"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -108,8 +107,10 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->beam = a == "--beam";
   } else if (a == "--lod") {
     VOX_ASSIGN_OR_RETURN(o->lod, ParseLodFactor("--lod", v));
-  } else if (a == "--no-silhouette-aa") {
-    o->antialias = false;
+  } else if (a == "--silhouette-aa") {
+    if (!ParseInt(v, 0, kMaxSilhouetteGrid, &o->silhouette_grid))
+      return InvalidArgumentError("--silhouette-aa '" + v + "': expected 0 (off) or 1.." +
+                                  std::to_string(kMaxSilhouetteGrid));
   } else if (a == "--float") {
     o->layers.float_color = true;
   } else if (a == "--compression") {

@@ -19,7 +19,7 @@ const char kUsage[] =
     "usage: vox-render STORE_DIR [--cam cam.json] [--scene scene.json] [-o out.exr]\n"
     "                  [--preview out.png] [--split N1+N2|N1] [--single-step] [--memory-mb M]\n"
     "                  [--cache-mb M] [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
-    "                  [--layers normal,voxel] [--size WxH] [--lod F] [--no-silhouette-aa] [--float]\n"
+    "                  [--layers normal,voxel] [--size WxH] [--lod F] [--silhouette-aa G] [--float]\n"
     "                  [--compression C]\n"
     "  --cam        camera JSON (world space of the source VDB); without it a default\n"
     "               camera frames the whole volume (--size sets its image size, default "
@@ -57,9 +57,9 @@ const char kUsage[] =
     "               seen whole costs what its image costs; wherever a voxel covers a pixel\n"
     "               the frame is the exact one, bit for bit), else 0. --lod 0: the paper's\n"
     "               exact frame everywhere. See docs/lod.md\n"
-    "  --no-silhouette-aa  with level of detail, keep coarse silhouettes whole cells (by\n"
-    "               default a coarse stop next to a miss is shaded again from 4x4 sub-pixel\n"
-    "               rays, so its alpha is the covered fraction)\n"
+    "  --silhouette-aa G  with level of detail, a coarse stop next to a miss is shaded again\n"
+    "               from GxG sub-pixel rays with cones G times narrower, so its alpha is the\n"
+    "               covered fraction (default 2; 0: coarse silhouettes stay whole cells)\n"
     "  --stats      write counters and timings as JSON\n"
     "  --quiet      no progress output\n";
 
