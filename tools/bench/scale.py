@@ -797,8 +797,11 @@ class Bench:
         if what == "read":
             v = [float(r["read_bytes"] if r["read_bytes"] not in ("", None) else r["inblock_bytes"]) / MiB
                  for r in done if (r["read_bytes"] or r["inblock_bytes"]) not in ("", None)]
+        elif what == "bricks":  # rows of earlier versions have only bricks_paged_in
+            v = [float(r["bricks"] or r["bricks_paged_in"]) for r in done
+                 if (r["bricks"] or r["bricks_paged_in"]) not in ("", None)]
         else:
-            field = {"wall": "wall_s", "render": "render_s", "bricks": "bricks"}[what]
+            field = {"wall": "wall_s", "render": "render_s"}[what]
             v = [float(r[field]) for r in done if r[field] not in ("", None)]
         return statistics.median(v) if v else None
 
@@ -822,7 +825,7 @@ class Bench:
         modes = [m for m in MODES if any(r["mode"] == m for r in vox)]
         limtext = (f"in a memory cgroup of {a.limit_mib} MiB (`--limit-mib`), whatever the grid"
                    if a.limit_mib else "in a memory cgroup without a limit")
-        L.append(f"Every frame {limtext}, 1024x1024 at the full view and at the close-up, in each "
+        L.append(f"Every frame {limtext}, {a.size[0]}x{a.size[1]} at the full view and at the close-up, in each "
                  "mode (**default**: no `--lod` flag; **exact**: `--lod 0`). **cold s**: the whole "
                  "process's wall time after `sync; echo 3 > /proc/sys/vm/drop_caches`; **warm s**: the "
                  "same command again; **bricks**: bricks paged in by the cold frame (every level of "
@@ -865,6 +868,11 @@ class Bench:
                                  cell(shape, n, mode, cam, "cold", "read")]
                 L.append("| " + " | ".join(line) + " |")
             L.append("")
+            missing = [n for n in a.grids if not any(r["shape"] == shape and int(r["grid"]) == n
+                                                     for r in vox)]
+            if missing:
+                L.append(f"{shape}: not measured (yet): " + ", ".join(f"{n}³" for n in missing)
+                         + " (no store, or not run).\n")
 
         # The goals, as ratios of cold full views.
         def ratio(shape, num, den, what, mode_n="default", mode_d="default"):
