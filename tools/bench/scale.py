@@ -4,27 +4,38 @@
 Usage (from the repository root; tools/bench/scale.sh wraps this):
 
   python3 tools/bench/scale.py [--build build] [--work /tmp/vox-scale]
-      [--grids 1024,2048,4096] [--limits 1/2,1/4,1/8] [--runs 3] [--threads 2]
-      [--size 1024x1024] [--store-8192 PATH] [--vdb N=PATH ...] [--timeout SECONDS]
+      [--grids 1024,2048,4096] [--shapes sphere,bumpy] [--modes default,exact]
+      [--limits 1/2,1/4,1/8 | --limit-mib 512] [--runs 3] [--threads 2]
+      [--size 1024x1024] [--store SHAPE:N=PATH ...] [--store-8192 PATH]
+      [--vdb N=PATH ...] [--timeout SECONDS]
       [--render-args "--flag value ..."] [--no-cold] [--fresh]
       [--out docs/scale.md]
   python3 tools/bench/scale.py --compare A.exr B.exr   # pixel check of two tiled EXRs
   python3 tools/bench/scale.py --report-only ...       # rewrite docs from the CSV only
 
-For each grid size N (8192 and 16384 are long runs: stores of tens of GB
-and hours of generation) it makes the store `vox-gen sphere WORK/sphereN.store
---size N` unless it exists (or --store-8192 names one), then renders a full
+The scale law (issue 25), in one command on existing stores:
+
+  nice -n 19 tools/bench/scale.sh --grids 4096,8192,16384,32768 --shapes sphere,bumpy \
+      --modes default,exact --limit-mib 512 --store sphere:4096=/data/sphere4096.store ...
+
+For each grid size N and shape (--shapes: sphere, bumpy; 8192 and up are long
+runs: stores of GBs and hours of generation) it makes the store `vox-gen SHAPE
+WORK/SHAPEN.store --size N` (with its level-of-detail pyramid) unless it exists
+or --store SHAPE:N=PATH names one (only read; a named store that is not there
+yet is skipped with a note, and a rerun picks it up), then renders a full
 view (camera at (0,0,3) looking at the origin, 40 degrees) and a close-up
 (camera at (0,0,1.05) looking at (0,0,0.9), 20 degrees: a patch of the unit
 sphere's surface) with one directional light without shadows and --threads,
-unlimited and in memory cgroups of each --limits fraction of the store's size
-on disk. Each (camera, limit) gets a cold frame (`sync; echo 3 >
+in each --modes (default: no --lod flag, so level of detail when the store has
+a pyramid; exact: --lod 0), unlimited and in memory cgroups of each --limits
+fraction of the store's size on disk, or only in one cgroup of --limit-mib MiB. Each (camera, limit) gets a cold frame (`sync; echo 3 >
 /proc/sys/vm/drop_caches` first; skipped, with a note, when not root) and a
 warm frame (the same command again), --runs times; the report shows medians.
 A run is killed after --timeout seconds (default: a limited run after 5 times
 the slowest unlimited run of its grid, camera and tool, at least 60 s: under a
 tight limit a process can thrash, re-reading its code and data for a long time
-before the OOM killer acts) and recorded as timed out; the same tool, grid,
+before the OOM killer acts; with --limit-mib, which runs no unlimited frame,
+after 30 min) and recorded as timed out; the same tool, grid,
 camera and phase are then not run again at that limit or tighter ones.
 
 Every run is one vox-render process in its own memory cgroup (v1: NAME under
@@ -37,19 +48,29 @@ memory and the page cache it brought in), failcnt, the OOM kill (SIGKILL with
 oom_kill or failcnt set), the child's ru_maxrss (which counts the forked
 Python before exec, about 15 MB) and ru_inblock * 512 (bytes
 it read from the block device, i.e. its /proc/PID/io read_bytes, from wait4),
-vox-render's --stats JSON (cache.bricks_paged_in, and when present
-cache.bytes_read / cache.process_read_bytes and a "memory" object), and whether
-its EXR's pixels are bit-identical to the unlimited run's (this script parses
-the tiled RLE or ZIP EXRs itself, see --compare).
+vox-render's --stats JSON (render_seconds; bricks: lod.bricks_paged_total
+when level of detail is on, else cache.bricks_paged_in; brick bytes:
+lod.brick_bytes_read_total, else io.brick_bytes_read; io.read_bytes; the
+"memory" object), whether its EXR's pixels are bit-identical to the first
+finished run of the same shape, grid, mode and camera (the unlimited one when
+there is one), and for close-ups whether they are bit-identical to the other
+mode's (this script parses the tiled RLE or ZIP EXRs itself, see --compare).
+
+The report has a section on the scale law: per shape, rows = grid, columns =
+mode x camera (cold s, warm s, bricks, MiB read) at the --limit-mib limit (else
+unlimited); the issue's ratios (default-mode full view cold time 16384/4096 <=
+1.5 and 32768/4096 <= 2, bytes read 32768/4096 <= 2, exact/default at 16384 >=
+8; from the smallest grid when 4096 is missing); whether the close-ups were
+identical across modes; the load average; and a log-log plot (REPORT-law.svg).
 
 Where --vdb N=PATH gives an OpenVDB file, vdb_render renders the same two
 views in the same cgroups (only that: no pixel check against vox).
 
 Results go to WORK/scale.csv, one row per run, written as each run ends;
 a rerun skips the runs already there for the same vox-render binary (keyed
-by its SHA-256), so an interrupted benchmark resumes, and a new build is
+by its SHA-256; a rebuilt binary starts afresh), so an interrupted benchmark resumes, and a new build is
 measured afresh. --fresh ignores earlier rows. The report (--out, default
-docs/scale.md, and the SVG plot beside it) is rewritten after every grid.
+docs/scale.md, and the SVG plots beside it) is rewritten after every grid.
 Standard library only.
 """
 
@@ -80,11 +101,15 @@ CAMERAS = {
 CAMERA_LABEL = {"full": "full view", "close": "close-up"}
 SCENE = {"lights": [{"type": "directional", "direction": [-0.3, -0.5, -1], "shadows": False}],
          "material": {"specular": 0}}
-FIELDS = ["bin", "tool", "grid", "camera", "limit", "limit_bytes", "phase", "run", "store_bytes",
+FIELDS = ["bin", "tool", "shape", "mode", "grid", "camera", "limit", "limit_bytes", "phase", "run", "store_bytes",
           "wall_s", "exit", "signal", "oom", "timeout", "peak_bytes", "failcnt", "maxrss_bytes",
           "inblock_bytes", "bricks_paged_in", "cache_misses", "stats_bytes_read",
           "stats_process_read_bytes", "render_s", "hit_pixels", "identical", "diff_pixels",
-          "memory", "cgroup", "loadavg", "when"]
+          "memory", "cgroup", "loadavg", "when",
+          "bricks", "brick_bytes", "read_bytes", "lod_setting", "refined_pixels",
+          "cross_mode", "cross_mode_pixels"]
+SHAPES = ("sphere", "bumpy")
+MODES = {"default": [], "exact": ["--lod", "0"]}  # vox-render flags of each mode
 MiB = 1 << 20
 
 
@@ -446,11 +471,36 @@ def frac_value(s):
     return int(a) / int(b)
 
 
+def limit_bytes_of(limit, store_bytes):
+    """Bytes of a limit label: 'none' (0), a fraction of the store ('1/4') or fixed ('512MiB')."""
+    if limit == "none":
+        return 0
+    if limit.endswith("MiB"):
+        return int(limit[:-3]) * MiB
+    return int(store_bytes * frac_value(limit))
+
+
+def wait_for(path, seconds=120):
+    """The lead's build may replace a binary under us: wait until it is back."""
+    t0 = time.monotonic()
+    while not os.access(path, os.X_OK):
+        if time.monotonic() - t0 > seconds:
+            sys.exit(f"scale: {path} not found or not executable for {seconds} s")
+        time.sleep(1)
+
+
 def loadavg():
     try:
         return open("/proc/loadavg").read().split()[0]
     except OSError:
         return ""
+
+
+def loadavg3():
+    try:
+        return ", ".join(open("/proc/loadavg").read().split()[:3])
+    except OSError:
+        return "?"
 
 
 def machine_notes(cg, is_root):
@@ -484,15 +534,36 @@ class Bench:
         self.gen = os.path.join(a.build, "tools/gen/vox-gen")
         for p in (self.render, self.gen):
             if not os.access(p, os.X_OK):
+                time.sleep(5)  # being relinked?
+            if not os.access(p, os.X_OK):
                 sys.exit(f"scale: {p} not found or not executable (build it: "
                          f"cmake --build {a.build} --target vox-render vox-gen)")
         os.makedirs(os.path.join(a.work, "out"), exist_ok=True)
-        self.bin = sha256(self.render)
+        for attempt in range(30):
+            try:
+                self.bin = sha256(self.render)
+                break
+            except OSError:
+                time.sleep(2)
+        else:
+            sys.exit(f"scale: cannot read {self.render}")
         self.csv = os.path.join(a.work, "scale.csv")
         self.rows = []
         if os.path.exists(self.csv) and not a.fresh:
             with open(self.csv, newline="") as f:
-                self.rows = list(csv.DictReader(f))
+                rd = csv.DictReader(f)
+                header = rd.fieldnames or []
+                self.rows = list(rd)
+            for r in self.rows:  # rows of earlier versions of this script: sphere, no --lod flag
+                for k in FIELDS:
+                    if r.get(k) is None:
+                        r[k] = {"shape": "sphere", "mode": "default" if r.get("tool") == "vox"
+                                else "-"}.get(k, "")
+            if header != FIELDS:  # rewrite with this version's columns, so appends line up
+                with open(self.csv, "w", newline="") as f:
+                    w = csv.DictWriter(f, fieldnames=FIELDS, extrasaction="ignore")
+                    w.writeheader()
+                    w.writerows(self.rows)
         elif os.path.exists(self.csv):
             os.replace(self.csv, self.csv + f".{int(time.time())}.old")
         self.is_root = os.geteuid() == 0
@@ -506,6 +577,8 @@ class Bench:
                               "peaks are ru_maxrss")
         help_text = subprocess.run([self.render, "--help"], capture_output=True, text=True)
         self.has_memory_flag = "--memory-mb" in (help_text.stdout + help_text.stderr)
+        if "exact" in a.modes and "--lod" not in help_text.stdout + help_text.stderr:
+            sys.exit(f"scale: {self.render} has no --lod flag, so no exact mode (--modes default)")
         self.vdb_render = None
         if a.vdb:
             for d in os.environ.get("PATH", "").split(":"):
@@ -515,7 +588,7 @@ class Bench:
             if not self.vdb_render:
                 self.notes.append("vdb_render not on PATH: its runs skipped")
         self.started = time.strftime("%Y-%m-%d %H:%M:%S %Z")
-        self.load_start = loadavg()
+        self.load_start = loadavg3()
         scene = os.path.join(a.work, "scene.json")
         with open(scene, "w") as f:
             json.dump(SCENE, f)
@@ -543,35 +616,46 @@ class Bench:
             w.writerow({k: row.get(k, "") for k in FIELDS})
         self.rows.append({k: str(row.get(k, "")) for k in FIELDS})
 
-    def store_for(self, n):
-        if n == 8192 and self.a.store_8192:
-            if not os.path.isfile(os.path.join(self.a.store_8192, "bricks.vxb")):
-                sys.exit(f"scale: --store-8192 {self.a.store_8192}: not a vox store (no bricks.vxb)")
-            return self.a.store_8192
-        store = os.path.join(self.a.work, f"sphere{n}.store")
+    def store_for(self, shape, n):
+        """The store of SHAPE at N^3: --store's, else WORK/SHAPEN.store (made by vox-gen, with
+        its pyramid). None when a given store is not there (yet): that grid is skipped."""
+        given = self.a.stores.get((shape, n))
+        if given:
+            if not os.path.isfile(os.path.join(given, "bricks.vxb")):
+                log(f"--store {shape}:{n}={given}: not a vox store (yet? no bricks.vxb): skipped")
+                self.notes.append(f"--store {shape}:{n}={given} was not a store when this ran: skipped")
+                return None
+            return given
+        store = os.path.join(self.a.work, f"{shape}{n}.store")
         if os.path.isfile(os.path.join(store, "bricks.vxb")):
             return store  # vox-gen renames a finished store into place
-        log(f"vox-gen sphere {store} --size {n}")
+        log(f"vox-gen {shape} {store} --size {n}")
         t0 = time.monotonic()
-        r = subprocess.run([self.gen, "sphere", store, "--size", str(n), "--no-lod", "--quiet", "--force"])
+        wait_for(self.gen)
+        r = subprocess.run([self.gen, shape, store, "--size", str(n), "--quiet", "--force"])
         if r.returncode != 0:
-            sys.exit(f"scale: vox-gen failed for --size {n} (exit {r.returncode})")
+            sys.exit(f"scale: vox-gen {shape} failed for --size {n} (exit {r.returncode})")
         log(f"  made in {time.monotonic() - t0:.1f} s")
         return store
 
-    def measure(self, tool, n, store, store_bytes, cam, limit, phase, run, ref):
-        key = {"bin": self.bin, "tool": tool, "grid": n, "camera": cam, "limit": limit,
-               "phase": phase, "run": run}
+    def ref_path(self, shape, n, mode, cam):
+        return os.path.join(self.a.work, "out", f"ref_{self.bin}_{shape}{n}_{mode}_{cam}.exr")
+
+    def measure(self, tool, shape, mode, n, store, store_bytes, cam, limit, phase, run):
+        key = {"bin": self.bin, "tool": tool, "shape": shape, "mode": mode, "grid": n,
+               "camera": cam, "limit": limit, "phase": phase, "run": run}
         if self.have(key):
             return
+        limit_bytes = limit_bytes_of(limit, store_bytes)
         if limit != "none" and any(
-                r["bin"] == self.bin and r["tool"] == tool and r["grid"] == str(n) and
+                r["bin"] == self.bin and r["tool"] == tool and r["shape"] == shape and
+                r["mode"] == mode and r["grid"] == str(n) and
                 r["camera"] == cam and r["phase"] == phase and
                 (r["timeout"] == "1" or r["oom"] == "1") and
-                r["limit"] != "none" and frac_value(r["limit"]) >= frac_value(limit) for r in self.rows):
+                r["limit"] != "none" and int(r["limit_bytes"]) >= limit_bytes for r in self.rows):
             return  # that limit or a looser one timed out or was OOM-killed: this would be too, slowly
-        limit_bytes = 0 if limit == "none" else int(store_bytes * frac_value(limit))
-        tag = f"{tool}_{n}_{cam}_{limit.replace('/', 'of')}_{phase}_{run}"
+        tag = f"{tool}_{shape}{n}_{mode}_{cam}_{limit.replace('/', 'of')}_{phase}_{run}"
+        ref = self.ref_path(shape, n, mode, cam)
         out = os.path.join(self.a.work, "out")
         exr = os.path.join(out, tag + ".exr")
         stats = os.path.join(out, tag + ".json")
@@ -581,13 +665,14 @@ class Bench:
         if tool == "vox":
             argv = [self.render, store, "--cam", self.cams[cam], "--scene", self.scene,
                     "--threads", str(self.a.threads), "--stats", stats, "-o", exr, "--quiet"]
-            argv += shlex.split(self.a.render_args)
+            argv += MODES[mode] + shlex.split(self.a.render_args)
         else:
             c = CAMERAS[cam]
             argv = [self.vdb_render, store, exr, "-translate", ",".join(map(str, c["position"])),
                     "-lookat", ",".join(map(str, c["look_at"])), "-up", "0,1,0",
                     "-fov", str(c["fov_deg"]), "-res", "%dx%d" % self.a.size,
                     "-cpus", str(self.a.threads), "-shader", "diffuse"]
+        wait_for(argv[0])
         if phase == "cold" and not drop_page_cache():
             log("cannot drop the page cache; cold run skipped")
             return
@@ -596,9 +681,12 @@ class Bench:
             # A limited run that takes far longer than the unlimited one is
             # thrashing (re-reading its code and data from disk); give up.
             base = [float(r["wall_s"]) for r in self.rows
-                    if r["bin"] == self.bin and r["tool"] == tool and r["grid"] == str(n)
+                    if r["bin"] == self.bin and r["tool"] == tool and r["shape"] == shape
+                    and r["mode"] == mode and r["grid"] == str(n)
                     and r["camera"] == cam and r["limit"] == "none" and r["exit"] == "0"]
-            timeout = max(60.0, 5 * max(base)) if base and limit != "none" else 7200.0
+            # Without an unlimited run (--limit-mib) there is nothing to compare with: 30 min.
+            timeout = (max(60.0, 5 * max(base)) if base and limit != "none" else
+                       1800.0 if self.a.limit_mib else 7200.0)
         log(f"{tag}: limit {limit_bytes // MiB if limit_bytes else 'none'} MiB ...")
         r = run_process(argv, self.cg if self.cg.version else None, limit_bytes,
                         os.path.join(out, tag + ".out"), os.path.join(out, tag + ".err"),
@@ -609,36 +697,56 @@ class Bench:
         if os.path.exists(stats):
             try:
                 s = json.load(open(stats))
-                cache = s.get("cache", {})
+                cache, io, lod = s.get("cache", {}), s.get("io", {}), s.get("lod", {})
                 row["bricks_paged_in"] = cache.get("bricks_paged_in", "")
                 row["cache_misses"] = cache.get("misses", "")
-                row["stats_bytes_read"] = cache.get("bytes_read", s.get("io", {}).get("bytes_read", ""))
+                row["stats_bytes_read"] = cache.get("bytes_read", io.get("bytes_read", ""))
                 row["stats_process_read_bytes"] = cache.get(
-                    "process_read_bytes", s.get("io", {}).get("process_read_bytes", ""))
+                    "process_read_bytes", io.get("process_read_bytes", ""))
                 row["render_s"] = s.get("timings", {}).get("render_seconds", "")
                 row["hit_pixels"] = s.get("image", {}).get("hit_pixels", "")
+                # Level of detail pages bricks of the pyramid too: its totals count every level.
+                row["bricks"] = lod.get("bricks_paged_total", cache.get("bricks_paged_in", ""))
+                row["brick_bytes"] = lod.get("brick_bytes_read_total", io.get("brick_bytes_read", ""))
+                row["read_bytes"] = io.get("read_bytes", "")
+                row["lod_setting"] = lod.get("setting", "")
+                row["refined_pixels"] = lod.get("refined_pixels", "")
                 if "memory" in s:
                     row["memory"] = json.dumps(s["memory"], separators=(",", ":"))
-            except (OSError, ValueError) as e:
+            except (OSError, ValueError, AttributeError) as e:
                 log(f"  {stats}: {e}")
         ok = row["exit"] == 0 and os.path.exists(exr)
         if ok and tool == "vox":
-            if limit == "none" and not os.path.exists(ref):
+            # The first finished run of a configuration is its reference (the unlimited one when
+            # there is one: limits run loosest first); the others are compared with it.
+            if not os.path.exists(ref):
                 os.replace(exr, ref)
                 row["identical"] = "ref"
-            elif os.path.exists(ref):
+                exr = ref
+            else:
                 try:
                     d = compare_exr(ref, exr)
                     row["identical"] = "yes" if d == 0 else "no"
                     row["diff_pixels"] = d
-                except (OSError, ValueError) as e:
+                except (OSError, ValueError, KeyError, zlib.error) as e:
                     row["identical"] = f"error: {e}"
-        if os.path.exists(exr):
+            # Close-ups: the default mode's frame against the exact one (the other mode's reference).
+            other = [m for m in MODES if m != mode]
+            oref = self.ref_path(shape, n, other[0], cam) if other else ""
+            if cam == "close" and os.path.exists(oref):
+                try:
+                    d = compare_exr(oref, exr)
+                    row["cross_mode"] = "yes" if d == 0 else "no"
+                    row["cross_mode_pixels"] = d
+                except (OSError, ValueError, KeyError, zlib.error) as e:
+                    row["cross_mode"] = f"error: {e}"
+        if os.path.exists(exr) and exr != ref:
             os.remove(exr)
         state = "ok" if ok else ("OOM-killed" if row["oom"] else
                                  "timeout" if row["timeout"] else f"exit {row['exit']} signal {row['signal']}")
         log(f"  {state}, {float(row['wall_s']):.2f} s, peak "
-            f"{int(row['peak_bytes'] or row['maxrss_bytes']) // MiB} MiB, {row.get('identical', '')}")
+            f"{int(row['peak_bytes'] or row['maxrss_bytes']) // MiB} MiB, {row.get('identical', '')}"
+            + (f", vs other mode {row['cross_mode']}" if row.get("cross_mode") else ""))
         self.append(row)
 
     def run(self):
@@ -646,26 +754,272 @@ class Bench:
         phases = ["cold", "warm"] if self.is_root and not a.no_cold else ["warm"]
         if a.no_cold:
             self.notes.append("--no-cold: cold frames not run")
-        limits = ["none"] + (a.limits if self.cg.version else [])
+        if a.limit_mib:
+            limits = [f"{a.limit_mib}MiB"] if self.cg.version else []
+        else:
+            limits = ["none"] + (a.limits if self.cg.version else [])
         for n in a.grids:
             if not a.report_only:
-                store = self.store_for(n)
-                store_bytes = dir_bytes(store)
-                vdb = a.vdb.get(n)
-                for cam in CAMERAS:
-                    ref = os.path.join(a.work, "out", f"ref_{self.bin}_{n}_{cam}.exr")
-                    for limit in limits:
-                        for run in range(a.runs):
-                            for phase in phases:
-                                self.measure("vox", n, store, store_bytes, cam, limit, phase, run, ref)
-                        if vdb and self.vdb_render:
-                            for run in range(a.runs):
-                                for phase in phases:
-                                    self.measure("vdb_render", n, vdb, store_bytes, cam, limit, phase,
-                                                 run, ref)
+                for shape in a.shapes:
+                    store = self.store_for(shape, n)
+                    if not store:
+                        continue
+                    store_bytes = dir_bytes(store)
+                    if "default" in a.modes and not os.path.isdir(os.path.join(store, "lod")):
+                        self.notes.append(f"{store} has no pyramid (lod/): its default mode is the exact frame")
+                    vdb = a.vdb.get(n) if shape == "sphere" else None
+                    for cam in CAMERAS:
+                        for limit in limits:
+                            for mode in a.modes:
+                                for run in range(a.runs):
+                                    for phase in phases:
+                                        self.measure("vox", shape, mode, n, store, store_bytes, cam,
+                                                     limit, phase, run)
+                            if vdb and self.vdb_render:
+                                for run in range(a.runs):
+                                    for phase in phases:
+                                        self.measure("vdb_render", shape, "-", n, vdb, store_bytes,
+                                                     cam, limit, phase, run)
                 if n != a.grids[-1]:
                     self.report()
         self.report()
+
+    # ------------------------------------------------------------ the scale law (issue 25)
+
+    def law_rows(self, rows):
+        lim = f"{self.a.limit_mib}MiB" if self.a.limit_mib else "none"
+        return lim, [r for r in rows if r["tool"] == "vox" and r["limit"] == lim]
+
+    @staticmethod
+    def law_value(sel, what):
+        """Median over the finished runs: wall s, render s, bricks or MiB read (None: none finished)."""
+        done = [r for r in sel if r["exit"] == "0"]
+        if what == "read":
+            v = [float(r["read_bytes"] if r["read_bytes"] not in ("", None) else r["inblock_bytes"]) / MiB
+                 for r in done if (r["read_bytes"] or r["inblock_bytes"]) not in ("", None)]
+        elif what == "bricks":  # rows of earlier versions have only bricks_paged_in
+            v = [float(r["bricks"] or r["bricks_paged_in"]) for r in done
+                 if (r["bricks"] or r["bricks_paged_in"]) not in ("", None)]
+        else:
+            field = {"wall": "wall_s", "render": "render_s"}[what]
+            v = [float(r[field]) for r in done if r[field] not in ("", None)]
+        return statistics.median(v) if v else None
+
+    @staticmethod
+    def law_failure(sel):
+        if not sel:
+            return "–"
+        bad = [r for r in sel if r["exit"] != "0"]
+        what = sorted({"OOM" if r["oom"] == "1" else "timeout" if r["timeout"] == "1" else
+                       f"exit {r['exit']}" if r["exit"] else f"signal {r['signal']}" for r in bad})
+        return ", ".join(what) or "–"
+
+    def law(self, rows, grids, svg):
+        a = self.a
+        lim, vox = self.law_rows(rows)
+        L = ["## The scale law (issue 25)\n"]
+        if not vox:
+            L.append(f"No vox runs at limit `{lim}` yet.\n")
+            return L
+        shapes = [s for s in SHAPES if any(r["shape"] == s for r in vox)]
+        modes = [m for m in MODES if any(r["mode"] == m for r in vox)]
+        limtext = (f"in a memory cgroup of {a.limit_mib} MiB (`--limit-mib`), whatever the grid"
+                   if a.limit_mib else "in a memory cgroup without a limit")
+        L.append(f"Every frame {limtext}, {a.size[0]}x{a.size[1]} at the full view and at the close-up, in each "
+                 "mode (**default**: no `--lod` flag; **exact**: `--lod 0`). **cold s**: the whole "
+                 "process's wall time after `sync; echo 3 > /proc/sys/vm/drop_caches`; **warm s**: the "
+                 "same command again; **bricks**: bricks paged in by the cold frame (every level of "
+                 "the pyramid: `--stats` lod.bricks_paged_total, else cache.bricks_paged_in); "
+                 "**MiB read**: what the cold process read from storage (`--stats` io.read_bytes). "
+                 f"Medians of the finished runs ({a.runs} per cell asked); a failed cell says how it ended.\n")
+        sel_of = {}
+        for r in vox:
+            sel_of.setdefault((r["shape"], int(r["grid"]), r["mode"], r["camera"], r["phase"]), []).append(r)
+
+        def sel(shape, n, mode, cam, phase):
+            return sel_of.get((shape, n, mode, cam, phase), [])
+
+        def cell(shape, n, mode, cam, phase, what):
+            s = sel(shape, n, mode, cam, phase)
+            v = self.law_value(s, what)
+            if v is None:
+                return self.law_failure(s)
+            return f"{v:.0f}" if what == "bricks" else f"{v:.1f}" if what == "read" else f"{v:.2f}"
+
+        for shape in shapes:
+            L.append(f"**{shape}**\n")
+            hdr = ["grid", "store MiB"]
+            for mode in modes:
+                for cam in CAMERAS:
+                    c = f"{mode}, {CAMERA_LABEL[cam]}"
+                    hdr += [f"{c}: cold s", "warm s", "bricks", "MiB read"]
+            L.append("| " + " | ".join(hdr) + " |")
+            L.append("|" + "---|" * len(hdr))
+            for n in grids:
+                sr = [r for r in vox if r["shape"] == shape and int(r["grid"]) == n]
+                if not sr:
+                    continue
+                line = [f"{n}³", f"{int(sr[0]['store_bytes']) / MiB:.0f}"]
+                for mode in modes:
+                    for cam in CAMERAS:
+                        line += [cell(shape, n, mode, cam, "cold", "wall"),
+                                 cell(shape, n, mode, cam, "warm", "wall"),
+                                 cell(shape, n, mode, cam, "cold", "bricks"),
+                                 cell(shape, n, mode, cam, "cold", "read")]
+                L.append("| " + " | ".join(line) + " |")
+            L.append("")
+            missing = [n for n in a.grids if not any(r["shape"] == shape and int(r["grid"]) == n
+                                                     for r in vox)]
+            if missing:
+                L.append(f"{shape}: not measured (yet): " + ", ".join(f"{n}³" for n in missing)
+                         + " (no store, or not run).\n")
+
+        # The issue's goals, as ratios of cold full views.
+        def ratio(shape, num, den, what, mode_n="default", mode_d="default"):
+            v1 = self.law_value(sel(shape, num, mode_n, "full", "cold"), what)
+            v0 = self.law_value(sel(shape, den, mode_d, "full", "cold"), what)
+            return (v1 / v0, v1, v0) if v1 and v0 else None
+
+        have = sorted({int(r["grid"]) for r in vox})
+        base = 4096 if 4096 in have else (have[0] if have else 4096)
+        unit = {"wall": "s", "render": "s", "read": "MiB", "bricks": ""}
+        goals = [(f"full view cold time, default: {base * 4}³ / {base}³", "≤ 1.5", 1.5, "le",
+                  lambda sh, w: ratio(sh, base * 4, base, w), ("wall", "render")),
+                 (f"full view cold time, default: {base * 8}³ / {base}³", "≤ 2", 2, "le",
+                  lambda sh, w: ratio(sh, base * 8, base, w), ("wall", "render")),
+                 (f"full view bytes read, default: {base * 8}³ / {base}³", "≤ 2", 2, "le",
+                  lambda sh, w: ratio(sh, base * 8, base, w), ("read",)),
+                 (f"full view cold time at {base * 4}³: exact / default", "≥ 8", 8, "ge",
+                  lambda sh, w: ratio(sh, base * 4, base * 4, w, "exact", "default"), ("wall", "render")),
+                 (f"full view bytes read at {base * 4}³: exact / default", "–", None, "",
+                  lambda sh, w: ratio(sh, base * 4, base * 4, w, "exact", "default"), ("read",)),
+                 (f"full view bricks at {base * 4}³: exact / default", "–", None, "",
+                  lambda sh, w: ratio(sh, base * 4, base * 4, w, "exact", "default"), ("bricks",))]
+        L.append("The issue's goals (cold full views; time: the whole process's wall time, "
+                 "render_seconds alone in brackets; the verdict is on wall time):\n")
+        L.append("| ratio | goal | " + " | ".join(shapes) + " |")
+        L.append("|---|---|" + "---|" * len(shapes))
+        for label, goal, g, how, fn, whats in goals:
+            cells = []
+            for shape in shapes:
+                r0 = fn(shape, whats[0])
+                if not r0:
+                    cells.append("not measured")
+                    continue
+                u = unit[whats[0]]
+                fmt = "{:.0f}" if whats[0] == "bricks" else "{:.1f}" if whats[0] == "read" else "{:.2f}"
+                c = f"**{r0[0]:.2f}** ({fmt.format(r0[1])} / {fmt.format(r0[2])}{(' ' + u) if u else ''})"
+                if len(whats) > 1:
+                    r1 = fn(shape, whats[1])
+                    c += f" [render {r1[0]:.2f}]" if r1 else ""
+                if g:
+                    c += ": met" if (r0[0] <= g if how == "le" else r0[0] >= g) else ": **not met**"
+                cells.append(c)
+            L.append(f"| {label} | {goal} | " + " | ".join(cells) + " |")
+        L.append("")
+        if base != 4096:
+            L.append(f"(4096³ not measured: the ratios are taken from {base}³, the smallest grid, "
+                     "with the same factors 4 and 8; the issue's goals are for 4096³.)\n")
+        # Close-ups: default mode against exact, bit for bit.
+        if len(modes) > 1:
+            L.append("Close-ups, default mode against exact, bit for bit (`scale.py --compare` of "
+                     "each run's EXR with the other mode's first frame):\n")
+            for shape in shapes:
+                parts = []
+                for n in grids:
+                    c = [r for r in vox if r["shape"] == shape and int(r["grid"]) == n
+                         and r["camera"] == "close" and r["cross_mode"]]
+                    if not c:
+                        continue
+                    if all(r["cross_mode"] == "yes" for r in c):
+                        parts.append(f"{n}³ identical ({len(c)}/{len(c)} runs)")
+                    else:
+                        worst = max((int(r["cross_mode_pixels"] or 0) for r in c), default=0)
+                        parts.append(f"{n}³ **differ** ({sum(r['cross_mode'] != 'yes' for r in c)}/{len(c)} "
+                                     f"runs, up to {worst} pixels)")
+                L.append(f"- {shape}: " + ("; ".join(parts) if parts else "not compared yet") + ".")
+            L.append("")
+        L.append(f"![cold time, bytes read and bricks against grid size, both modes]({os.path.basename(svg)})\n")
+        return L
+
+    def law_plot(self, rows, grids):
+        """2x3 log-log SVG: cold wall time, MiB read and bricks against grid size, per camera."""
+        _, vox = self.law_rows(rows)
+        W, H, pad = 330, 260, 52
+        colors = {"default": "#1f77b4", "exact": "#d62728"}
+        dashes = {"sphere": "", "bumpy": ' stroke-dasharray="6,3"'}
+        parts = []
+        whats = [("wall", "cold wall time (s)"), ("read", "cold MiB read"), ("bricks", "bricks paged (cold)")]
+        gx = [math.log2(n) for n in grids] or [10]
+        x0, x1 = min(gx) - 0.3, max(gx) + 0.3
+        for ci, cam in enumerate(CAMERAS):
+            for wi, (what, ylabel) in enumerate(whats):
+                ox, oy = wi * (W + 16) + 10, ci * (H + 26) + 40
+                series = {}
+                for shape in SHAPES:
+                    for mode in MODES:
+                        pts = []
+                        for n in grids:
+                            s = [r for r in vox if r["shape"] == shape and r["mode"] == mode and
+                                 int(r["grid"]) == n and r["camera"] == cam and r["phase"] == "cold"]
+                            v = self.law_value(s, what)
+                            if v and v > 0:
+                                pts.append((n, v))
+                        if pts:
+                            series[(shape, mode)] = pts
+                vals = [v for p in series.values() for _, v in p]
+                lo, hi = (min(vals), max(vals)) if vals else (0.1, 10)
+                lo, hi = 10 ** math.floor(math.log10(lo)), 10 ** math.ceil(math.log10(hi))
+                if hi <= lo:
+                    hi = lo * 10
+
+                def X(n):
+                    return ox + pad + (math.log2(n) - x0) / (x1 - x0) * (W - pad - 10)
+
+                def Y(v):
+                    return oy + H - 30 - (math.log10(v) - math.log10(lo)) / (math.log10(hi) - math.log10(lo)) * (H - 50)
+
+                parts.append(f'<rect x="{ox + pad}" y="{oy + 20}" width="{W - pad - 10}" height="{H - 50}" '
+                             'fill="none" stroke="#888"/>')
+                parts.append(f'<text x="{ox + W / 2 + 20}" y="{oy + 14}" text-anchor="middle" font-size="13">'
+                             f'{CAMERA_LABEL[cam]}: {ylabel}</text>')
+                e = math.log10(lo)
+                while e <= math.log10(hi) + 1e-9:
+                    y = Y(10 ** e)
+                    parts.append(f'<line x1="{ox + pad}" x2="{ox + W - 10}" y1="{y:.1f}" y2="{y:.1f}" stroke="#ddd"/>')
+                    parts.append(f'<text x="{ox + pad - 4}" y="{y + 4:.1f}" text-anchor="end" '
+                                 f'font-size="11">{10 ** e:g}</text>')
+                    e += 1
+                for n in grids:
+                    parts.append(f'<text x="{X(n):.1f}" y="{oy + H - 14}" text-anchor="middle" '
+                                 f'font-size="11">{n}³</text>')
+                for (shape, mode), pts in series.items():
+                    col = colors[mode]
+                    xy = [(X(n), Y(v)) for n, v in pts]
+                    if len(xy) > 1:
+                        parts.append(f'<polyline fill="none" stroke="{col}" stroke-width="1.8"{dashes[shape]} '
+                                     'points="' + " ".join(f"{x:.1f},{y:.1f}" for x, y in xy) + '"/>')
+                    for x, y in xy:
+                        if shape == "sphere":
+                            parts.append(f'<circle cx="{x:.1f}" cy="{y:.1f}" r="3" fill="{col}"/>')
+                        else:
+                            parts.append(f'<rect x="{x - 3:.1f}" y="{y - 3:.1f}" width="6" height="6" fill="{col}"/>')
+        ly = 2 * (H + 26) + 50
+        x = 20
+        for shape in SHAPES:
+            for mode in MODES:
+                label = f"{shape}, {mode}"
+                parts.append(f'<line x1="{x}" x2="{x + 24}" y1="{ly}" y2="{ly}" stroke="{colors[mode]}" '
+                             f'stroke-width="2"{dashes[shape]}/>')
+                parts.append(f'<text x="{x + 28}" y="{ly + 4}" font-size="12">{label}</text>')
+                x += 48 + 7 * len(label)
+        parts.append(f'<text x="20" y="{ly + 22}" font-size="12">log-log; medians of the finished '
+                     'cold runs; default: no --lod flag, exact: --lod 0</text>')
+        total_w, total_h = 3 * (W + 16) + 20, ly + 36
+        return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{total_w}" height="{total_h}" '
+                f'font-family="sans-serif">\n<rect width="100%" height="100%" fill="white"/>\n'
+                f'<text x="20" y="24" font-size="15">vox-render scale law: cold frames against grid size</text>\n'
+                + "\n".join(parts) + "\n</svg>\n")
 
     # ------------------------------------------------------------ the report
 
@@ -686,7 +1040,7 @@ class Bench:
         peak = f"{statistics.median(peaks) / MiB:.0f}"
         fails = [int(r["failcnt"]) for r in rows if r["failcnt"] not in ("", None)]
         peak += f" ({statistics.median(fails):.0f})" if fails else ""
-        paged = med("bricks_paged_in", 1, "{:.0f}")
+        paged = med("bricks" if any(r["bricks"] for r in done) else "bricks_paged_in", 1, "{:.0f}")
         reads = [float(r["inblock_bytes"]) for r in rows if r["inblock_bytes"] not in ("", None)]
         read = f"{statistics.median(reads) / MiB:.1f}" if reads else "–"
         ids = [r["identical"] for r in done]
@@ -732,8 +1086,10 @@ class Bench:
                 f"{statistics.median(loads):.1f}, over the runs") if loads else f"load {loadavg()}"
         L.append(f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory']}, Linux {m['kernel']}, "
                  f"memory cgroup {m['cgroup']}. **Shared and loaded**: other jobs build and test on "
-                 f"the same cores ({load}; each run's is in the CSV), so wall times are noisy and "
-                 "only their order of magnitude and the trends are meaningful.\n")
+                 f"the same cores ({load}; each run's is in the CSV; load average (1, 5, 15 min) "
+                 f"{self.load_start} when this invocation started, {loadavg3()} when this report "
+                 "was written), so wall times are noisy and only their order of magnitude and the "
+                 "trends are meaningful.\n")
         try:
             commit = subprocess.run(["git", "-C", os.path.dirname(os.path.abspath(__file__)),
                                      "rev-parse", "--short", "HEAD"], capture_output=True,
@@ -745,10 +1101,12 @@ class Bench:
                  f"defaults{(' plus `' + a.render_args + '`') if a.render_args else ''}, "
                  f"`--threads {a.threads}`, {a.size[0]}x{a.size[1]} pixels, one directional light "
                  f"without shadows. Medians of {a.runs} run(s) per cell.\n")
-        runs = sorted({int(r["run"]) for r in rows})
+        law_svg = os.path.splitext(out)[0] + "-law.svg"
+        L += self.law(rows, grids, law_svg)
+        L.append("## All runs\n")
         counts = {}
         for r in rows:
-            k = (r["grid"], r["tool"], r["camera"], r["limit"], r["phase"])
+            k = (r["grid"], r["shape"], r["mode"], r["tool"], r["camera"], r["limit"], r["phase"])
             counts[k] = counts.get(k, 0) + 1
         if counts and min(counts.values()) != max(counts.values()):
             L.append(f"Runs per cell: {min(counts.values())} to {max(counts.values())} (CSV).\n")
@@ -761,67 +1119,86 @@ class Bench:
                      "its paging; the bigger grids are the meaningful ones.\n")
         for note in self.notes:
             L.append(f"Note: {note}.\n")
-        L.append("Stores: `vox-gen sphere --size N` (the unit sphere shell, 15/16 of the grid "
-                 "across, band 3 voxels). Cameras, side by side in each row: **full view** from "
+        L.append("Stores: `vox-gen SHAPE --size N` (sphere: the unit sphere shell, 15/16 of the grid "
+                 "across, band 3 voxels; bumpy: that sphere displaced by multi-octave noise), with "
+                 "their level-of-detail pyramid unless `--store` named an existing store. Modes: "
+                 "**default**: vox-render without a `--lod` flag (level of detail with factor 1 "
+                 "when the store has a pyramid); **exact**: `--lod 0`. Cameras, side by side in each row: **full view** from "
                  "(0,0,3) at the origin, 40°; **close-up** from (0,0,1.05) at (0,0,0.9), 20° (a "
                  "patch of the surface: few bricks, so a frame should not need the whole store). "
-                 "Limits are fractions of the store's size on disk (sum of its files' sizes), "
+                 "Limits are fractions of the store's size on disk (sum of its files' sizes) or a "
+                 "fixed size (`--limit-mib`), "
                  "applied as a memory cgroup limit around the whole process; `none` runs in a "
                  "cgroup without a limit, so peaks are measured alike.\n")
         L.append("Columns per camera: **wall** s: the whole process (start, store open, render, "
                  "EXR write, exit; median of the runs that finished); **peak** MiB (failcnt): the cgroup's peak charge, anonymous "
                  "memory plus the page cache the process brought in (failcnt counts how often the "
                  "charge hit the limit, i.e. reclaim, not failure); **bricks**: bricks paged in "
-                 "(`--stats` cache.bricks_paged_in); **read** MiB: bytes the process read from the "
+                 "(`--stats` lod.bricks_paged_total with level of detail, every level counted, else cache.bricks_paged_in); **read** MiB: bytes the process read from the "
                  "disk, killed runs included (wait4 ru_inblock x 512, the same counter as /proc/PID/io read_bytes; near 0 "
-                 "when warm); **pixels**: the EXR against the unlimited run's, bit for bit per "
+                 "when warm); **pixels**: the EXR against the first finished run's of the same shape, grid, mode and camera (the unlimited one when there is one), bit for bit per "
                  "channel (`scale.py --compare`), or how the runs ended and when. Cold: `sync; echo 3 > "
                  "/proc/sys/vm/drop_caches` first. Warm: the same command again; page cache left by "
                  "an earlier run stays charged to that run's (removed) cgroup's parent, so a warm "
                  "limited run's peak is mostly anonymous memory.\n")
-        order = ["none"] + a.limits
+        order = ["none"] + ([f"{a.limit_mib}MiB"] if a.limit_mib else a.limits)
+        order += sorted({r["limit"] for r in rows} - set(order))
+        configs = [(sh, md) for sh in SHAPES for md in list(MODES) + ["-"]
+                   if any(r["shape"] == sh and r["mode"] == md for r in rows)]
+
+        def lim_label(limit, lb):
+            if limit == "none":
+                return "none"
+            return f"{lb / MiB:.0f} MiB" if limit.endswith("MiB") else f"{limit} ({lb / MiB:.0f} MiB)"
         # Summary: the tightest limit under which every run, cold and warm, finished.
-        L.append("Summary: the tightest limit under which every run (cold and warm) finished; "
-                 "`none` when only the unlimited runs did.\n")
-        L.append("| grid | tool | full view | close-up |")
-        L.append("|---|---|---|---|")
-        for n in grids:
-            for tool in ("vox", "vdb_render"):
-                cells = []
-                for cam in CAMERAS:
-                    best = "–"
-                    for limit in order:
-                        sel = [r for r in rows if int(r["grid"]) == n and r["tool"] == tool
-                               and r["camera"] == cam and r["limit"] == limit]
-                        if sel and all(r["exit"] == "0" for r in sel):
-                            lb = int(sel[0]["limit_bytes"])
-                            best = "none" if limit == "none" else f"{limit} ({lb / MiB:.0f} MiB)"
-                        elif limit != "none" or sel:
-                            break
-                    cells.append(best)
-                if any(r["tool"] == tool and int(r["grid"]) == n for r in rows):
-                    L.append(f"| {n} | {tool} | " + " | ".join(cells) + " |")
+        summary = len({r["limit"] for r in rows}) > 1
+        if summary:
+            L.append("Summary: the tightest limit under which every run (cold and warm) finished; "
+                     "`none` when only the unlimited runs did.\n")
+            L.append("| shape | grid | tool | mode | full view | close-up |")
+            L.append("|---|---|---|---|---|---|")
+        for shape, mode in configs if summary else []:
+            for n in grids:
+                for tool in ("vox", "vdb_render"):
+                    cr = [r for r in rows if int(r["grid"]) == n and r["tool"] == tool
+                          and r["shape"] == shape and r["mode"] == mode]
+                    if not cr:
+                        continue
+                    cells = []
+                    for cam in CAMERAS:
+                        best = "–"
+                        for limit in order:
+                            sel = [r for r in cr if r["camera"] == cam and r["limit"] == limit]
+                            if sel and all(r["exit"] == "0" for r in sel):
+                                best = lim_label(limit, int(sel[0]["limit_bytes"]))
+                            elif limit != "none" or sel:
+                                break
+                        cells.append(best)
+                    L.append(f"| {shape} | {n} | {tool} | {mode} | " + " | ".join(cells) + " |")
         L.append("")
-        hdr = ["grid", "store MiB", "tool", "limit", "phase"]
+        hdr = ["shape", "grid", "store MiB", "tool", "mode", "limit", "phase"]
         sub = ["wall s", "peak MiB (failcnt)", "bricks", "read MiB", "pixels"]
         L.append("| " + " | ".join(hdr + [f"full: {s}" for s in sub] + [f"close-up: {s}" for s in sub]) + " |")
         L.append("|" + "---|" * (len(hdr) + 2 * len(sub)))
-        for n in grids:
-            gr = [r for r in rows if int(r["grid"]) == n]
-            sb = int(gr[0]["store_bytes"]) / MiB
-            for tool in ("vox", "vdb_render"):
-                for limit in order:
-                    for phase in ("cold", "warm"):
-                        sel = [r for r in gr if r["tool"] == tool and r["limit"] == limit and r["phase"] == phase]
-                        if not sel:
-                            continue
-                        lb = int(sel[0]["limit_bytes"])
-                        lim = "none" if limit == "none" else f"{limit} ({lb / MiB:.0f} MiB)"
-                        cells = []
-                        for cam in CAMERAS:
-                            c = self.cells([r for r in sel if r["camera"] == cam])
-                            cells += c if c else ["–"] * len(sub)
-                        L.append("| " + " | ".join([str(n), f"{sb:.0f}", tool, lim, phase] + cells) + " |")
+        for shape, mode in configs:
+            for n in grids:
+                gr = [r for r in rows if int(r["grid"]) == n and r["shape"] == shape and r["mode"] == mode]
+                if not gr:
+                    continue
+                sb = int(gr[0]["store_bytes"]) / MiB
+                for tool in ("vox", "vdb_render"):
+                    for limit in order:
+                        for phase in ("cold", "warm"):
+                            sel = [r for r in gr if r["tool"] == tool and r["limit"] == limit and r["phase"] == phase]
+                            if not sel:
+                                continue
+                            lim = lim_label(limit, int(sel[0]["limit_bytes"]))
+                            cells = []
+                            for cam in CAMERAS:
+                                c = self.cells([r for r in sel if r["camera"] == cam])
+                                cells += c if c else ["–"] * len(sub)
+                            L.append("| " + " | ".join([shape, str(n), f"{sb:.0f}", tool, mode, lim, phase]
+                                                       + cells) + " |")
         if any(r["timeout"] == "1" for r in rows):
             L.append("Timed out: a run still going after 5 times the slowest unlimited run of its "
                      "grid, camera and tool (at least 60 s) was killed; after one, that tool, grid, "
@@ -846,14 +1223,19 @@ class Bench:
                      "(reading the .vdb included); limits are the same bytes as vox's (fractions of "
                      "the vox store), and its pixels are not compared with vox's.\n")
         L.append("Long runs: `--grids 8192` (a store of a few GB, about an hour to generate on this "
-                 "machine) or `--store-8192 PATH` for an existing one, and `--grids 16384`; raw "
+                 "machine) or `--store SHAPE:8192=PATH` for an existing one, and larger grids; raw "
                  f"rows: `{self.csv}`.\n")
+        first = configs[0] if configs else ("sphere", "default")
         L.append(f"![wall time and peak memory against grid size]({os.path.basename(svg)})\n")
+        L.append(f"(The plot above: {first[0]}, {first[1]} mode, every limit.)\n")
         with open(out, "w") as f:
             f.write("\n".join(L))
         with open(svg, "w") as f:
-            f.write(self.plot(rows, grids, order))
-        log(f"wrote {out} and {svg}")
+            f.write(self.plot([r for r in rows if r["tool"] != "vox" or
+                               (r["shape"], r["mode"]) == first], grids, order))
+        with open(law_svg, "w") as f:
+            f.write(self.law_plot(rows, grids))
+        log(f"wrote {out}, {svg} and {law_svg}")
 
     def plot(self, rows, grids, order):
         """A 2x2 SVG: wall time and peak memory against grid size, full view and close-up."""
@@ -940,8 +1322,10 @@ class Bench:
                                      'stroke-width="2"/>')
         ly = 2 * (H + 30) + 48
         x = 20
-        for lim in order + (["vdb_render"] if any(r["tool"] == "vdb_render" for r in rows) else []):
+        for lim in [l for l in order if any(r["limit"] == l for r in vox)] + (
+                ["vdb_render"] if any(r["tool"] == "vdb_render" for r in rows) else []):
             label = ("vox unlimited" if lim == "none" else "vdb_render unlimited" if lim == "vdb_render"
+                     else "vox, limit " + lim.replace("MiB", " MiB") if lim.endswith("MiB")
                      else "vox, limit " + lim + " of store")
             parts.append(f'<line x1="{x}" x2="{x + 24}" y1="{ly}" y2="{ly}" stroke="{colors[lim]}" stroke-width="2"/>')
             parts.append(f'<text x="{x + 28}" y="{ly + 4}" font-size="12">{label}</text>')
@@ -966,11 +1350,21 @@ def main():
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--size", default="1024x1024")
-    p.add_argument("--store-8192", dest="store_8192")
+    p.add_argument("--shapes", default="sphere", help="vox-gen shapes, comma-separated: sphere,bumpy")
+    p.add_argument("--modes", default="default",
+                   help="vox-render modes, comma-separated: default (no --lod flag: level of "
+                        "detail when the store has a pyramid), exact (--lod 0)")
+    p.add_argument("--store", action="append", default=[], metavar="SHAPE:N=PATH",
+                   help="use this existing store for SHAPE at N^3 (repeatable); never written to")
+    p.add_argument("--store-8192", dest="store_8192", help="same as --store sphere:8192=PATH")
+    p.add_argument("--limit-mib", type=int, default=0,
+                   help="one fixed memory cgroup limit in MiB for every run, instead of --limits "
+                        "(and of the unlimited runs)")
     p.add_argument("--vdb", action="append", default=[], metavar="N=PATH")
     p.add_argument("--timeout", type=float, default=0,
                    help="seconds per run before SIGKILL (default: for a limited run 5x the slowest "
-                        "unlimited run of the same grid, camera and tool, at least 60 s; else 2 h)")
+                        "unlimited run of the same grid, camera and tool, at least 60 s; with "
+                        "--limit-mib 30 min; else 2 h)")
     p.add_argument("--render-args", default="", help="extra vox-render flags, one string")
     p.add_argument("--no-cold", action="store_true")
     p.add_argument("--fresh", action="store_true", help="ignore (and set aside) earlier results")
@@ -1015,8 +1409,26 @@ def main():
             p.error(f"--vdb {item}: {path} is not a file")
         vdb[int(n)] = path
     a.vdb = vdb
-    if a.store_8192 and 8192 not in a.grids:
-        p.error("--store-8192 given but 8192 is not in --grids")
+    a.shapes = [x.strip() for x in a.shapes.split(",") if x.strip()]
+    if not a.shapes or any(x not in SHAPES for x in a.shapes):
+        p.error(f"--shapes: expected some of {','.join(SHAPES)}")
+    a.modes = [x.strip() for x in a.modes.split(",") if x.strip()]
+    if not a.modes or any(x not in MODES for x in a.modes) or len(set(a.modes)) != len(a.modes):
+        p.error(f"--modes: expected some of {','.join(MODES)}")
+    if a.limit_mib < 0:
+        p.error("--limit-mib must be positive")
+    stores = {}
+    if a.store_8192:
+        a.store.append(f"sphere:8192={a.store_8192}")
+    for item in a.store:
+        m = re.fullmatch(r"(\w+):(\d+)=(.+)", item)
+        if not m or m.group(1) not in SHAPES:
+            p.error(f"--store {item}: expected SHAPE:N=PATH with SHAPE one of {','.join(SHAPES)}")
+        stores[(m.group(1), int(m.group(2)))] = m.group(3)
+    for shape, n in stores:
+        if n not in a.grids or shape not in a.shapes:
+            p.error(f"--store {shape}:{n}=...: {n} is not in --grids or {shape} not in --shapes")
+    a.stores = stores
     signal.signal(signal.SIGTERM, lambda *_: sys.exit("scale: terminated"))
     try:
         Bench(a).run()
