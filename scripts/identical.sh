@@ -23,7 +23,8 @@
 #     attribute but the two timing slots (renderTimeSeconds, vox:timings)
 #     and, for ingested stores, vox:storeId;
 #     a --tiles part (which vox.read_exr refuses: tiles are missing) by its
-#     attributes and the bytes after its header (uncompressed tiles);
+#     attributes and each of its tiles' bytes (uncompressed; the order of
+#     the tiles in the file follows the threads and varies from run to run);
 #   - the PNG previews byte for byte.
 # Exits 1 on any difference, with a one-line summary last.
 # IDENTICAL_COMPARE_ONLY=1 compares the outputs an earlier run left in WORKDIR.
@@ -166,13 +167,30 @@ def header(path):
         value = data[type_end + 5:type_end + 5 + size]
         attrs[name] = (kind, value)
         at = type_end + 5 + size
-    return attrs, open(path, "rb").read()[at + 1:]
+    return attrs, open(path, "rb").read()[at + 1:], at + 1
+
+def tiles(attrs, rest, base):
+    """{(tx, ty, lx, ly): bytes} of a single-level tiled EXR's chunks (`rest`:
+    the bytes after its header, which ends at file offset `base`). Tiles are written as they finish, so their
+    order in the file, and the offset table, vary from run to run."""
+    x0, y0, x1, y1 = struct.unpack("<4i", attrs["dataWindow"][1])
+    tw, th = struct.unpack_from("<2I", attrs["tiles"][1])
+    n = -(-(x1 - x0 + 1) // tw) * -(-(y1 - y0 + 1) // th)
+    out = {}
+    for (offset,) in struct.iter_unpack("<Q", rest[:8 * n]):
+        if offset == 0:
+            continue  # a tile this part does not hold
+        at = offset - base
+        key = struct.unpack_from("<4i", rest, at)
+        (size,) = struct.unpack_from("<i", rest, at + 16)
+        out[key] = rest[at + 20:at + 20 + size]
+    return out
 
 args = sys.argv[1:]
 bad = 0
 for a, b in zip(args[0::2], args[1::2]):
     why = []
-    (ha, rest_a), (hb, rest_b) = header(a), header(b)
+    (ha, rest_a, base_a), (hb, rest_b, base_b) = header(a), header(b)
     # An ingested store's id is random: its images differ in vox:storeId only.
     ingested = os.path.basename(b).split("-")[0].split(".")[0] in os.environ["INGESTED"].split()
     for k in sorted(set(ha) | set(hb)):
@@ -183,7 +201,7 @@ for a, b in zip(args[0::2], args[1::2]):
     try:
         ia, ib = vox.read_exr(a), vox.read_exr(b)
     except OSError:  # a --tiles part (missing tiles): its tiles byte for byte
-        if rest_a != rest_b:
+        if tiles(ha, rest_a, base_a) != tiles(hb, rest_b, base_b):
             why.append("tile data")
         print(("DIFFERENT " if why else "same ") + b + (": " + ", ".join(why) if why else ""))
         bad += bool(why)
