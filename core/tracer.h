@@ -52,6 +52,27 @@ struct StartPlane {
 };
 inline constexpr double kStartPlaneMargin = 1.0;
 
+// OkStatus when `tree` can be traced in two steps of n1 and levels - n1
+// levels: 1 to 40 levels with a top, a brick level inside them, and each step
+// at most kMaxStepLevels (20) levels. Every tracer's Create checks it first.
+inline Status CheckTwoStepSplit(const OctreeView& tree, int n1) {
+  if (tree.levels < 1 || tree.levels > kMaxLevels || tree.top == nullptr)
+    return InvalidArgumentError("octree has " + std::to_string(tree.levels) +
+                                " levels; vox traces 1 to 40");
+  if (tree.brick_level < 1 || tree.brick_level > tree.levels)
+    return InvalidArgumentError("octree brick level " + std::to_string(tree.brick_level) +
+                                " outside 1.." + std::to_string(tree.levels));
+  if (n1 < 1 || n1 > tree.levels)
+    return InvalidArgumentError("first-step levels " + std::to_string(n1) + " outside 1.." +
+                                std::to_string(tree.levels));
+  const int n2 = tree.levels - n1;
+  if (n1 > kMaxStepLevels || n2 > kMaxStepLevels)
+    return InvalidArgumentError("split " + std::to_string(n1) + "+" + std::to_string(n2) +
+                                ": each step holds at most 20 levels" +
+                                (n2 == 0 ? " (single step needs a grid of at most 2^20)" : ""));
+  return OkStatus();
+}
+
 template <class Fixed = Fixed64, class Real = long double>
 class Tracer {
  public:
@@ -60,20 +81,8 @@ class Tracer {
   // n1 first-step levels; the second step gets levels - n1. n1 == levels is
   // the single-step traversal. Each step must have at most 20 levels.
   static StatusOr<Tracer> Create(const OctreeView& tree, int n1) {
-    if (tree.levels < 1 || tree.levels > kMaxLevels || tree.top == nullptr)
-      return InvalidArgumentError("octree has " + std::to_string(tree.levels) +
-                                  " levels; vox traces 1 to 40");
-    if (tree.brick_level < 1 || tree.brick_level > tree.levels)
-      return InvalidArgumentError("octree brick level " + std::to_string(tree.brick_level) +
-                                  " outside 1.." + std::to_string(tree.levels));
-    if (n1 < 1 || n1 > tree.levels)
-      return InvalidArgumentError("first-step levels " + std::to_string(n1) + " outside 1.." +
-                                  std::to_string(tree.levels));
+    VOX_RETURN_IF_ERROR(CheckTwoStepSplit(tree, n1));
     int n2 = tree.levels - n1;
-    if (n1 > kMaxStepLevels || n2 > kMaxStepLevels)
-      return InvalidArgumentError("split " + std::to_string(n1) + "+" + std::to_string(n2) +
-                                  ": each step holds at most 20 levels" +
-                                  (n2 == 0 ? " (single step needs a grid of at most 2^20)" : ""));
     int nmax = std::max(n1, n2);
     if (nmax + 3 > Fixed::kIntBits)
       return InvalidArgumentError("fixed-point format has " + std::to_string(Fixed::kIntBits) +
@@ -478,7 +487,7 @@ inline constexpr int kFixed64MaxLevels = 26;
 
 // The paper's tracer with the word chosen for the grid: Fixed64 up to
 // kFixed64MaxLevels levels, Fixed128 (exact on every grid the tests reach,
-// about 1.2-1.8x slower per ray) above. Same interface as Tracer.
+// slower per ray: docs/benchmarks.md) above. Same interface as Tracer.
 template <class Real = long double>
 class AutoTracer {
  public:

@@ -40,6 +40,7 @@ namespace {
 
 using ingest_internal::ColorSource;
 using ingest_internal::Context;
+using ingest_internal::Quote;
 
 // Below this an ingest cannot hold OpenVDB's registries, the threads and one brick.
 constexpr uint64_t kMinMemoryBytes = uint64_t(64) << 20;
@@ -48,8 +49,6 @@ void InitOpenVdb() {
   static std::once_flag once;
   std::call_once(once, [] { openvdb::initialize(); });
 }
-
-std::string Quote(const std::string& s) { return "'" + s + "'"; }
 
 std::string GridTypeLabel(const openvdb::GridBase& g) {
   return g.valueType() + (g.isType<openvdb::points::PointDataGrid>() ? " (points)" : "");
@@ -75,10 +74,8 @@ std::string FormatDouble(double v) {
   return buf;
 }
 
-StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const IngestLimits& limits,
-                                 const WriterFactory& factory, ProgressSink* progress) {
-  const Stopwatch t_start;
-  IngestStats stats;
+// The options' own checks, before anything is read.
+Status CheckOptions(const IngestOptions& o) {
   if (o.input.empty()) return InvalidArgumentError("no input .vdb file given");
   if (o.output.empty()) return InvalidArgumentError("no output store directory given");
   if (o.zstd_level < 1 || o.zstd_level > 22)
@@ -98,18 +95,154 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const IngestLimits& lim
     return InvalidArgumentError("isovalue must be finite");
   if (o.threshold && !std::isfinite(*o.threshold))
     return InvalidArgumentError("threshold must be finite");
-  VOX_ASSIGN_OR_RETURN(LevelsChoice choice, ParseLevels(o.levels));
+  return OkStatus();
+}
 
+// The input's size; refuses an input that is not a regular file, and an
+// existing target without --force before the (long) read (the writer checks
+// again).
+StatusOr<uint64_t> CheckInputAndOutput(const IngestOptions& o) {
   struct stat st;
   if (::stat(o.input.c_str(), &st) != 0)
     return errno == ENOENT ? NotFoundError(o.input + ": no such file")
                            : IoError(o.input + ": " + std::strerror(errno));
   if (!S_ISREG(st.st_mode)) return InvalidArgumentError(o.input + ": not a regular file");
-  stats.input_bytes = uint64_t(st.st_size);
-  // Refuse an existing target before the (long) read; the writer checks again.
   if (!o.force && ::access(o.output.c_str(), F_OK) == 0)
     return InvalidArgumentError(o.output + ": already exists; pass --force to replace it");
+  return uint64_t(st.st_size);
+}
 
+// The grid to ingest (--grid, or the file's first float or double grid),
+// refused unless scalar with a linear transform.
+StatusOr<openvdb::GridBase::Ptr> ChooseGrid(const IngestOptions& o,
+                                            const openvdb::GridPtrVec& grids) {
+  openvdb::GridBase::Ptr grid;
+  if (!o.grid_name.empty()) {
+    for (const auto& g : grids)
+      if (g->getName() == o.grid_name) {
+        grid = g;
+        break;
+      }
+    if (!grid)
+      return NotFoundError(o.input + ": no grid named " + Quote(o.grid_name) +
+                           "; the file has: " + ListGrids(grids));
+  } else {
+    for (const auto& g : grids)
+      if (IsScalar(*g)) {
+        grid = g;
+        break;
+      }
+    if (!grid)
+      return NotFoundError(o.input + ": no float or double grid to ingest; the file has: " +
+                           ListGrids(grids));
+  }
+  const std::string where = "grid " + Quote(grid->getName()) + " in " + o.input;
+  if (!IsScalar(*grid))
+    return UnsupportedError(where + " holds " + GridTypeLabel(*grid) +
+                            " values; vox ingests float and double grids (level sets and fog "
+                            "volumes)");
+  if (!grid->transform().isLinear())
+    return UnsupportedError(where + " has a non-linear (" + grid->transform().mapType() +
+                            ") transform; vox needs a linear (affine) one");
+  return grid;
+}
+
+// The store's metadata from the grid's and the options': source, class and
+// occupancy rule, placement, build options. `where` names the grid.
+Status DescribeGrid(const IngestOptions& o, const openvdb::GridBase& grid,
+                    const std::string& where, StoreMeta* meta) {
+  meta->source_file = o.input;
+  meta->grid_name = grid.getName();
+  switch (grid.getGridClass()) {
+    case openvdb::GRID_LEVEL_SET:
+      if (o.threshold)
+        return InvalidArgumentError(where + " is a level set; --threshold applies to fog volumes "
+                                    "(use --isovalue)");
+      meta->grid_class = GridClass::kLevelSet;
+      break;
+    case openvdb::GRID_FOG_VOLUME:
+      if (o.isovalue)
+        return InvalidArgumentError(where + " is a fog volume; --isovalue applies to level sets "
+                                    "(use --threshold)");
+      meta->grid_class = GridClass::kFogVolume;
+      break;
+    default:
+      if (o.threshold) {
+        meta->grid_class = GridClass::kFogVolume;
+      } else if (o.isovalue) {
+        meta->grid_class = GridClass::kLevelSet;
+      } else {
+        return InvalidArgumentError(
+            where + " has grid class " +
+            Quote(openvdb::GridBase::gridClassToString(grid.getGridClass())) +
+            "; pass --threshold F to read it as a fog volume or --isovalue F as a level set");
+      }
+  }
+  meta->isovalue = o.isovalue.value_or(0.0);
+  meta->threshold = o.threshold.value_or(0.0);
+  meta->has_normal = meta->grid_class == GridClass::kLevelSet;
+  meta->has_density = meta->grid_class == GridClass::kFogVolume;
+  const openvdb::math::Mat4d m = grid.transform().baseMap()->getAffineMap()->getMat4();
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) meta->index_to_world[i][j] = m(i, j);  // row vectors: same indices
+  const openvdb::Vec3d vs = grid.transform().voxelSize();
+  meta->voxel_size = std::max({vs[0], vs[1], vs[2]});
+  meta->build_options = o.command_line;
+  if (meta->build_options.empty()) {
+    meta->build_options = "levels=" + o.levels + " zstd_level=" + std::to_string(o.zstd_level);
+    if (o.isovalue) meta->build_options += " isovalue=" + FormatDouble(*o.isovalue);
+    if (o.threshold) meta->build_options += " threshold=" + FormatDouble(*o.threshold);
+    if (!o.color_grid.empty()) meta->build_options += " color=" + o.color_grid;
+    if (o.normal_bits != 16) meta->build_options += " normal_bits=" + std::to_string(o.normal_bits);
+  }
+  return OkStatus();
+}
+
+// The colour grid (--color; null without it), refused unless a vec3 grid
+// with a linear transform.
+StatusOr<openvdb::GridBase::Ptr> ChooseColorGrid(const IngestOptions& o,
+                                                 const openvdb::GridPtrVec& grids) {
+  if (o.color_grid.empty()) return openvdb::GridBase::Ptr();
+  openvdb::GridBase::Ptr color;
+  for (const auto& g : grids)
+    if (g->getName() == o.color_grid) color = g;
+  if (!color)
+    return NotFoundError(o.input + ": no colour grid named " + Quote(o.color_grid) +
+                         "; the file has: " + ListGrids(grids));
+  const std::string where = "colour grid " + Quote(o.color_grid) + " in " + o.input;
+  if (!color->isType<openvdb::Vec3fGrid>() && !color->isType<openvdb::Vec3dGrid>())
+    return UnsupportedError(where + " holds " + GridTypeLabel(*color) +
+                            " values; a colour grid holds vec3s or vec3d");
+  if (!color->transform().isLinear()) return UnsupportedError(where + " has a non-linear transform");
+  return color;
+}
+
+// Where the grid `name` lies in the file (its offsets), which the streaming
+// reader needs.
+StatusOr<const ingest_internal::VdbLayout::Grid*> FindGridLayout(
+    const ingest_internal::VdbLayout& layout, const std::string& name, const std::string& where) {
+  for (const auto& g : layout.grids)
+    if (g.name == name) return &g;
+  return UnsupportedError(where + ": the file has no grid offsets (an OpenVDB stream or a "
+                          "file older than format 2.1.2); re-save it as a .vdb file");
+}
+
+// The memory the ingest may hold: --memory-mb, or what the process may use.
+StatusOr<uint64_t> MemoryBudget(const IngestOptions& o) {
+  if (o.memory_bytes != 0) return o.memory_bytes;
+  VOX_ASSIGN_OR_RETURN(MemoryLimit limit, DetectMemoryLimit());
+  return limit.bytes;
+}
+
+StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const IngestLimits& limits,
+                                 const WriterFactory& factory, ProgressSink* progress) {
+  const Stopwatch t_start;
+  IngestStats stats;
+  VOX_RETURN_IF_ERROR(CheckOptions(o));
+  VOX_ASSIGN_OR_RETURN(LevelsChoice choice, ParseLevels(o.levels));
+  VOX_ASSIGN_OR_RETURN(stats.input_bytes, CheckInputAndOutput(o));
+
+  // Open the file and choose the grids.
   Stopwatch t0;
   VOX_ASSIGN_OR_RETURN(ingest_internal::VdbLayout layout, ingest_internal::ReadVdbLayout(o.input));
   InitOpenVdb();
@@ -121,129 +254,32 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const IngestLimits& lim
     return CorruptionError(o.input + ": not a readable OpenVDB file (" + e.what() + ")");
   }
   openvdb::GridPtrVecPtr grids = file.readAllGridMetadata();
-  // The grid.
-  openvdb::GridBase::Ptr meta_grid;
-  if (!o.grid_name.empty()) {
-    for (const auto& g : *grids)
-      if (g->getName() == o.grid_name) {
-        meta_grid = g;
-        break;
-      }
-    if (!meta_grid)
-      return NotFoundError(o.input + ": no grid named " + Quote(o.grid_name) +
-                           "; the file has: " + ListGrids(*grids));
-  } else {
-    for (const auto& g : *grids)
-      if (IsScalar(*g)) {
-        meta_grid = g;
-        break;
-      }
-    if (!meta_grid)
-      return NotFoundError(o.input + ": no float or double grid to ingest; the file has: " +
-                           ListGrids(*grids));
-  }
+  VOX_ASSIGN_OR_RETURN(const openvdb::GridBase::Ptr meta_grid, ChooseGrid(o, *grids));
   const std::string name = meta_grid->getName();
   const std::string where = "grid " + Quote(name) + " in " + o.input;
-  if (!IsScalar(*meta_grid))
-    return UnsupportedError(where + " holds " + GridTypeLabel(*meta_grid) +
-                            " values; vox ingests float and double grids (level sets and fog "
-                            "volumes)");
-  if (!meta_grid->transform().isLinear())
-    return UnsupportedError(where + " has a non-linear (" + meta_grid->transform().mapType() +
-                            ") transform; vox needs a linear (affine) one");
-
   Context cx{o, factory, progress, &stats, choice, StoreMeta{}, nullptr};
-  StoreMeta& meta = cx.meta;
-  meta.source_file = o.input;
-  meta.grid_name = name;
-  switch (meta_grid->getGridClass()) {
-    case openvdb::GRID_LEVEL_SET:
-      if (o.threshold)
-        return InvalidArgumentError(where + " is a level set; --threshold applies to fog volumes "
-                                    "(use --isovalue)");
-      meta.grid_class = GridClass::kLevelSet;
-      break;
-    case openvdb::GRID_FOG_VOLUME:
-      if (o.isovalue)
-        return InvalidArgumentError(where + " is a fog volume; --isovalue applies to level sets "
-                                    "(use --threshold)");
-      meta.grid_class = GridClass::kFogVolume;
-      break;
-    default:
-      if (o.threshold) {
-        meta.grid_class = GridClass::kFogVolume;
-      } else if (o.isovalue) {
-        meta.grid_class = GridClass::kLevelSet;
-      } else {
-        return InvalidArgumentError(
-            where + " has grid class " +
-            Quote(openvdb::GridBase::gridClassToString(meta_grid->getGridClass())) +
-            "; pass --threshold F to read it as a fog volume or --isovalue F as a level set");
-      }
-  }
-  meta.isovalue = o.isovalue.value_or(0.0);
-  meta.threshold = o.threshold.value_or(0.0);
-  meta.has_normal = meta.grid_class == GridClass::kLevelSet;
-  meta.has_density = meta.grid_class == GridClass::kFogVolume;
-  const openvdb::math::Mat4d m = meta_grid->transform().baseMap()->getAffineMap()->getMat4();
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) meta.index_to_world[i][j] = m(i, j);  // row vectors: same indices
-  const openvdb::Vec3d vs = meta_grid->transform().voxelSize();
-  meta.voxel_size = std::max({vs[0], vs[1], vs[2]});
-  meta.build_options = o.command_line;
-  if (meta.build_options.empty()) {
-    meta.build_options = "levels=" + o.levels + " zstd_level=" + std::to_string(o.zstd_level);
-    if (o.isovalue) meta.build_options += " isovalue=" + FormatDouble(*o.isovalue);
-    if (o.threshold) meta.build_options += " threshold=" + FormatDouble(*o.threshold);
-    if (!o.color_grid.empty()) meta.build_options += " color=" + o.color_grid;
-    if (o.normal_bits != 16) meta.build_options += " normal_bits=" + std::to_string(o.normal_bits);
-  }
-
-  // The colour grid.
-  openvdb::GridBase::Ptr color_meta;
-  if (!o.color_grid.empty()) {
-    for (const auto& g : *grids)
-      if (g->getName() == o.color_grid) color_meta = g;
-    if (!color_meta)
-      return NotFoundError(o.input + ": no colour grid named " + Quote(o.color_grid) +
-                           "; the file has: " + ListGrids(*grids));
-    const std::string cwhere = "colour grid " + Quote(o.color_grid) + " in " + o.input;
-    if (!color_meta->isType<openvdb::Vec3fGrid>() && !color_meta->isType<openvdb::Vec3dGrid>())
-      return UnsupportedError(cwhere + " holds " + GridTypeLabel(*color_meta) +
-                              " values; a colour grid holds vec3s or vec3d");
-    if (!color_meta->transform().isLinear())
-      return UnsupportedError(cwhere + " has a non-linear transform");
-  }
-
-  const ingest_internal::VdbLayout::Grid* grid_layout = nullptr;
-  for (const auto& g : layout.grids)
-    if (g.name == name) {
-      grid_layout = &g;
-      break;
-    }
-  if (!grid_layout)
-    return UnsupportedError(where + ": the file has no grid offsets (an OpenVDB stream or a "
-                            "file older than format 2.1.2); re-save it as a .vdb file");
-  uint64_t budget = o.memory_bytes;
-  if (budget == 0) {
-    VOX_ASSIGN_OR_RETURN(MemoryLimit limit, DetectMemoryLimit());
-    budget = limit.bytes;
-  }
+  VOX_RETURN_IF_ERROR(DescribeGrid(o, *meta_grid, where, &cx.meta));
+  VOX_ASSIGN_OR_RETURN(const openvdb::GridBase::Ptr color_meta, ChooseColorGrid(o, *grids));
+  VOX_ASSIGN_OR_RETURN(const ingest_internal::VdbLayout::Grid* grid_layout,
+                       FindGridLayout(layout, name, where));
+  VOX_ASSIGN_OR_RETURN(const uint64_t budget, MemoryBudget(o));
   cx.memory_budget = budget;
   cx.max_tile_voxels = limits.max_tile_voxels;
   stats.memory_budget = budget;
+
+  // Read the colour grid whole; the grid itself is streamed by IngestGrid.
   if (progress) progress->Message("reading the topology of " + where);
-  const openvdb::math::Transform& xform = meta_grid->transform();
   std::unique_ptr<ColorSource> color;
   if (color_meta) {
-    color = ingest_internal::NewColorSource(file.readGrid(o.color_grid), xform);
+    color = ingest_internal::NewColorSource(file.readGrid(o.color_grid), meta_grid->transform());
     if (!color) return InternalError("colour grid " + Quote(o.color_grid) + " in " + o.input +
                                      ": grid type changed between metadata and read");
-    meta.has_color = true;
+    cx.meta.has_color = true;
     cx.color = color.get();
   }
   stats.seconds_open = t0.Seconds();
 
+  // Ingest on the threads asked for.
   const int threads = o.threads > 0 ? o.threads : tbb::this_task_arena::max_concurrency();
   stats.threads = threads;
   tbb::task_arena arena(threads);

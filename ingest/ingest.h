@@ -33,6 +33,7 @@
 #include "core/status.h"
 #include "ingest/placement.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 
 namespace vox {
 

@@ -6,12 +6,13 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+#include <Imath/ImathMatrix.h>
 #include <glm/geometric.hpp>
 #include <limits>
 #include <nlohmann/json.hpp>
 
-#include "render/internal/json_fields.h"
-#include "render/internal/text_file.h"
+#include "storage/file.h"
+#include "storage/json_fields.h"
 
 namespace vox {
 namespace {
@@ -137,6 +138,47 @@ std::string Camera::ToJson() const {
     j["ortho_width"] = ortho_width;
   }
   return j.dump();
+}
+
+ExrCameraAttributes StandardCameraAttributes(const Camera& cam) {
+  const glm::dvec3 r = cam.right(), u = cam.true_up(), f = cam.forward(), p = cam.position;
+  // World -> camera: x right, y up, z along the view (left-handed, as RenderMan).
+  Imath::M44d to_camera(r.x, u.x, f.x, 0,  //
+                        r.y, u.y, f.y, 0,  //
+                        r.z, u.z, f.z, 0,  //
+                        -glm::dot(p, r), -glm::dot(p, u), -glm::dot(p, f), 1);
+  // Screen half-extents as Camera::PixelRay uses them: pixel x maps to screen
+  // (2x/W - 1) sx, pixel y to (1 - 2y/H) sy.
+  const bool perspective = cam.projection == Projection::kPerspective;
+  const double sx = perspective ? std::tan(cam.fov_deg * M_PI / 360.0) : 0.5 * cam.ortho_width;
+  const double sy = sx * (double(cam.height) / double(cam.width));
+  // Camera -> NDC ((0,0) top-left, (1,1) bottom-right of the display window).
+  // Perspective: X = x/(2 sx) + z/2, Y = -y/(2 sy) + z/2, W = z (Z = 1, so
+  // the matrix is invertible and z/w is 1/depth); orthographic: W = 1 and
+  // z stays the depth.
+  const Imath::M44d to_ndc =
+      perspective ? Imath::M44d(0.5 / sx, 0, 0, 0,   //
+                                0, -0.5 / sy, 0, 0,  //
+                                0.5, 0.5, 0, 1,      //
+                                0, 0, 1, 0)
+                  : Imath::M44d(0.5 / sx, 0, 0, 0,   //
+                                0, -0.5 / sy, 0, 0,  //
+                                0, 0, 1, 0,          //
+                                0.5, 0.5, 0, 1);
+  const Imath::M44d world_to_ndc = to_camera * to_ndc;
+  // Single precision, row by row, as the header keeps them.
+  const auto rows = [](const Imath::M44d& m) {
+    const Imath::M44f single(m);
+    std::array<float, 16> out;
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) out[size_t(4 * i + j)] = single[i][j];
+    return out;
+  };
+  ExrCameraAttributes a;
+  a.world_to_camera = rows(to_camera);
+  a.world_to_ndc = rows(world_to_ndc);
+  a.screen_window_width = float(2.0 * sx);
+  return a;
 }
 
 StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) {

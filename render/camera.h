@@ -16,11 +16,13 @@
 #ifndef VOX_RENDER_CAMERA_H_
 #define VOX_RENDER_CAMERA_H_
 
+#include <array>
 #include <glm/vec3.hpp>
 #include <string>
 #include <string_view>
 
 #include "core/status.h"
+#include "render/limits.h"
 
 namespace vox {
 
@@ -31,9 +33,6 @@ struct WorldRay {
   glm::dvec3 origin{0.0};
   glm::dvec3 dir{0.0, 0.0, -1.0};
 };
-
-// Largest image side vox-render accepts.
-inline constexpr int kMaxImageSide = 1 << 20;
 
 class Camera {
  public:
@@ -78,6 +77,18 @@ class Camera {
   double scale_x_ = 1.0, scale_y_ = 1.0;  // screen half-extent (tan(fov/2) or ortho_width / 2)
   bool finalized_ = false;
 };
+
+// OpenEXR's standard camera attributes (ImfStandardAttributes.h) of a
+// camera, as render/exr.h describes them: matrices act on row vectors
+// (p' = p * M) and are stored row by row, in single precision as the header
+// keeps them; the screen window is centred on (0, 0).
+struct ExrCameraAttributes {
+  std::array<float, 16> world_to_camera{};  // x right, y up, z along the view
+  std::array<float, 16> world_to_ndc{};     // (0, 0) top-left, (1, 1) bottom-right
+  float screen_window_width = 0.0f;         // at z = 1 (perspective), or ortho_width
+};
+// REQUIRES: cam.Finalize().
+ExrCameraAttributes StandardCameraAttributes(const Camera& cam);
 
 // Parses cam.json text; `file` names it in every error ("cam.json: field
 // 'width' must be a positive integer").

@@ -24,8 +24,8 @@
 #include <limits>
 
 #include "render/camera.h"
-#include "render/internal/atomic_file.h"
 #include "render/internal/exr_header.h"
+#include "storage/atomic_file.h"
 
 namespace vox {
 namespace {
@@ -41,44 +41,18 @@ Imf::Slice TileSlice(float* base, int stride) {
                     /*yTileCoords=*/true);
 }
 
-// The standard camera attributes of OpenEXR (ImfStandardAttributes.h) for
-// the vox:camera JSON `camera_json`, as render/exr.h describes them. Imath
-// matrices act on row vectors: p' = p * M.
-void AddStandardCameraAttributes(const std::string& camera_json, Imf::Header* header) {
-  StatusOr<Camera> parsed = ParseCamera(camera_json, "vox:camera");
-  if (!parsed.ok()) return;  // not a vox camera: no standard attributes
-  const Camera& cam = *parsed;
-  const glm::dvec3 r = cam.right(), u = cam.true_up(), f = cam.forward(), p = cam.position;
-  // World -> camera: x right, y up, z along the view (left-handed, as RenderMan).
-  Imath::M44d to_camera(r.x, u.x, f.x, 0,  //
-                        r.y, u.y, f.y, 0,  //
-                        r.z, u.z, f.z, 0,  //
-                        -glm::dot(p, r), -glm::dot(p, u), -glm::dot(p, f), 1);
-  // Screen half-extents as Camera::PixelRay uses them: pixel x maps to screen
-  // (2x/W - 1) sx, pixel y to (1 - 2y/H) sy.
-  const bool perspective = cam.projection == Projection::kPerspective;
-  const double sx = perspective ? std::tan(cam.fov_deg * M_PI / 360.0) : 0.5 * cam.ortho_width;
-  const double sy = sx * (double(cam.height) / double(cam.width));
-  // Camera -> NDC ((0,0) top-left, (1,1) bottom-right of the display window).
-  // Perspective: X = x/(2 sx) + z/2, Y = -y/(2 sy) + z/2, W = z (Z = 1, so
-  // the matrix is invertible and z/w is 1/depth); orthographic: W = 1 and
-  // z stays the depth.
-  const Imath::M44d to_ndc =
-      perspective ? Imath::M44d(0.5 / sx, 0, 0, 0,   //
-                                0, -0.5 / sy, 0, 0,  //
-                                0.5, 0.5, 0, 1,      //
-                                0, 0, 1, 0)
-                  : Imath::M44d(0.5 / sx, 0, 0, 0,   //
-                                0, -0.5 / sy, 0, 0,  //
-                                0, 0, 1, 0,          //
-                                0.5, 0.5, 0, 1);
-  const Imath::M44d world_to_ndc = to_camera * to_ndc;
-  Imf::addWorldToCamera(*header, Imath::M44f(to_camera));
-  Imf::addWorldToNDC(*header, Imath::M44f(world_to_ndc));
+// Adds `cam` to `header` (render/camera.h computes the values).
+void AddStandardCameraAttributes(const ExrCameraAttributes& cam, Imf::Header* header) {
+  const auto matrix = [](const std::array<float, 16>& m) {
+    return Imath::M44f(m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8], m[9], m[10], m[11],
+                       m[12], m[13], m[14], m[15]);
+  };
+  Imf::addWorldToCamera(*header, matrix(cam.world_to_camera));
+  Imf::addWorldToNDC(*header, matrix(cam.world_to_ndc));
   // The display window on the image plane: z = 1 in camera space
   // (perspective), any plane of constant z (orthographic).
   header->screenWindowCenter() = Imath::V2f(0.0f, 0.0f);
-  header->screenWindowWidth() = float(2.0 * sx);
+  header->screenWindowWidth() = cam.screen_window_width;
 }
 
 Imf::Slice HalfTileSlice(Imath::half* base, int stride) {
@@ -139,7 +113,8 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
                                                                  int height, int tile,
                                                                  const ImageLayers& layers,
                                                                  const ExrAttributes& attrs,
-                                                                 ExrCompression compression) {
+                                                                 ExrCompression compression,
+                                                                 const ExrCameraAttributes* camera) {
   auto w = std::unique_ptr<TiledExrWriter>(new TiledExrWriter());
   w->path_ = path;
   w->layers_ = layers;
@@ -160,8 +135,7 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
         header.channels().insert(kChannelNames[c],
                                  Imf::Channel(IsHalf(layers, c) ? Imf::HALF : Imf::FLOAT));
     for (const auto& [k, v] : attrs) header.insert(k, Imf::StringAttribute(v));
-    if (auto cam = attrs.find("vox:camera"); cam != attrs.end())
-      AddStandardCameraAttributes(cam->second, &header);
+    if (camera != nullptr) AddStandardCameraAttributes(*camera, &header);
     header.insert("renderTimeSeconds", Imf::FloatAttribute(0.0f));
     header.insert("vox:timings", Imf::StringAttribute(std::string(kTimingsSlot, ' ')));
     w->file_ = std::make_unique<Imf::TiledOutputFile>(w->out_->temp_path().c_str(), header);
@@ -417,6 +391,28 @@ struct PngFile {
   }
 };
 
+// libpng reports an error by longjmp to the last setjmp. Every call into it
+// goes through these functions, whose frames hold no object with a
+// destructor (the jump would skip it): each returns false after a jump.
+[[gnu::noinline]] bool PngStart(const PngFile& out, int width, int height) {
+  if (setjmp(png_jmpbuf(out.png))) return false;
+  png_init_io(out.png, out.fp);
+  png_set_IHDR(out.png, out.info, png_uint_32(width), png_uint_32(height), 8, PNG_COLOR_TYPE_RGB,
+               PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_write_info(out.png, out.info);
+  return true;
+}
+[[gnu::noinline]] bool PngWriteRow(const PngFile& out, const uint8_t* row) {
+  if (setjmp(png_jmpbuf(out.png))) return false;
+  png_write_row(out.png, row);
+  return true;
+}
+[[gnu::noinline]] bool PngFinish(const PngFile& out) {
+  if (setjmp(png_jmpbuf(out.png))) return false;
+  png_write_end(out.png, nullptr);
+  return true;
+}
+
 }  // namespace
 
 Status WritePngPreview(const std::string& exr_path, const std::string& png_path) {
@@ -441,11 +437,8 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
     if (!out.png) return ResourceExhaustedError(png_path + ": libpng init failed");
     out.info = png_create_info_struct(out.png);
     if (!out.info) return ResourceExhaustedError(png_path + ": libpng init failed");
-    if (setjmp(png_jmpbuf(out.png))) return IoError(png_path + ": libpng write failed");
-    png_init_io(out.png, out.fp);
-    png_set_IHDR(out.png, out.info, png_uint_32(w), png_uint_32(info.height), 8, PNG_COLOR_TYPE_RGB,
-                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-    png_write_info(out.png, out.info);
+    const Status png_failed = IoError(png_path + ": libpng write failed");
+    if (!PngStart(out, w, info.height)) return png_failed;
     const char* names[3] = {"R", "G", "B"};
     for (int ty = 0; ty < in.numYTiles(); ++ty) {
       const int y0 = ty * tile;
@@ -462,10 +455,10 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
       for (int y = 0; y < rows; ++y) {
         for (int x = 0; x < w; ++x)
           for (int c = 0; c < 3; ++c) row[size_t(x) * 3 + c] = ToSrgb8(band[c][size_t(y) * w + x]);
-        png_write_row(out.png, row.data());
+        if (!PngWriteRow(out, row.data())) return png_failed;
       }
     }
-    png_write_end(out.png, nullptr);
+    if (!PngFinish(out)) return png_failed;
     const bool flushed = fflush(out.fp) == 0;
     const bool closed = fclose(out.fp) == 0;
     out.fp = nullptr;
@@ -474,7 +467,6 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
   } catch (const std::exception& e) {
     return IoError(exr_path + ": cannot read EXR for the preview: " + e.what());
   }
-  return OkStatus();
 }
 
 }  // namespace vox

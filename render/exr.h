@@ -15,20 +15,21 @@
 // Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
 // vox:part ("I/N"), vox:tileOrder, vox:storeId (the store's store_id, hex),
 // plus renderTimeSeconds (float, as pbrt) and vox:timings (JSON), which are
-// patched in place after the last tile. When the attributes hold a
-// vox:camera, the writer adds OpenEXR's standard camera attributes
-// (ImfStandardAttributes.h) derived from it, so a compositor can place the
+// patched in place after the last tile. With the camera's
+// ExrCameraAttributes (render/camera.h, StandardCameraAttributes: the frame
+// loop and vox-merge pass them), the writer adds OpenEXR's standard camera
+// attributes (ImfStandardAttributes.h), so a compositor can place the
 // pixels in 3D: worldToCamera (M44f, row vectors: x right, y up, z along the
 // view, origin at the camera position), worldToNDC (M44f: a world point p
 // maps to (x/w, y/w) with (x, y, z, w) = (p, 1) * M; (0, 0) is the image's
 // top-left corner, (1, 1) its bottom-right, so pixel (i, j)'s centre is
 // ((i + 0.5)/W, (j + 0.5)/H)), and the screen window (centre (0, 0), width
 // 2 tan(fov/2) on the camera-space plane z = 1 for perspective cameras,
-// ortho_width for orthographic ones). vox-merge keeps them: its output has
-// the parts' vox:camera.
+// ortho_width for orthographic ones). vox-merge keeps them: it computes them
+// again from the parts' vox:camera.
 //
 // Every file is written to a temporary beside its target and renamed over it
-// only when complete (render/internal/atomic_file.h): a failed render or
+// only when complete (storage/atomic_file.h): a failed render or
 // merge never replaces an earlier output with a partial one.
 //
 // Thread safety: TiledExrWriter::WriteTile is thread-safe; everything else is
@@ -101,21 +102,19 @@ const char* ExrCompressionName(ExrCompression c);
 void SetExrThreads(int threads);
 
 class AtomicFile;
-
-// OkStatus when `path` can be written as an output (EXR, PNG, JSON): its
-// directory exists and is writable and `path` is not a directory. Tools run
-// it on every output path before any work.
-Status CheckOutputPath(const std::string& path);
+struct ExrCameraAttributes;
 
 class TiledExrWriter {
  public:
   // Starts `path` (tiles of `tile` pixels compressed as `compression`,
-  // random tile order) with the given string attributes, and reserves
-  // renderTimeSeconds and vox:timings for Finish. The file is written to a
-  // temporary beside `path`.
+  // random tile order) with the given string attributes and, given a
+  // `camera`, OpenEXR's standard camera attributes (render/camera.h), and
+  // reserves renderTimeSeconds and vox:timings for Finish. The file is
+  // written to a temporary beside `path`.
   static StatusOr<std::unique_ptr<TiledExrWriter>> Create(
       const std::string& path, int width, int height, int tile, const ImageLayers& layers,
-      const ExrAttributes& attrs, ExrCompression compression = ExrCompression::kZip);
+      const ExrAttributes& attrs, ExrCompression compression = ExrCompression::kZip,
+      const ExrCameraAttributes* camera = nullptr);
   ~TiledExrWriter();
   // Writes one tile; thread-safe (HALF channels are converted from the
   // buffer's floats, rounding to nearest, before the writer's lock).

@@ -80,9 +80,10 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
     SetExrThreads(0);
     const ExrCompression compression = options.compression.value_or(
         options.part.whole() ? ExrCompression::kRle : ExrCompression::kNone);
-    VOX_ASSIGN_OR_RETURN(writer,
-                         TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
-                                                options.tile_size, img_layers, attrs, compression));
+    const ExrCameraAttributes camera_attrs = StandardCameraAttributes(cam);
+    VOX_ASSIGN_OR_RETURN(writer, TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
+                                                        options.tile_size, img_layers, attrs,
+                                                        compression, &camera_attrs));
   }
   stats->threads = threads;
   stats->tiles_total = end - begin;

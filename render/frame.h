@@ -21,6 +21,7 @@
 #include "core/progress.h"
 #include "core/status.h"
 #include "render/exr.h"
+#include "render/limits.h"
 #include "render/renderer.h"
 #include "render/tiles.h"
 
@@ -37,8 +38,6 @@ struct ProgressSnapshot {
 // The text of one progress report (without the bar), for the display, tests
 // and logs.
 std::string ProgressLine(const ProgressSnapshot& s, double elapsed_seconds);
-
-inline constexpr int kMinTileSize = 8, kMaxTileSize = 4096;
 
 struct FrameOptions {
   std::string exr_path;  // empty: render without writing (benchmarks)

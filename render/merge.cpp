@@ -6,27 +6,21 @@
 #include <algorithm>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 
+#include "render/camera.h"
 #include "render/exr.h"
 #include "render/frame.h"
-#include "render/internal/atomic_file.h"
 #include "render/tiles.h"
+#include "storage/atomic_file.h"
 
 namespace vox {
 
-Status MergeParts(const std::vector<std::string>& parts, const std::string& out_path,
-                  MergeResult* result) {
-  if (parts.empty()) return InvalidArgumentError("vox-merge: no part files given");
-  // Before reading anything: the output must not be one of the parts (by
-  // device and inode, so ./p1.exr and p1.exr or a hard link are caught), and
-  // its directory must be writable.
-  for (const std::string& p : parts)
-    if (p == out_path || SameFile(p, out_path))
-      return InvalidArgumentError("output " + out_path + " is the part " + p +
-                                  "; writing it would destroy that part");
-  VOX_RETURN_IF_ERROR(CheckOutputPath(out_path));
-  std::vector<ExrInfo> infos;
-  std::vector<PartSpec> specs;
+namespace {
+
+// Reads each part's header: its info and its vox:part.
+Status ReadParts(const std::vector<std::string>& parts, std::vector<ExrInfo>* infos,
+                 std::vector<PartSpec>* specs) {
   for (const std::string& p : parts) {
     VOX_ASSIGN_OR_RETURN(ExrInfo info, ReadExrInfo(p));
     auto it = info.attrs.find("vox:part");
@@ -37,10 +31,16 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
       return InvalidArgumentError(p + ": bad vox:part attribute '" + it->second + "'");
     if (info.attrs["vox:tileOrder"] != "morton")
       return UnsupportedError(p + ": unknown tile order '" + info.attrs["vox:tileOrder"] + "'");
-    infos.push_back(std::move(info));
-    specs.push_back(*spec);
+    infos->push_back(std::move(info));
+    specs->push_back(*spec);
   }
-  // Everything that must agree, compared with the first part.
+  return OkStatus();
+}
+
+// Everything that must agree, compared with the first part.
+Status CheckPartsBelongTogether(const std::vector<std::string>& parts,
+                                const std::vector<ExrInfo>& infos,
+                                const std::vector<PartSpec>& specs) {
   const ExrInfo& ref = infos[0];
   for (size_t i = 1; i < parts.size(); ++i) {
     const ExrInfo& o = infos[i];
@@ -76,6 +76,12 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
     if (specs[i].count != specs[0].count)
       return differ("part count", std::to_string(specs[0].count), std::to_string(specs[i].count));
   }
+  return OkStatus();
+}
+
+// Which of `parts` is part k, for k = 1..N; refuses a part given twice or missing.
+StatusOr<std::map<int, size_t>> IndexParts(const std::vector<std::string>& parts,
+                                           const std::vector<PartSpec>& specs) {
   const int n = specs[0].count;
   std::map<int, size_t> by_index;
   for (size_t i = 0; i < parts.size(); ++i) {
@@ -89,6 +95,64 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
       return InvalidArgumentError("part " + std::to_string(k) + "/" + std::to_string(n) +
                                   " is missing (" + std::to_string(parts.size()) + " of " +
                                   std::to_string(n) + " parts given)");
+  return by_index;
+}
+
+// Copies the tiles of `path`, part `spec` of `layout`, into `writer`
+// through `buf`; counts them in *tiles.
+Status CopyPartTiles(const std::string& path, const PartSpec& spec, const TileLayout& layout,
+                     const ImageLayers& layers, TileBuffer& buf, TiledExrWriter& writer,
+                     int64_t* tiles) {
+  int64_t begin = 0, end = 0;
+  layout.PartRange(spec, &begin, &end);
+  try {
+    Imf::TiledInputFile in(path.c_str());
+    Imf::FrameBuffer fb;
+    for (int c = 0; c < kNumChannels; ++c)
+      if (layers.Has(c))
+        fb.insert(ChannelName(c),
+                  Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(buf.ch[c].data()), sizeof(float),
+                             sizeof(float) * size_t(buf.size), 1, 1, 0.0, true, true));
+    in.setFrameBuffer(fb);
+    for (int64_t t = begin; t < end; ++t) {
+      const TileRect& r = layout.order()[size_t(t)];
+      try {
+        in.readTile(r.tx, r.ty);
+      } catch (const std::exception& e) {
+        return CorruptionError(path + ": part " + spec.ToString() + " lacks tile (" +
+                               std::to_string(r.tx) + ", " + std::to_string(r.ty) +
+                               "); did its render finish? (" + e.what() + ")");
+      }
+      VOX_RETURN_IF_ERROR(writer.WriteTile(r, buf));
+      ++*tiles;
+    }
+  } catch (const std::exception& e) {
+    return IoError(path + ": cannot read: " + e.what());
+  }
+  return OkStatus();
+}
+
+}  // namespace
+
+Status MergeParts(const std::vector<std::string>& parts, const std::string& out_path,
+                  MergeResult* result) {
+  if (parts.empty()) return InvalidArgumentError("vox-merge: no part files given");
+  // Before reading anything: the output must not be one of the parts (by
+  // device and inode, so ./p1.exr and p1.exr or a hard link are caught), and
+  // its directory must be writable.
+  for (const std::string& p : parts)
+    if (p == out_path || SameFile(p, out_path))
+      return InvalidArgumentError("output " + out_path + " is the part " + p +
+                                  "; writing it would destroy that part");
+  VOX_RETURN_IF_ERROR(CheckOutputPath(out_path));
+  std::vector<ExrInfo> infos;
+  std::vector<PartSpec> specs;
+  VOX_RETURN_IF_ERROR(ReadParts(parts, &infos, &specs));
+  VOX_RETURN_IF_ERROR(CheckPartsBelongTogether(parts, infos, specs));
+  using PartIndex = std::map<int, size_t>;  // part k -> its place in `parts`
+  VOX_ASSIGN_OR_RETURN(PartIndex by_index, IndexParts(parts, specs));
+  const ExrInfo& ref = infos[0];
+  const int n = specs[0].count;
 
   ImageLayers layers;
   layers.float_color = ref.float_color;
@@ -97,7 +161,11 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
     if (c == "voxel.i") layers.voxel = true;
   }
   // The parts' vox:camera comes along, and with it the standard camera
-  // attributes the writer derives from it (render/exr.h).
+  // attributes (render/exr.h), computed again from it.
+  std::optional<ExrCameraAttributes> camera_attrs;
+  if (auto json = ref.attrs.find("vox:camera"); json != ref.attrs.end())
+    if (StatusOr<Camera> cam = ParseCamera(json->second, "vox:camera"); cam.ok())
+      camera_attrs = StandardCameraAttributes(*cam);  // else not a vox camera: none
   ExrAttributes attrs = ref.attrs;
   attrs.erase("vox:timings");
   attrs["vox:part"] = "1/1";
@@ -107,43 +175,20 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
                             " is larger than vox writes (" + std::to_string(kMaxTileSize) + ")");
   VOX_RETURN_IF_ERROR(CheckTileCount(ref.width, ref.height, ref.tile).WithContext(parts[0]));
   const TileLayout layout(ref.width, ref.height, ref.tile);
-  VOX_ASSIGN_OR_RETURN(auto writer, TiledExrWriter::Create(out_path, ref.width, ref.height,
-                                                           ref.tile, layers, attrs));
+  VOX_ASSIGN_OR_RETURN(auto writer,
+                       TiledExrWriter::Create(out_path, ref.width, ref.height, ref.tile, layers,
+                                              attrs, ExrCompression::kZip,
+                                              camera_attrs ? &*camera_attrs : nullptr));
   TileBuffer buf;
   buf.Allocate(ref.tile, layers);
   MergeResult res;
   res.parts = n;
   for (int k = 1; k <= n; ++k) {
     const size_t i = by_index[k];
-    const std::string& path = parts[i];
     res.sum_render_seconds += infos[i].render_seconds;
     res.max_render_seconds = std::max(res.max_render_seconds, infos[i].render_seconds);
-    int64_t begin = 0, end = 0;
-    layout.PartRange(specs[i], &begin, &end);
-    try {
-      Imf::TiledInputFile in(path.c_str());
-      Imf::FrameBuffer fb;
-      for (int c = 0; c < kNumChannels; ++c)
-        if (layers.Has(c))
-          fb.insert(ChannelName(c),
-                    Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(buf.ch[c].data()), sizeof(float),
-                               sizeof(float) * size_t(buf.size), 1, 1, 0.0, true, true));
-      in.setFrameBuffer(fb);
-      for (int64_t t = begin; t < end; ++t) {
-        const TileRect& r = layout.order()[size_t(t)];
-        try {
-          in.readTile(r.tx, r.ty);
-        } catch (const std::exception& e) {
-          return CorruptionError(path + ": part " + specs[i].ToString() + " lacks tile (" +
-                                 std::to_string(r.tx) + ", " + std::to_string(r.ty) +
-                                 "); did its render finish? (" + e.what() + ")");
-        }
-        VOX_RETURN_IF_ERROR(writer->WriteTile(r, buf));
-        ++res.tiles;
-      }
-    } catch (const std::exception& e) {
-      return IoError(path + ": cannot read: " + e.what());
-    }
+    VOX_RETURN_IF_ERROR(
+        CopyPartTiles(parts[i], specs[i], layout, layers, buf, *writer, &res.tiles));
   }
   nlohmann::json timings{{"parts", n},
                          {"sum_render_seconds", res.sum_render_seconds},

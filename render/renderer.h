@@ -62,10 +62,10 @@
 #include "render/beam.h"
 #include "render/camera.h"
 #include "render/exr.h"
+#include "render/grid_transform.h"
 #include "render/lod.h"
 #include "render/scene.h"
 #include "render/tiles.h"
-#include "render/volume.h"
 #include "storage/store.h"
 
 namespace vox {

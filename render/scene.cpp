@@ -3,8 +3,8 @@
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
-#include "render/internal/json_fields.h"
-#include "render/internal/text_file.h"
+#include "storage/file.h"
+#include "storage/json_fields.h"
 
 namespace vox {
 namespace {

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/status.h"
+#include "render/limits.h"
 
 namespace vox {
 
@@ -30,13 +31,8 @@ struct PartSpec {
   std::string ToString() const { return std::to_string(index) + "/" + std::to_string(count); }
 };
 
-// The most tiles an image may have: the tile order (and the EXR's tile
-// offset table) are held in memory, about 32 bytes a tile. 2^22 tiles is
-// 131072 x 131072 pixels in 64-pixel tiles; larger tiles allow larger images.
-inline constexpr int64_t kMaxTiles = int64_t(1) << 22;
-
 // OkStatus when a width x height image cut into tile x tile tiles has at most
-// kMaxTiles tiles (and all are positive); otherwise an error naming the limit.
+// kMaxTiles (render/limits.h) tiles (and all are positive); otherwise an error naming the limit.
 Status CheckTileCount(int width, int height, int tile);
 
 // Parses "I/N" with 1 <= I <= N.

@@ -1,16 +1,22 @@
 #include "storage/file.h"
 
+#include <dirent.h>
 #include <fcntl.h>
 #include <setjmp.h>
 #include <signal.h>
+#include <stdio.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
+#include <random>
+#include <sstream>
 #include <string>
 
 namespace vox {
@@ -73,6 +79,13 @@ void InstallBusHandler() {
   return true;
 }
 
+// The size of open file `fd` now (fstat), for CurrentSize.
+StatusOr<uint64_t> SizeOnDisk(int fd, const std::string& path) {
+  struct stat st;
+  if (fstat(fd, &st) != 0) return ErrnoError("cannot stat", path, errno);
+  return uint64_t(st.st_size);
+}
+
 Status RangeError(const std::string& path, uint64_t offset, size_t n, uint64_t size) {
   return CorruptionError("read of bytes [" + std::to_string(offset) + ", " +
                          std::to_string(offset + n) + ") past the end of '" + path + "' (" +
@@ -107,11 +120,7 @@ class MmapFile : public RandomAccessFile {
     return OkStatus();
   }
 
-  StatusOr<uint64_t> CurrentSize() const override {
-    struct stat st;
-    if (fstat(fd_, &st) != 0) return ErrnoError("cannot stat", path_, errno);
-    return uint64_t(st.st_size);
-  }
+  StatusOr<uint64_t> CurrentSize() const override { return SizeOnDisk(fd_, path_); }
 
  private:
   std::string path_;
@@ -152,11 +161,7 @@ class PreadFile : public RandomAccessFile {
     return OkStatus();
   }
 
-  StatusOr<uint64_t> CurrentSize() const override {
-    struct stat st;
-    if (fstat(fd_, &st) != 0) return ErrnoError("cannot stat", path_, errno);
-    return uint64_t(st.st_size);
-  }
+  StatusOr<uint64_t> CurrentSize() const override { return SizeOnDisk(fd_, path_); }
 
  private:
   std::string path_;
@@ -345,6 +350,142 @@ bool ProcessGone(long pid) {
   if (!std::getline(in, stat)) return false;
   const size_t paren = stat.rfind(')');
   return paren != std::string::npos && paren + 2 < stat.size() && stat[paren + 2] == 'Z';
+}
+
+void SplitPath(const std::string& path, std::string* dir, std::string* name) {
+  const size_t slash = path.rfind('/');
+  if (slash == std::string::npos) {
+    *dir = ".";
+    *name = path;
+  } else {
+    *dir = slash == 0 ? "/" : path.substr(0, slash);
+    *name = path.substr(slash + 1);
+  }
+}
+
+StatusOr<std::string> ReadTextFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return NotFoundError(path + ": cannot open for reading");
+  std::ostringstream s;
+  s << in.rdbuf();
+  if (in.bad()) return IoError(path + ": read failed");
+  return s.str();
+}
+
+namespace {
+
+std::string JoinPath(const std::string& dir, const std::string& name) {
+  return (dir == "/" ? "" : dir) + "/" + name;
+}
+
+bool AllOf(const std::string& s, size_t from, bool (*accept)(char)) {
+  for (size_t i = from; i < s.size(); ++i)
+    if (!accept(s[i])) return false;
+  return true;
+}
+bool IsAlnum(char c) {
+  return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z');
+}
+bool IsLowerHex(char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); }
+
+// What kind of temporary `rest` (the entry's name after ".NAME.tmp-") names:
+// its process id and whether it is a directory's; pid 0 when none.
+struct TempName {
+  long pid = 0;
+  bool directory = false;
+};
+TempName ParseTempName(std::string rest) {
+  const size_t dash = rest.find('-');
+  if (dash == std::string::npos || dash == 0 || dash > 10) return {};
+  if (rest.find_first_not_of("0123456789") != dash) return {};
+  const long pid = std::strtol(rest.c_str(), nullptr, 10);
+  if (rest.size() == dash + 7 && AllOf(rest, dash + 1, IsAlnum)) return {pid, false};
+  if (rest.size() > 4 && rest.compare(rest.size() - 4, 4, ".old") == 0) rest.resize(rest.size() - 4);
+  if (rest.size() == dash + 9 && AllOf(rest, dash + 1, IsLowerHex)) return {pid, true};
+  return {};
+}
+
+}  // namespace
+
+void RemoveStaleTemporaries(const std::string& dir, const std::string& name) {
+  const std::string prefix = "." + name + ".tmp-";
+  DIR* d = opendir(dir.c_str());
+  if (d == nullptr) return;
+  while (const dirent* e = readdir(d)) {
+    const std::string entry = e->d_name;
+    if (entry.compare(0, prefix.size(), prefix) != 0) continue;
+    const TempName temp = ParseTempName(entry.substr(prefix.size()));
+    if (temp.pid <= 0 || temp.pid == long(getpid())) continue;
+    if (!ProcessGone(temp.pid)) continue;  // alive (or not ours to judge)
+    const std::string path = JoinPath(dir, entry);
+    struct stat st;
+    if (lstat(path.c_str(), &st) != 0) continue;
+    if (!temp.directory && S_ISREG(st.st_mode)) {
+      unlink(path.c_str());
+    } else if (temp.directory && S_ISDIR(st.st_mode)) {
+      std::error_code ec;
+      std::filesystem::remove_all(path, ec);
+    }
+  }
+  closedir(d);
+}
+
+StatusOr<std::string> CreateTemporary(const std::string& target, bool directory) {
+  std::string dir, name;
+  SplitPath(target, &dir, &name);
+  RemoveStaleTemporaries(dir, name);
+  const std::string prefix =
+      JoinPath(dir, "." + name + ".tmp-" + std::to_string(long(getpid())) + "-");
+  if (directory) {
+    std::random_device rd;
+    char suffix[16];
+    snprintf(suffix, sizeof(suffix), "%08x", unsigned(rd()));
+    const std::string path = prefix + suffix;
+    if (mkdir(path.c_str(), 0755) != 0)
+      return ErrnoError("cannot create the temporary directory", path, errno);
+    return path;
+  }
+  std::string path = prefix + "XXXXXX";
+  const int fd = mkstemp(path.data());
+  if (fd < 0) return ErrnoError("cannot create a temporary file beside", target, errno);
+  const mode_t mask = umask(0);
+  umask(mask);
+  fchmod(fd, 0644 & ~mask);
+  close(fd);
+  return path;
+}
+
+Status PublishAtomically(const std::string& temp, const std::string& target,
+                         const std::string& what) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const bool replace_directory = fs::is_directory(fs::symlink_status(target, ec));
+  if (!replace_directory) {
+    if (rename(temp.c_str(), target.c_str()) != 0)
+      return ErrnoError("cannot rename '" + temp + "' to", target, errno);
+  } else if (renameat2(AT_FDCWD, temp.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
+    fs::remove_all(temp, ec);  // now the old one
+    if (ec)
+      return IoError("cannot remove the replaced " + what + " at '" + temp + "': " + ec.message());
+  } else if (errno == EINVAL || errno == ENOSYS || errno == ENOTSUP) {
+    // No atomic exchange here: move the old one aside, then rename.
+    const std::string old = temp + ".old";
+    if (rename(target.c_str(), old.c_str()) != 0)
+      return ErrnoError("cannot move the old " + what + " aside", target, errno);
+    if (rename(temp.c_str(), target.c_str()) != 0) {
+      const int err = errno;
+      rename(old.c_str(), target.c_str());
+      return ErrnoError("cannot rename '" + temp + "' to", target, err);
+    }
+    fs::remove_all(old, ec);
+    if (ec)
+      return IoError("cannot remove the replaced " + what + " at '" + old + "': " + ec.message());
+  } else {
+    return ErrnoError("cannot replace " + what, target, errno);
+  }
+  std::string dir, name;
+  SplitPath(target, &dir, &name);
+  return SyncDir(dir);
 }
 
 }  // namespace vox

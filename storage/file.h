@@ -1,7 +1,8 @@
 // The file layer under vox's store: read-only random access files (read
 // with pread, memory mapped, in memory, and a fault-injecting wrapper for
-// tests), an append-only writable file, and the process's disk read counter.
-// Every error names the file.
+// tests), an append-only writable file, temporaries and their atomic
+// publication, and the process's disk read counter. Every error names the
+// file.
 //
 // Thread safety: RandomAccessFile::Read and CurrentSize are thread-safe.
 // A WritableFile is used by one thread at a time. FaultInjectionFile's
@@ -129,6 +130,44 @@ StatusOr<uint64_t> ProcessIoBytes();
 // does not reap), which holds no files and writes no more. For removing the
 // temporaries of killed writers.
 bool ProcessGone(long pid);
+
+// The directory and the name of `path`: "." and `path` for a bare name, "/"
+// for a name in the root.
+void SplitPath(const std::string& path, std::string* dir, std::string* name);
+
+// The bytes of a whole (small) text file, such as cam.json; NotFound and
+// IoError name the file.
+StatusOr<std::string> ReadTextFile(const std::string& path);
+
+// Temporaries and atomic publication. An output DIR/NAME (a file or a store
+// directory) is built as a temporary beside it, synced, and published by a
+// rename, so a reader sees the old output or the whole new one, never a
+// part. The temporaries' names:
+//   .NAME.tmp-PID-XXXXXX     a file (mkstemp's six letters and digits)
+//   .NAME.tmp-PID-hhhhhhhh   a directory (eight lowercase hex digits), and
+//                            with ".old" the replaced one on its way out
+// A process killed outright cannot remove its temporaries: the next writer
+// of the same NAME removes those of processes that are gone.
+
+// Removes the temporaries of `name` in `dir` whose process is gone: entries
+// of exactly the patterns above, the files' of regular files, the
+// directories' of directories (not links). A live process's (another run
+// writing the same output), this process's and anything else stay.
+void RemoveStaleTemporaries(const std::string& dir, const std::string& name);
+
+// Creates an empty temporary file (`directory` false, mode 0644 less the
+// umask) or directory beside `target`, named as above, after removing the
+// stale temporaries of `target`. Returns its path.
+StatusOr<std::string> CreateTemporary(const std::string& target, bool directory);
+
+// Puts the finished temporary `temp` (a synced file or directory, beside
+// `target`) in place of `target` and fsyncs their directory. A file replaces
+// a file by rename(2). A directory replaces an existing one by an atomic
+// exchange (renameat2 RENAME_EXCHANGE) where the file system has it, else by
+// moving the old one aside to `temp`.old first; the old one is then removed.
+// `what` names the output in messages ("store", "level-of-detail pyramid").
+Status PublishAtomically(const std::string& temp, const std::string& target,
+                         const std::string& what);
 
 // "<what> '<path>': <strerror(err)>" as an IoError (ResourceExhausted for
 // ENOSPC/EDQUOT/EFBIG, NotFound for ENOENT).

@@ -10,13 +10,13 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <random>
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "storage/file.h"
 #include "storage/internal/format.h"
+#include "storage/store_writer.h"
 
 namespace vox {
 namespace {
@@ -307,13 +307,6 @@ class BaseReader {
   uint32_t prefetched_to_ = 0;
 };
 
-std::string TempName(const std::string& store_dir) {
-  std::random_device rd;
-  char suffix[48];
-  snprintf(suffix, sizeof(suffix), "/.lod.tmp-%d-%08x", int(getpid()), unsigned(rd()));
-  return store_dir + suffix;
-}
-
 }  // namespace
 
 int LodMaxLevel(int base_levels) { return base_levels >= 3 ? base_levels - 2 : 0; }
@@ -343,17 +336,8 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
     return InvalidArgumentError("'" + store_dir + "' is a level-of-detail store, not a base store");
   const int max_level = LodMaxLevel(base->meta().levels);
 
-  // Remove temporaries of builds whose process is gone.
-  for (const auto& e : fs::directory_iterator(store_dir, ec)) {
-    const std::string name = e.path().filename().string();
-    if (name.rfind(".lod.tmp-", 0) != 0) continue;
-    const long pid = std::atol(name.c_str() + 9);
-    if (pid > 0 && pid != long(getpid()) && ProcessGone(pid))
-      fs::remove_all(e.path(), ec);
-  }
-  const std::string temp = TempName(store_dir);
-  if (mkdir(temp.c_str(), 0755) != 0)
-    return ErrnoError("cannot create the temporary level-of-detail directory", temp, errno);
+  VOX_ASSIGN_OR_RETURN(const std::string temp,
+                       CreateTemporary(target.string(), /*directory=*/true));
   struct Cleanup {
     std::string dir;
     bool keep = false;
@@ -372,16 +356,8 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
     VOX_RETURN_IF_ERROR(cascade.Finish(&stats));
   }
   VOX_RETURN_IF_ERROR(SyncDir(temp));
-  if (exists) {
-    const std::string old = temp + ".old";
-    if (rename(target.c_str(), old.c_str()) != 0)
-      return ErrnoError("cannot move the old pyramid aside", target.string(), errno);
-    fs::remove_all(old, ec);
-  }
-  if (rename(temp.c_str(), target.c_str()) != 0)
-    return ErrnoError("cannot rename '" + temp + "' to", target.string(), errno);
+  VOX_RETURN_IF_ERROR(PublishAtomically(temp, target.string(), "level-of-detail pyramid"));
   cleanup.keep = true;
-  VOX_RETURN_IF_ERROR(SyncDir(store_dir));
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return stats;
 }

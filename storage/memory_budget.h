@@ -73,10 +73,8 @@ struct BudgetInputs {
   // in what the fixed costs leave.
   uint64_t cache_override = 0;
   // Code, libraries, stacks, allocator and decoder state of the process that
-  // do not scale with the image or the store. Measured: vox-render (2
-  // threads, 1024^2 image) held about 16 MiB besides its brick cache and
-  // the page cache, and finished with --cache-mb 1 in a 20 MiB cgroup; 24
-  // leaves a margin for more threads and other allocators.
+  // do not scale with the image or the store: a measured base plus a margin
+  // for more threads and other allocators (docs/benchmarks.md).
   uint64_t process_base = kDefaultProcessBase;
   static constexpr uint64_t kDefaultProcessBase = 24 * kMiB;
 };
@@ -85,8 +83,8 @@ struct BudgetInputs {
 struct MemoryBudget {
   uint64_t total = 0;
   uint64_t process_base = 0;   // fixed: code, libraries, stacks, allocator
-  uint64_t headroom = 0;       // 1/8 of total: fragmentation and estimates' error (1/16 measured
-                               // 10 MiB short at 256 MiB on a 922 MiB store)
+  uint64_t headroom = 0;       // 1/8 of total: fragmentation and estimates' error (1/16 was
+                               // too little: docs/benchmarks.md)
   uint64_t resident_top = 0;   // the store's top and brick table
   uint64_t tile_buffers = 0;   // one TileBuffer per thread
   uint64_t exr_writer = 0;     // compressed tiles in flight, offset table, preview rows

@@ -10,6 +10,7 @@
 #include <zstd.h>
 
 #include "storage/internal/coding.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/internal/record_windows.h"
 #include "storage/internal/store_impl.h"
@@ -123,6 +124,57 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id,
   return b;
 }
 
+namespace {
+
+// The brick table block of a store (`meta`, bricks of `depth` levels, the
+// brick file `bpath` of `brick_file_size` bytes), each row checked: its
+// record inside the file, sizes consistent, coordinates in the brick grid,
+// and the voxels summing to the metadata's. Errors name `ipath`.
+StatusOr<std::vector<BrickEntry>> DecodeBrickTable(const std::vector<uint8_t>& table_b,
+                                                   const StoreMeta& meta, int depth,
+                                                   uint64_t brick_file_size,
+                                                   const std::string& ipath,
+                                                   const std::string& bpath) {
+  auto bad = [&](const std::string& m) { return CorruptionError("'" + ipath + "': " + m); };
+  if (table_b.size() != meta.brick_count * kTableEntrySize)
+    return bad("brick table is " + std::to_string(table_b.size()) + " bytes for " +
+               std::to_string(meta.brick_count) + " bricks");
+  std::vector<BrickEntry> table(meta.brick_count);
+  uint64_t voxels = 0;
+  const uint64_t bsize = brick_file_size;
+  const uint64_t brick_grid = uint64_t(1) << meta.brick_level;
+  const size_t attr_bytes = AttrBytesPerVoxel(AttrFlags(meta));
+  for (size_t i = 0; i < table.size(); ++i) {
+    BrickEntry e = DecodeBrickEntry(table_b.data() + i * kTableEntrySize);
+    auto row = [&](const std::string& m) { return bad("brick " + std::to_string(i) + " " + m); };
+    if (e.offset < kFileHeaderSize || e.offset > bsize ||
+        uint64_t(e.stored_size) + kTrailerSize > bsize - e.offset)
+      return row("record [" + std::to_string(e.offset) + ", +" + std::to_string(e.stored_size) +
+                 ") lies outside '" + bpath + "' (" + std::to_string(bsize) + " bytes)");
+    if (e.codec != kCodecZstd && e.codec != kCodecRaw)
+      return row("has unknown codec " + std::to_string(e.codec));
+    if (e.raw_size > kMaxBrickRawBytes ||
+        e.raw_size != kBrickHeaderSize + uint64_t(e.num_cells) + uint64_t(e.voxel_count) * attr_bytes)
+      return row("sizes are inconsistent (" + std::to_string(e.raw_size) + " bytes, " +
+                 std::to_string(e.num_cells) + " cells, " + std::to_string(e.voxel_count) +
+                 " voxels)");
+    if (e.num_cells == 0 || e.voxel_count == 0 || e.num_cells > MaxCells(depth, e.voxel_count))
+      return row("has " + std::to_string(e.num_cells) + " cells for " +
+                 std::to_string(e.voxel_count) + " voxels: impossible at depth " +
+                 std::to_string(depth));
+    if (e.x >= brick_grid || e.y >= brick_grid || e.z >= brick_grid)
+      return row("coordinate lies outside the brick grid");
+    voxels += e.voxel_count;
+    table[i] = e;
+  }
+  if (depth != 0 && voxels != meta.voxel_count)
+    return bad("bricks hold " + std::to_string(voxels) + " voxels, the metadata says " +
+               std::to_string(meta.voxel_count));
+  return table;
+}
+
+}  // namespace
+
 Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
                        std::unique_ptr<RandomAccessFile> bricks) {
   const std::string& ipath = index->path();
@@ -214,40 +266,8 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
                            (bricks->size() < f.brick_file_size ? " (truncated)" : ""));
 
   // The brick table: every record inside the brick file, sizes consistent.
-  if (table_b.size() != meta_.brick_count * kTableEntrySize)
-    return bad("brick table is " + std::to_string(table_b.size()) + " bytes for " +
-               std::to_string(meta_.brick_count) + " bricks");
-  table_.resize(meta_.brick_count);
-  uint64_t voxels = 0;
-  const uint64_t bsize = f.brick_file_size;
-  const uint64_t brick_grid = uint64_t(1) << meta_.brick_level;
-  const size_t attr_bytes = AttrBytesPerVoxel(flags_);
-  for (size_t i = 0; i < table_.size(); ++i) {
-    BrickEntry e = DecodeBrickEntry(table_b.data() + i * kTableEntrySize);
-    auto row = [&](const std::string& m) { return bad("brick " + std::to_string(i) + " " + m); };
-    if (e.offset < kFileHeaderSize || e.offset > bsize ||
-        uint64_t(e.stored_size) + kTrailerSize > bsize - e.offset)
-      return row("record [" + std::to_string(e.offset) + ", +" + std::to_string(e.stored_size) +
-                 ") lies outside '" + bpath + "' (" + std::to_string(bsize) + " bytes)");
-    if (e.codec != kCodecZstd && e.codec != kCodecRaw)
-      return row("has unknown codec " + std::to_string(e.codec));
-    if (e.raw_size > kMaxBrickRawBytes ||
-        e.raw_size != kBrickHeaderSize + uint64_t(e.num_cells) + uint64_t(e.voxel_count) * attr_bytes)
-      return row("sizes are inconsistent (" + std::to_string(e.raw_size) + " bytes, " +
-                 std::to_string(e.num_cells) + " cells, " + std::to_string(e.voxel_count) +
-                 " voxels)");
-    if (e.num_cells == 0 || e.voxel_count == 0 || e.num_cells > MaxCells(depth_, e.voxel_count))
-      return row("has " + std::to_string(e.num_cells) + " cells for " +
-                 std::to_string(e.voxel_count) + " voxels: impossible at depth " +
-                 std::to_string(depth_));
-    if (e.x >= brick_grid || e.y >= brick_grid || e.z >= brick_grid)
-      return row("coordinate lies outside the brick grid");
-    voxels += e.voxel_count;
-    table_[i] = e;
-  }
-  if (!top_only && voxels != meta_.voxel_count)
-    return bad("bricks hold " + std::to_string(voxels) + " voxels, the metadata says " +
-               std::to_string(meta_.voxel_count));
+  VOX_ASSIGN_OR_RETURN(table_, DecodeBrickTable(table_b, meta_, depth_, f.brick_file_size, ipath,
+                                                bpath));
   bricks_ = std::move(bricks);
   windows_ = std::make_unique<RecordWindows>(bricks_.get(), table_);
   SetCacheCapacity(options_.cache_bytes);

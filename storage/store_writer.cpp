@@ -16,8 +16,10 @@
 #include <unordered_set>
 
 #include "storage/file.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 
 namespace vox {
 namespace {
@@ -109,37 +111,12 @@ std::string NotAStoreReason(const fs::path& dir) {
   return "";
 }
 
-// Removes temporary store directories `.NAME.tmp-PID-XXXXXXXX` (and their
-// `.old` variants) beside `target` left by processes that no longer run.
-void RemoveStaleTemporaries(const fs::path& parent, const std::string& name) {
-  const std::string prefix = "." + name + ".tmp-";
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(parent, ec)) {
-    const std::string entry = e.path().filename().string();
-    if (entry.compare(0, prefix.size(), prefix) != 0) continue;
-    std::string rest = entry.substr(prefix.size());
-    if (rest.size() > 4 && rest.compare(rest.size() - 4, 4, ".old") == 0)
-      rest.resize(rest.size() - 4);
-    const size_t dash = rest.find('-');
-    if (dash == std::string::npos || dash == 0 || dash > 10 || rest.size() != dash + 9) continue;
-    if (rest.find_first_not_of("0123456789") != dash) continue;
-    if (rest.find_first_not_of("0123456789abcdef", dash + 1) != std::string::npos) continue;
-    const long pid = std::stol(rest.substr(0, dash));
-    if (pid <= 0 || pid == long(getpid())) continue;
-    if (!ProcessGone(pid)) continue;  // alive (or not ours to judge)
-    if (!e.is_directory(ec) || e.is_symlink(ec)) continue;
-    std::error_code rec;
-    fs::remove_all(e.path(), rec);
-  }
-}
-
 class StoreWriterImpl : public StoreWriter {
  public:
-  StoreWriterImpl(std::string target, std::string temp, bool replace, StoreMeta meta,
-                  WriteOptions options, uint64_t store_id)
+  StoreWriterImpl(std::string target, std::string temp, StoreMeta meta, WriteOptions options,
+                  uint64_t store_id)
       : target_(std::move(target)),
         temp_(std::move(temp)),
-        replace_(replace),
         meta_(std::move(meta)),
         options_(options),
         store_id_(store_id),
@@ -384,35 +361,10 @@ class StoreWriterImpl : public StoreWriter {
     }
 
     // Into place: swap atomically with an existing store, or rename.
-    std::error_code ec;
-    if (replace_ && fs::exists(target_, ec)) {
-      if (renameat2(AT_FDCWD, temp_.c_str(), AT_FDCWD, target_.c_str(), RENAME_EXCHANGE) == 0) {
-        fs::remove_all(temp_, ec);  // now the old store
-      } else if (errno == EINVAL || errno == ENOSYS || errno == ENOTSUP) {
-        // No atomic exchange here: move the old store aside, then rename.
-        std::string old = temp_ + ".old";
-        if (rename(target_.c_str(), old.c_str()) != 0)
-          return ErrnoError("cannot move the old store aside", target_, errno);
-        if (rename(temp_.c_str(), target_.c_str()) != 0) {
-          int err = errno;
-          rename(old.c_str(), target_.c_str());
-          return ErrnoError("cannot rename '" + temp_ + "' to", target_, err);
-        }
-        fs::remove_all(old, ec);
-      } else {
-        return ErrnoError("cannot replace store", target_, errno);
-      }
-      if (ec)
-        return IoError("cannot remove the replaced store at '" + temp_ + "': " + ec.message());
-    } else if (rename(temp_.c_str(), target_.c_str()) != 0) {
-      return ErrnoError("cannot rename '" + temp_ + "' to", target_, errno);
-    }
-    fs::path parent = fs::path(target_).parent_path();
-    return SyncDir(parent.empty() ? "." : parent.string());
+    return PublishAtomically(temp_, target_, "store");
   }
 
   const std::string target_, temp_;
-  const bool replace_;
   StoreMeta meta_;
   const WriteOptions options_;
   const uint64_t store_id_;
@@ -448,7 +400,6 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
   if (target.empty()) return InvalidArgumentError("empty store path");
   fs::path tp(target);
   std::error_code ec;
-  bool replace = false;
   auto st = fs::symlink_status(tp, ec);
   if (!ec && fs::exists(st)) {
     if (!options.force)
@@ -464,23 +415,18 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
         return InvalidArgumentError("'" + target + "' is not a vox store (" + why +
                                     "); --force replaces only a vox store or an empty directory");
     }
-    replace = true;
   }
   fs::path parent = tp.parent_path();
   if (parent.empty()) parent = ".";
   if (!fs::is_directory(parent, ec))
     return NotFoundError("cannot create store '" + target + "': directory '" + parent.string() +
                          "' does not exist");
-  RemoveStaleTemporaries(parent, tp.filename().string());
   std::random_device rd;
   uint64_t id = (uint64_t(rd()) << 32) ^ rd() ^
                 uint64_t(std::chrono::steady_clock::now().time_since_epoch().count());
-  char suffix[40];
-  snprintf(suffix, sizeof(suffix), ".tmp-%d-%08x", int(getpid()), unsigned(id));
-  std::string temp = (parent / ("." + tp.filename().string() + suffix)).string();
-  if (mkdir(temp.c_str(), 0755) != 0)
-    return ErrnoError("cannot create temporary directory for store", temp, errno);
-  auto w = std::make_unique<StoreWriterImpl>(target, temp, replace, meta, options,
+  StatusOr<std::string> temp = CreateTemporary(target, /*directory=*/true);
+  if (!temp.ok()) return temp.status().WithContext("store '" + target + "'");
+  auto w = std::make_unique<StoreWriterImpl>(target, *temp, meta, options,
                                              options.store_id != 0 ? options.store_id : id);
   Status init = w->Init();
   if (!init.ok()) return init.WithContext("writing store '" + target + "'");

@@ -46,8 +46,6 @@ namespace {
 using openvdb::Coord;
 using openvdb::CoordBBox;
 
-std::string Quote(const std::string& s) { return "'" + s + "'"; }
-
 template <class ValueT>
 class GridIngest {
  public:

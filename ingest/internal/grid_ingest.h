@@ -12,6 +12,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <string>
 
 #include "core/status.h"
 #include "ingest/ingest.h"
@@ -19,6 +20,9 @@
 #include "ingest/internal/vdb_layout.h"
 
 namespace vox::ingest_internal {
+
+// A name as the ingest's messages quote it: 'name'.
+inline std::string Quote(const std::string& s) { return "'" + s + "'"; }
 
 struct Context {
   const IngestOptions& options;

@@ -28,6 +28,7 @@
 #include "ingest/internal/leaf_values.h"
 #include "ingest/internal/vdb_topology.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 
 namespace vox::ingest_internal {
 

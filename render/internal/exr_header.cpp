@@ -8,9 +8,7 @@
 #include <fstream>
 #include <map>
 
-#include "render/camera.h"
-#include "render/frame.h"
-#include "render/tiles.h"
+#include "render/limits.h"
 
 namespace vox {
 namespace {
@@ -162,8 +160,7 @@ struct Geometry {
 
 // OpenEXR allocates by the tile description and the data window (a tile's
 // buffer, the table of tile offsets) before reading any pixel: values beyond
-// what vox writes are refused here (the limits of render/frame.h,
-// render/camera.h and render/tiles.h).
+// what vox writes are refused here (the limits of render/limits.h).
 Status CheckGeometry(const Geometry& g, const std::string& path, const std::string& part) {
   const std::string where = path + ": EXR header" + part + ": ";
   if (g.has_tiles && (g.tile_x < 1 || g.tile_y < 1 || g.tile_x > uint32_t(kMaxTileSize) ||

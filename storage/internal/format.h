@@ -1,6 +1,8 @@
-// The constants, on-disk records and brick codec of vox's store format
-// (storage/FORMAT.md is the specification; keep the two in step). Private to
-// storage and its tests. Stateless functions and immutable values; thread-safe.
+// The constants and on-disk records of vox's store format: file header,
+// footer, block trailers, metadata block and brick table rows
+// (storage/FORMAT.md is the specification; keep the two in step). The brick
+// codec is storage/internal/brick_codec.h. Private to storage and its tests.
+// Stateless functions and immutable values; thread-safe.
 #ifndef VOX_STORAGE_INTERNAL_FORMAT_H_
 #define VOX_STORAGE_INTERNAL_FORMAT_H_
 
@@ -14,7 +16,7 @@
 
 #include "core/octree.h"
 #include "core/status.h"
-#include "storage/store.h"
+#include "storage/meta.h"
 
 namespace vox::storage_internal {
 
@@ -91,79 +93,6 @@ struct BrickEntry {
 };
 void EncodeBrickEntry(const BrickEntry& e, std::string* dst);
 BrickEntry DecodeBrickEntry(const uint8_t* p);
-
-// The most cells a `depth`-level pool over `voxels` voxels can have:
-// sum over levels l < depth of min(8^l, voxels). Zero when voxels exceed 8^depth.
-uint64_t MaxCells(int depth, uint64_t voxels);
-
-// Octahedral normal in 2 x 16 bits (u | v << 16), each a multiple of
-// 2^(16 - bits). A zero or non-finite vector encodes as +z.
-uint32_t EncodeOctNormal(const glm::vec3& n, int bits = 16);
-glm::vec3 DecodeOctNormal(uint32_t code);
-
-// Coverage as a 16-bit fraction: round(c * 65535), at least 1 (an occupied
-// cell is never empty); decoded as q / 65535.
-inline uint16_t EncodeCoverage(float c) {
-  if (!(c > 0)) return 1;  // an occupied cell has some coverage
-  return c >= 1 ? 65535 : uint16_t(std::clamp(std::lround(double(c) * 65535.0), 1L, 65535L));
-}
-inline float DecodeCoverage(uint16_t q) { return float(q) / 65535.0f; }
-
-// A voxel's attributes from planar attribute bytes (`count` voxels).
-VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
-                               uint32_t index);
-// Appends the planar attribute bytes of `attrs` (in payload order).
-void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
-                     int normal_bits = 16);
-
-// The decompressed contents of a brick: header, one child mask per cell in
-// pre-order, planar attributes. `cells` is a BuildCells pool (pre-order).
-std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
-                           int depth, uint8_t flags, int normal_bits = 16);
-
-// A decoded brick as the cache holds it: its pool in traversal form.
-struct DecodedBrick {
-  std::vector<CompactCell> cells;
-  std::vector<uint8_t> attr_planes;
-  uint32_t voxel_count = 0;
-  uint8_t flags = 0;
-  // What it costs in memory: this struct, its two heap blocks (capacity, as
-  // allocated), and the shared_ptr control block make_shared puts beside it.
-  // (The cache adds its own per-entry overhead; see ShardedPageCache.)
-  size_t charge() const {
-    return sizeof(DecodedBrick) + cells.capacity() * sizeof(CompactCell) +
-           attr_planes.capacity() + kOverheadBytes;
-  }
-  // Bookkeeping beside the data: the shared_ptr control block make_shared
-  // puts in front of this struct (16), a malloc header on each of the three
-  // allocations (3 x 16), and the cache's entry: a hash-map node holding the
-  // key, the shared_ptr, the charge and the LRU iterator (64 with the malloc
-  // header), its bucket pointer (8), and the LRU list node (32).
-  static constexpr size_t kOverheadBytes = 16 + 3 * 16 + 64 + 8 + 32;
-};
-
-// Rebuilds the cell pool (level order, as LevelOrderPool would make it from
-// the BuildCells pool) from raw brick bytes, checking every field against
-// the table row and the store's depth and flags. The pool is valid by
-// construction: indices in range, leaves exactly at depth.
-// Errors are Corruption without a file name (the caller adds it).
-StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_t n,
-                                                       const BrickEntry& entry, int depth,
-                                                       uint8_t flags);
-
-// Checks a `depth`-level pool laid out as BuildCells does (pre-order): each
-// cell ref is the next index in pre-order and every cell is reached once;
-// refs at the last level are brick refs < limit (bricks_at_last_level) or
-// leaf refs with payload < limit. Linear time; never reads out of bounds.
-Status ValidatePool(const Cell* cells, size_t n, int depth, bool bricks_at_last_level,
-                    uint64_t limit);
-
-// Checks a `depth`-level traversal-form (level-order) pool of `n` cells:
-// every cell has a child, each level's cells are the previous level's
-// children in order (each first index is where the cell's children begin),
-// every cell is reached once, and the last level's children number at most
-// `limit` payloads. Linear time; never reads out of bounds.
-Status ValidateLevelOrderPool(const CompactCell* cells, size_t n, int depth, uint64_t limit);
 
 }  // namespace vox::storage_internal
 

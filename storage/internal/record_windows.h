@@ -35,10 +35,8 @@ class RecordWindows {
   // The memory the window cache may hold. The window size is the largest
   // power of two of at most 1/128 of it, at most kMaxWindow; below kMinWindow
   // (a cache under 8 MiB) windows are off and every record is read alone.
-  // 128 windows in the cache: replaying a full view of the 8192^3 sphere's
-  // reads, a cache of 8 to 64 MiB read 1.19-1.33x the records' bytes (64
-  // windows: 1.28-1.49x; 32: up to 2.5x, windows evicted before their
-  // neighbours were asked for).
+  // 128 windows in the cache: fewer are evicted before their neighbours are
+  // asked for (the replayed reads that chose it: docs/benchmarks.md).
   void SetCapacity(uint64_t bytes);
   uint64_t capacity() const { return capacity_; }
   uint64_t window_bytes() const { return window_; }

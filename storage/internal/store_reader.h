@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "storage/file.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/internal/record_windows.h"
 #include "storage/page_cache.h"
@@ -89,7 +90,7 @@ class StoreImpl : public Store {
     s.hits = c.hits;
     s.misses = c.misses;
     s.evictions = c.evictions;
-    s.bytes_mapped = bricks_ ? bricks_->size() : 0;
+    s.brick_file_bytes = bricks_ ? bricks_->size() : 0;
     s.bytes_decompressed = bytes_decompressed_.load(std::memory_order_relaxed);
     s.bytes_resident = c.charge + (windows_ ? windows_->charge() : 0);
     s.capacity = c.capacity + (windows_ ? windows_->capacity() : 0);

@@ -23,6 +23,7 @@
 #include "render/exr.h"
 #include "render/tiles.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 #include "tests/common/run_command.h"
 #include "tests/common/spawn.h"
 

@@ -25,6 +25,7 @@
 #include "core/shapes.h"
 #include "render/job.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 #include "tests/fuzz/fuzz_input.h"
 
 namespace fs = std::filesystem;

@@ -22,9 +22,10 @@
 #include "core/tracer.h"
 #include "ingest/ingest.h"
 #include "storage/store.h"
-#include "tools/study/reference.h"
+#include "storage/store_writer.h"
 #include "tests/core/test_util.h"
 #include "tests/ingest/ingest_test_util.h"
+#include "tools/study/reference.h"
 
 namespace vox {
 namespace {

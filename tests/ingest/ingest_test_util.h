@@ -26,6 +26,7 @@
 #include "core/status.h"
 #include "ingest/ingest.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 
 namespace vox::testutil {
 

@@ -18,6 +18,7 @@
 
 #include "render/exr.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 #include "tests/common/cgroup_util.h"
 
 namespace vox::testing {

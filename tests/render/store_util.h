@@ -11,8 +11,9 @@
 #include <tuple>
 #include <vector>
 
-#include "render/volume.h"
+#include "render/grid_transform.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 #include "tests/render/test_volumes.h"
 
 namespace vox::testing {

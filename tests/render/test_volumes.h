@@ -9,7 +9,7 @@
 #include <memory>
 #include <vector>
 
-#include "render/volume.h"
+#include "render/grid_transform.h"
 
 namespace vox::testing {
 

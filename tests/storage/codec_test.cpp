@@ -7,6 +7,7 @@
 #include <random>
 
 #include "core/shapes.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/internal/store_impl.h"
 #include "tests/storage/test_util.h"

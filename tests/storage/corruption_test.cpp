@@ -10,6 +10,7 @@
 #include "storage/crc32c.h"
 #include "storage/file.h"
 #include "storage/internal/coding.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/internal/store_impl.h"
 #include "tests/storage/test_util.h"

@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "storage/file.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/internal/store_impl.h"
 #include "tests/storage/test_util.h"

@@ -11,8 +11,10 @@
 
 #include "core/tracer.h"
 #include "storage/crc32c.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 #include "tests/storage/test_util.h"
 
 namespace vox {

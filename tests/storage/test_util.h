@@ -18,6 +18,7 @@
 
 #include "core/shapes.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 
 namespace vox::storage_test {
 

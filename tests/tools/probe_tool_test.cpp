@@ -15,6 +15,7 @@
 #include "core/core.h"
 #include "core/shapes.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 
 namespace vox {
 namespace {

@@ -16,7 +16,7 @@
 //         index-space ray, writing the same RGBAZ tile buffers. The index ray
 //         starts half a voxel up on each axis so that NanoVDB's voxel ijk, the
 //         cell [ijk, ijk + 1), is the cell OpenVDB's voxel ijk covers (centred
-//         on ijk), as vox's grid space has it (render/volume.h).
+//         on ijk), as vox's grid space has it (render/grid_transform.h).
 // After one warm-up frame each, --rounds warm frames of each run alternately
 // (vox, nano, vox, nano, ...); the median of each gives rays/s and the ratio.
 //
@@ -61,12 +61,12 @@
 #include "ingest/ingest.h"
 #include "render/camera.h"
 #include "render/frame.h"
+#include "render/grid_transform.h"
 #include "render/job.h"
 #include "render/lod.h"
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "render/tiles.h"
-#include "render/volume.h"
 #include "storage/store.h"
 #include "tools/common/flags.h"
 

@@ -30,6 +30,7 @@
 #include "core/tracer.h"
 #include "storage/store.h"
 #include "storage/store_info.h"
+#include "storage/store_writer.h"
 #include "tools/common/flags.h"
 
 namespace {

@@ -12,11 +12,11 @@
 #include <map>
 
 #include "core/shapes.h"
-#include "tools/study/variants.h"
-#include "render/volume.h"
-#include "tools/study/reference.h"
+#include "render/grid_transform.h"
 #include "tests/core/test_util.h"
 #include "tools/bench/vox_bench.h"
+#include "tools/study/reference.h"
+#include "tools/study/variants.h"
 
 namespace vox::bench {
 namespace {

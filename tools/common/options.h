@@ -1,13 +1,11 @@
 // The options of vox-ingest, vox-render and vox-probe, applied one flag at a
-// time from (flag, text value) pairs, and vox-probe's store opening and ray
-// tracing (vox::Prober). The tools' flag loops and the Python module
+// time from (flag, text value) pairs (vox-probe's tracing is
+// tools/common/prober.h). The tools' flag loops and the Python module
 // (tools/python) both use them, so the two accept the same options and
 // refuse bad ones with the same messages. Flags are spelled as on the
 // command line ("--zstd-level", "-o"); a switch's value is ignored.
 //
-// Thread safety: the Apply and Check functions are pure; a Prober is
-// immutable once opened and Trace is thread-compatible (one thread at a
-// time: vox-probe traces on one thread).
+// Thread safety: the Apply and Check functions are pure.
 #ifndef VOX_TOOLS_COMMON_OPTIONS_H_
 #define VOX_TOOLS_COMMON_OPTIONS_H_
 
@@ -58,29 +56,6 @@ struct ProbeOptions {
 };
 FlagArity ProbeFlagArity(std::string_view flag);
 Status ApplyProbeFlag(ProbeOptions* o, const std::string& flag, const std::string& value);
-
-// vox-probe's volume (a store under the memory budget, or a generated shape)
-// and tracer (split, fixed-point word), ready to trace index-space rays.
-class Prober {
- public:
-  // Errors carry, as their message, the line vox-probe prints.
-  static StatusOr<std::unique_ptr<Prober>> Open(const ProbeOptions& options);
-  ~Prober();
-  // The first hit of an index-space ray (voxel in index coordinates, t along
-  // the ray); nullopt on a miss. Errors: the ray is invalid (ValidateRay).
-  StatusOr<std::optional<Hit>> Trace(const Ray& index_ray, TraceCounters* counters) const;
-  // With --lod: the ray's first stop over the pyramid (render/lod.h). A stop
-  // at a coarse cell of level *level > 0 has voxel = the cell's first voxel
-  // (index coordinates); rays the cone keeps at level 0 answer as Trace.
-  bool lod() const;
-  StatusOr<std::optional<Hit>> TraceLod(const Ray& index_ray, TraceCounters* counters,
-                                        LodCounters* lod_counters, int* level) const;
-
- private:
-  struct Impl;
-  explicit Prober(std::unique_ptr<Impl> impl);
-  std::unique_ptr<Impl> impl_;
-};
 
 }  // namespace vox
 

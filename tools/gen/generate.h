@@ -30,6 +30,7 @@
 
 #include "core/status.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 
 namespace vox::gen {
 

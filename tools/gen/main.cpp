@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "tools/common/flags.h"
+#include "tools/common/tool_main.h"
 #include "tools/gen/generate.h"
 #include "tools/gen/shapes.h"
 
@@ -61,7 +62,7 @@ double Now() {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int RunTool(int argc, char** argv) {
   vox::gen::GenerateOptions o;
   bool quiet = false, have_size = false;
   std::vector<std::string> positional;
@@ -157,3 +158,5 @@ int main(int argc, char** argv) {
   }
   return 0;
 }
+
+int main(int argc, char** argv) { return vox::ToolMain("vox-gen", argc, argv, RunTool); }

@@ -5,13 +5,13 @@
 // Exit status: 0 on success, 1 when the store cannot be read, 2 on bad usage.
 #include <cstdint>
 #include <cstdio>
-#include <new>
 #include <optional>
 #include <string>
 
 #include "storage/store_budget.h"
 #include "storage/store_info.h"
 #include "tools/common/flags.h"
+#include "tools/common/tool_main.h"
 
 namespace {
 
@@ -103,13 +103,4 @@ static int RunTool(int argc, char** argv) {
   return 0;
 }
 
-// Allocation failures anywhere (an image, a brick, a table sized from input)
-// end with a clear message and exit 1, never an abort.
-int main(int argc, char** argv) {
-  try {
-    return RunTool(argc, argv);
-  } catch (const std::bad_alloc&) {
-    fprintf(stderr, "vox-info: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return vox::ToolMain("vox-info", argc, argv, RunTool); }

@@ -3,32 +3,19 @@
 //              [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B] [--threads N]
 //              [--memory-mb N] [--max-voxels N] [--no-lod] [--force] [--quiet]
 //   vox-ingest --add-lod store/ [--force] [--quiet]
-// Exit codes: 0 done, 1 the ingest failed (or crashed: see below), 2 bad
-// command line, 128+N killed by signal N (SIGINT, SIGTERM, SIGKILL: the
+// Exit codes: 0 done, 1 the ingest failed (or its child process crashed),
+// 2 bad command line, 128+N killed by signal N (SIGINT, SIGTERM, SIGKILL: the
 // temporary store directory is removed).
 //
-// The ingest runs in a forked child. OpenVDB's reader can crash on a corrupt
-// .vdb (a segfault in its decompression or topology code), and a file
-// truncated while it is read raises SIGBUS; the parent sees the child die by
-// a signal, reports it naming the file, removes the child's temporary store
-// and exits 1. The parent forwards SIGINT and SIGTERM to the child; if the
-// parent itself is SIGKILLed, the child is killed with it (PR_SET_PDEATHSIG)
-// and the next run removes the temporary directory it leaves.
-#include <pthread.h>
-#include <signal.h>
-#include <sys/prctl.h>
-#include <sys/wait.h>
+// The ingest runs in a forked child under tools/common/supervisor.h, which
+// reports a crash of the child (a signal, a sanitizer's exit) as a crash,
+// naming the file and the signal, and removes the child's temporary store.
 #include <unistd.h>
 
-#include <cmath>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
-#include <filesystem>
-#include <new>
+#include <memory>
 #include <optional>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "ingest/ingest.h"
@@ -37,6 +24,8 @@
 #include "storage/memory_budget.h"
 #include "tools/common/flags.h"
 #include "tools/common/options.h"
+#include "tools/common/supervisor.h"
+#include "tools/common/tool_main.h"
 
 namespace {
 
@@ -69,126 +58,6 @@ constexpr char kUsage[] =
 int UsageError(const std::string& message) {
   std::fprintf(stderr, "vox-ingest: %s\n%s", message.c_str(), kUsage);
   return 2;
-}
-
-// SIGINT and SIGTERM (a Slurm time-out) are blocked in every thread and
-// taken by one thread with sigwait, which is an ordinary thread: it removes
-// this process's temporary store directory `.NAME.tmp-PID-*` beside the
-// output (storage/FORMAT.md, "Writing") and exits with 128 + the signal.
-void RemoveOwnTemporaries(const std::string& output, pid_t pid) {
-  namespace fs = std::filesystem;
-  std::string target = output;
-  while (target.size() > 1 && target.back() == '/') target.pop_back();
-  fs::path tp(target), parent = tp.parent_path();
-  if (parent.empty()) parent = ".";
-  const std::string prefix =
-      "." + tp.filename().string() + ".tmp-" + std::to_string(pid) + "-";
-  for (int attempt = 0; attempt < 3; ++attempt) {  // writers may still be adding files
-    std::error_code ec;
-    bool left = false;
-    for (const auto& e : fs::directory_iterator(parent, ec)) {
-      if (e.path().filename().string().compare(0, prefix.size(), prefix) != 0) continue;
-      std::error_code rec;
-      fs::remove_all(e.path(), rec);
-      left = left || fs::exists(e.path(), rec);
-    }
-    if (!left) return;
-  }
-}
-
-void StartSignalThread(const std::string& output) {
-  sigset_t set;
-  sigemptyset(&set);
-  sigaddset(&set, SIGINT);
-  sigaddset(&set, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &set, nullptr);  // inherited by every thread created later
-  std::thread([set, output] {
-    int sig = 0;
-    if (sigwait(&set, &sig) != 0) return;
-    std::fprintf(stderr, "\nvox-ingest: %s: removing the unfinished store and exiting\n",
-                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)");
-    RemoveOwnTemporaries(output, getpid());
-    std::_Exit(128 + sig);
-  }).detach();
-}
-
-// Test hooks: with VOX_INGEST_TEST_STALL set, the first progress report
-// stalls the ingest (the temporary store exists), so tests can signal a
-// real ingest mid-way; with VOX_INGEST_TEST_CRASH=N it raises signal N
-// there instead (a crash while reading, at a known point).
-class StallingProgress : public vox::ProgressSink {
- public:
-  explicit StallingProgress(vox::ProgressSink* inner, int crash_signal)
-      : inner_(inner), crash_signal_(crash_signal) {}
-  void Message(std::string_view line) override {
-    if (inner_) inner_->Message(line);
-  }
-  void Progress(uint64_t done, uint64_t total, uint64_t voxels) override {
-    if (crash_signal_ > 0) {
-      signal(crash_signal_, SIG_DFL);
-      raise(crash_signal_);
-    }
-    std::fprintf(stderr, "vox-ingest: test stall\n");
-    for (;;) pause();
-    if (inner_) inner_->Progress(done, total, voxels);
-  }
-  void Done() override {
-    if (inner_) inner_->Done();
-  }
-
- private:
-  vox::ProgressSink* inner_;
-  int crash_signal_ = 0;
-};
-
-volatile sig_atomic_t g_child = 0;
-
-extern "C" void ForwardToChild(int sig) {
-  if (g_child > 0) kill(pid_t(g_child), sig);
-}
-
-// Runs `ingest` in a forked child and returns its exit code; a child killed
-// by a signal is reported (naming `input`) and its temporary store removed.
-template <typename F>
-int RunInChild(const std::string& input, const std::string& output, F ingest) {
-  std::fflush(nullptr);
-  const pid_t parent = getpid();
-  const pid_t child = fork();
-  if (child < 0) return ingest();  // cannot fork: run unprotected
-  if (child == 0) {
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (getppid() != parent) _exit(128 + SIGKILL);  // the parent died before prctl
-    const int code = ingest();
-    std::fflush(nullptr);
-    _exit(code);
-  }
-  g_child = child;
-  struct sigaction sa;
-  std::memset(&sa, 0, sizeof sa);
-  sa.sa_handler = ForwardToChild;
-  sigemptyset(&sa.sa_mask);
-  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
-  int status = 0;
-  while (waitpid(child, &status, 0) < 0) {
-    if (errno != EINTR) {
-      std::perror("vox-ingest: waitpid");
-      return 1;
-    }
-  }
-  if (WIFEXITED(status)) return WEXITSTATUS(status);
-  const int sig = WIFSIGNALED(status) ? WTERMSIG(status) : SIGKILL;
-  RemoveOwnTemporaries(output, child);
-  if (sig == SIGKILL || sig == SIGINT || sig == SIGTERM || sig == SIGHUP) {
-    std::fprintf(stderr, "vox-ingest: the ingest was killed by signal %d (%s)%s; its unfinished "
-                 "store is removed\n", sig, strsignal(sig),
-                 sig == SIGKILL ? ", perhaps for lack of memory" : "");
-    return 128 + sig;
-  }
-  std::fprintf(stderr,
-               "vox-ingest: %s: OpenVDB crashed reading the grid (signal %d, %s): the file is "
-               "corrupt or truncated\n",
-               input.c_str(), sig, strsignal(sig));
-  return 1;
 }
 
 }  // namespace
@@ -252,19 +121,17 @@ static int RunTool(int argc, char** argv) {
   o.output = positional[1];
   if (vox::Status s = vox::CheckIngestCommand(command); !s.ok()) return UsageError(s.message());
 
-  return RunInChild(o.input, o.output, [&] { return IngestAndReport(o, command.limits, quiet); });
+  return vox::RunSupervised(o.input, o.output,
+                            [&] { return IngestAndReport(o, command.limits, quiet); });
 }
 
 static int IngestAndReport(const vox::IngestOptions& o, const vox::IngestLimits& limits,
                            bool quiet) {
-  StartSignalThread(o.output);
+  vox::StartSignalThread(o.output);
   std::unique_ptr<vox::ProgressSink> progress;
   if (!quiet) progress = vox::MakeStderrProgress(isatty(STDERR_FILENO) != 0);
-  std::unique_ptr<vox::ProgressSink> stall;
-  const char* crash = std::getenv("VOX_INGEST_TEST_CRASH");
-  if (std::getenv("VOX_INGEST_TEST_STALL") != nullptr || crash != nullptr)
-    stall = std::make_unique<StallingProgress>(progress.get(), crash ? std::atoi(crash) : 0);
-  auto stats = vox::Ingest(o, limits, stall ? stall.get() : progress.get());
+  const std::unique_ptr<vox::ProgressSink> test_hook = vox::MakeTestHookProgress(progress.get());
+  auto stats = vox::Ingest(o, limits, test_hook ? test_hook.get() : progress.get());
   if (!stats.ok()) {
     std::fprintf(stderr, "vox-ingest: %s\n", stats.status().ToString().c_str());
     return 1;
@@ -285,13 +152,4 @@ static int IngestAndReport(const vox::IngestOptions& o, const vox::IngestLimits&
   return 0;
 }
 
-// Allocation failures anywhere (an image, a brick, a table sized from input)
-// end with a clear message and exit 1, never an abort.
-int main(int argc, char** argv) {
-  try {
-    return RunTool(argc, argv);
-  } catch (const std::bad_alloc&) {
-    fprintf(stderr, "vox-ingest: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return vox::ToolMain("vox-ingest", argc, argv, RunTool); }

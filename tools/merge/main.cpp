@@ -1,14 +1,15 @@
 // vox-merge: assembles the partial EXRs of `vox-render --tiles I/N` into one
 // image. Parses flags and calls vox::MergeParts.
 #include <cstdio>
-#include <new>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "render/exr.h"
 #include "render/merge.h"
+#include "storage/atomic_file.h"
 #include "tools/common/flags.h"
+#include "tools/common/tool_main.h"
 
 namespace {
 
@@ -65,13 +66,4 @@ static int RunTool(int argc, char** argv) {
   return 0;
 }
 
-// Allocation failures anywhere (an image, a brick, a table sized from input)
-// end with a clear message and exit 1, never an abort.
-int main(int argc, char** argv) {
-  try {
-    return RunTool(argc, argv);
-  } catch (const std::bad_alloc&) {
-    fprintf(stderr, "vox-merge: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return vox::ToolMain("vox-merge", argc, argv, RunTool); }

@@ -22,6 +22,7 @@
 #include "core/ray_text.h"
 #include "tools/common/flags.h"
 #include "tools/common/options.h"
+#include "tools/common/prober.h"
 
 namespace {
 

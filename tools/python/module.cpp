@@ -31,6 +31,7 @@
 #include "render/job.h"
 #include "storage/store_info.h"
 #include "tools/common/options.h"
+#include "tools/common/prober.h"
 
 namespace py = pybind11;
 

@@ -2,16 +2,13 @@
 // Parses flags into RenderJobOptions (tools/common/options.h) and calls
 // vox::RunRenderJob.
 #include <cstdio>
-#include <new>
 #include <optional>
 #include <string>
 
-#include "render/camera.h"
 #include "render/job.h"
-#include "render/lod.h"
-#include "storage/memory_budget.h"
 #include "tools/common/flags.h"
 #include "tools/common/options.h"
+#include "tools/common/tool_main.h"
 
 namespace {
 
@@ -102,13 +99,4 @@ static int RunTool(int argc, char** argv) {
   return 0;
 }
 
-// Allocation failures anywhere (an image, a brick, a table sized from input)
-// end with a clear message and exit 1, never an abort.
-int main(int argc, char** argv) {
-  try {
-    return RunTool(argc, argv);
-  } catch (const std::bad_alloc&) {
-    fprintf(stderr, "vox-render: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return vox::ToolMain("vox-render", argc, argv, RunTool); }

@@ -24,6 +24,7 @@
 #include "core/octree.h"
 #include "core/ray.h"
 #include "core/status.h"
+#include "core/tracer.h"
 
 namespace vox {
 
@@ -31,16 +32,8 @@ template <class Real>
 class AwTracer {
  public:
   static StatusOr<AwTracer> Create(const OctreeView& tree, int n1) {
-    if (tree.levels < 1 || tree.levels > kMaxLevels || tree.top == nullptr)
-      return InvalidArgumentError("octree has " + std::to_string(tree.levels) +
-                                  " levels; vox traces 1 to 40");
-    if (tree.brick_level < 1 || tree.brick_level > tree.levels)
-      return InvalidArgumentError("octree brick level " + std::to_string(tree.brick_level) +
-                                  " outside 1.." + std::to_string(tree.levels));
-    int n2 = tree.levels - n1;
-    if (n1 < 1 || n1 > kMaxStepLevels || n2 < 0 || n2 > kMaxStepLevels)
-      return InvalidArgumentError("split " + std::to_string(n1) + "+" + std::to_string(n2) +
-                                  ": each step holds 1 to 20 levels");
+    VOX_RETURN_IF_ERROR(CheckTwoStepSplit(tree, n1));  // core/tracer.h
+    const int n2 = tree.levels - n1;
     AwTracer t;
     t.tree_ = tree;
     t.n1_ = n1;

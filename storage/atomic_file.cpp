@@ -1,13 +1,10 @@
-#include "render/internal/atomic_file.h"
+#include "storage/atomic_file.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <dirent.h>
-
 #include <cerrno>
-#include <cstdlib>
 #include <cstring>
 #include <optional>
 #include <utility>
@@ -17,53 +14,11 @@
 namespace vox {
 namespace {
 
-void SplitPath(const std::string& path, std::string* dir, std::string* name) {
-  const size_t slash = path.rfind('/');
-  if (slash == std::string::npos) {
-    *dir = ".";
-    *name = path;
-  } else {
-    *dir = slash == 0 ? "/" : path.substr(0, slash);
-    *name = path.substr(slash + 1);
-  }
-}
-
 std::string ErrnoText() { return std::strerror(errno); }
 
 Status SyncFd(int fd, const std::string& what) {
   if (fsync(fd) != 0) return IoError(what + ": fsync failed: " + ErrnoText());
   return OkStatus();
-}
-
-// Removes the temporaries `.NAME.tmp-PID-XXXXXX` (mkstemp's six characters)
-// of `name` in `dir` whose process is gone: what a killed vox-render or
-// vox-merge left. Only regular files of exactly that pattern are touched; a
-// live process's temporary (another run writing the same output) is kept.
-void RemoveStaleTemporaries(const std::string& dir, const std::string& name) {
-  const std::string prefix = "." + name + ".tmp-";
-  DIR* d = opendir(dir.c_str());
-  if (d == nullptr) return;
-  while (const dirent* e = readdir(d)) {
-    const std::string entry = e->d_name;
-    if (entry.compare(0, prefix.size(), prefix) != 0) continue;
-    const std::string rest = entry.substr(prefix.size());
-    const size_t dash = rest.find('-');
-    if (dash == std::string::npos || dash == 0 || dash > 10 || rest.size() != dash + 7) continue;
-    if (rest.find_first_not_of("0123456789") != dash) continue;
-    bool alnum = true;
-    for (size_t i = dash + 1; i < rest.size(); ++i)
-      alnum = alnum && ((rest[i] >= '0' && rest[i] <= '9') || (rest[i] >= 'a' && rest[i] <= 'z') ||
-                        (rest[i] >= 'A' && rest[i] <= 'Z'));
-    if (!alnum) continue;
-    const long pid = std::strtol(rest.c_str(), nullptr, 10);
-    if (pid <= 0 || pid == long(getpid())) continue;
-    if (!ProcessGone(pid)) continue;  // alive (or not ours to judge)
-    const std::string path = (dir == "/" ? "" : dir) + "/" + entry;
-    struct stat st;
-    if (lstat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) continue;
-    unlink(path.c_str());
-  }
-  closedir(d);
 }
 
 }  // namespace
@@ -97,23 +52,11 @@ StatusOr<AtomicFile> AtomicFile::Create(const std::string& path) {
   if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
     return InvalidArgumentError(path + ": not a regular file; this output is written to a " +
                                 "temporary beside it and renamed over it");
-  std::string dir, name;
-  SplitPath(path, &dir, &name);
-  RemoveStaleTemporaries(dir, name);
-  std::string templ =
-      (dir == "/" ? "" : dir) + "/." + name + ".tmp-" + std::to_string(long(getpid())) + "-XXXXXX";
-  int fd = mkstemp(templ.data());
-  if (fd < 0) return IoError(path + ": cannot create a temporary file: " + ErrnoText());
-  fchmod(
-      fd, 0644 & ~[] {
-        mode_t m = umask(0);
-        umask(m);
-        return m;
-      }());
-  close(fd);
+  StatusOr<std::string> temp = CreateTemporary(path, /*directory=*/false);
+  if (!temp.ok()) return IoError(path + ": " + temp.status().message());
   AtomicFile f;
   f.path_ = path;
-  f.temp_ = templ;
+  f.temp_ = *temp;
   return f;
 }
 
@@ -150,20 +93,14 @@ Status AtomicFile::Commit() {
     Abandon();
     return s;
   }
-  if (rename(temp_.c_str(), path_.c_str()) != 0) {
-    s = IoError(path_ + ": cannot rename the finished output into place: " + ErrnoText());
+  s = PublishAtomically(temp_, path_, "output");
+  if (!s.ok()) {
+    s = IoError(path_ + ": cannot put the finished output into place: " + s.message());
     Abandon();
     return s;
   }
   temp_.clear();
-  std::string dir, name;
-  SplitPath(path_, &dir, &name);
-  int dfd = open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    s = SyncFd(dfd, dir);
-    close(dfd);
-  }
-  return s;
+  return OkStatus();
 }
 
 Status WriteFileAtomically(const std::string& path, const std::string& bytes) {

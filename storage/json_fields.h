@@ -1,8 +1,9 @@
-// Typed field readers over nlohmann::json for cam.json and scene.json: each
-// error names the file and the field path ("scene.json: lights[0].color[2]
-// must be a finite number"). Stateless; thread-safe.
-#ifndef VOX_RENDER_INTERNAL_JSON_FIELDS_H_
-#define VOX_RENDER_INTERNAL_JSON_FIELDS_H_
+// Typed field readers over nlohmann::json for vox's JSON inputs (cam.json,
+// scene.json): each error names the file and the field path ("scene.json:
+// lights[0].color[2] must be a finite number"). Header-only: its users link
+// nlohmann_json. Stateless; thread-safe.
+#ifndef VOX_STORAGE_JSON_FIELDS_H_
+#define VOX_STORAGE_JSON_FIELDS_H_
 
 #include <algorithm>
 #include <cmath>
@@ -162,4 +163,4 @@ inline Status GetString(const json& obj, std::string_view key, std::string_view 
 
 }  // namespace vox::json_fields
 
-#endif  // VOX_RENDER_INTERNAL_JSON_FIELDS_H_
+#endif  // VOX_STORAGE_JSON_FIELDS_H_

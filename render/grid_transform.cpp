@@ -1,4 +1,4 @@
-#include "render/volume.h"
+#include "render/grid_transform.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,14 +1,15 @@
 // Atomic output files for vox-render and vox-merge: every output (EXR, PNG
 // preview, --stats JSON) is written to a temporary file in the target's
-// directory, named `.NAME.tmp-PID-XXXXXX`, then fsynced and renamed over the
-// target. A failed or interrupted write removes the temporary and leaves any
-// earlier file at the target untouched. A process killed outright (SIGKILL,
-// a node lost) cannot remove its temporary: the next AtomicFile for the same
-// target removes such temporaries whose process is gone.
+// directory (storage/file.h's CreateTemporary: `.NAME.tmp-PID-XXXXXX`), then
+// fsynced and published over the target (PublishAtomically). A failed or
+// interrupted write removes the temporary and leaves any earlier file at the
+// target untouched. A process killed outright (SIGKILL, a node lost) cannot
+// remove its temporary: the next AtomicFile for the same target removes such
+// temporaries whose process is gone.
 //
 // Thread safety: thread-compatible (one AtomicFile per output).
-#ifndef VOX_RENDER_INTERNAL_ATOMIC_FILE_H_
-#define VOX_RENDER_INTERNAL_ATOMIC_FILE_H_
+#ifndef VOX_STORAGE_ATOMIC_FILE_H_
+#define VOX_STORAGE_ATOMIC_FILE_H_
 
 #include <string>
 
@@ -16,9 +17,10 @@
 
 namespace vox {
 
-// OkStatus when `path` can be written atomically: its directory exists, is a
-// directory and is writable, and `path` itself is not a directory. Cheap; run
-// before any long work so a bad output path fails first.
+// OkStatus when `path` can be written atomically (an EXR, a PNG, a JSON):
+// its directory exists, is a directory and is writable, and `path` itself is
+// not a directory. Cheap; tools run it on every output path before any long
+// work, so a bad output path fails first.
 Status CheckOutputPath(const std::string& path);
 
 // True when a and b name the same existing file (same device and inode).
@@ -27,7 +29,7 @@ bool SameFile(const std::string& a, const std::string& b);
 class AtomicFile {
  public:
   // Creates the (empty) temporary file beside `path`, first removing stale
-  // temporaries of `path` (the pattern above) whose process no longer runs.
+  // temporaries of `path` whose process no longer runs.
   static StatusOr<AtomicFile> Create(const std::string& path);
   AtomicFile(AtomicFile&& o) noexcept;
   AtomicFile& operator=(AtomicFile&& o) noexcept;
@@ -54,4 +56,4 @@ Status WriteFileAtomically(const std::string& path, const std::string& bytes);
 
 }  // namespace vox
 
-#endif  // VOX_RENDER_INTERNAL_ATOMIC_FILE_H_
+#endif  // VOX_STORAGE_ATOMIC_FILE_H_

@@ -1,12 +1,12 @@
-// The renderer's view of a Volume (storage/store.h): GridTransform, the
+// The renderer's view of a Volume (storage/volume.h): GridTransform, the
 // affine maps between world space and the tracer's grid space, and
 // WorldBounds, for the default camera. MemoryVolume, the in-memory Volume of
 // the tests and demos.
 //
 // Thread safety: GridTransform is an immutable value; a MemoryVolume is
 // thread-safe (Attributes and the MemoryOctree behind view() are read-only).
-#ifndef VOX_RENDER_VOLUME_H_
-#define VOX_RENDER_VOLUME_H_
+#ifndef VOX_RENDER_GRID_TRANSFORM_H_
+#define VOX_RENDER_GRID_TRANSFORM_H_
 
 #include <glm/mat3x3.hpp>
 #include <glm/mat4x4.hpp>
@@ -17,7 +17,7 @@
 
 #include "core/octree.h"
 #include "core/status.h"
-#include "storage/store.h"
+#include "storage/volume.h"
 
 namespace vox {
 
@@ -67,4 +67,4 @@ class MemoryVolume : public Volume {
 
 }  // namespace vox
 
-#endif  // VOX_RENDER_VOLUME_H_
+#endif  // VOX_RENDER_GRID_TRANSFORM_H_

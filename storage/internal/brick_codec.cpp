@@ -1,0 +1,425 @@
+#include "storage/internal/brick_codec.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <type_traits>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
+#include <glm/gtc/packing.hpp>
+
+#include "storage/internal/coding.h"
+
+namespace vox::storage_internal {
+
+uint64_t MaxCells(int depth, uint64_t voxels) {
+  if (depth < 1 || depth > kMaxLevels) return 0;
+  if (depth < 21 && voxels > (uint64_t(1) << (3 * depth))) return 0;
+  uint64_t total = 0, level = 1;
+  for (int l = 0; l < depth; ++l) {
+    total += std::min(level, voxels);
+    if (level < voxels) level *= 8;
+  }
+  return total;
+}
+
+uint32_t EncodeOctNormal(const glm::vec3& n, int bits) {
+  float s = std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z);
+  float px = 0, py = 0;
+  if (std::isfinite(s) && s > 0) {
+    px = n.x / s;
+    py = n.y / s;
+    if (n.z < 0) {
+      float ox = (1 - std::fabs(py)) * (px >= 0 ? 1.f : -1.f);
+      float oy = (1 - std::fabs(px)) * (py >= 0 ? 1.f : -1.f);
+      px = ox;
+      py = oy;
+    }
+  }
+  const uint32_t step = uint32_t(1) << (16 - std::clamp(bits, 8, 16));
+  const uint32_t top = 65535 / step * step;
+  auto q = [&](float v) {
+    double t = std::clamp(double(v) * 0.5 + 0.5, 0.0, 1.0) * 65535.0 / step;
+    return std::min(uint32_t(std::lround(t)) * step, top);
+  };
+  return q(px) | (q(py) << 16);
+}
+
+glm::vec3 DecodeOctNormal(uint32_t code) {
+  float px = float(code & 0xffff) / 65535.f * 2 - 1;
+  float py = float(code >> 16) / 65535.f * 2 - 1;
+  glm::vec3 n(px, py, 1 - std::fabs(px) - std::fabs(py));
+  if (n.z < 0) {
+    float ox = (1 - std::fabs(py)) * (px >= 0 ? 1.f : -1.f);
+    float oy = (1 - std::fabs(px)) * (py >= 0 ? 1.f : -1.f);
+    n.x = ox;
+    n.y = oy;
+  }
+  float len = std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+  return n / len;
+}
+
+// Planar layout: for each attribute in flag order, each byte of its encoded
+// value is one plane of `count` bytes (byte 0 of every voxel, then byte 1 ...).
+// Shuffled bytes compress far better than interleaved ones.
+namespace {
+inline uint64_t GatherPlanes(const uint8_t* planes, uint32_t count, uint32_t index, int nbytes) {
+  uint64_t v = 0;
+  for (int b = 0; b < nbytes; ++b) v |= uint64_t(planes[size_t(b) * count + index]) << (8 * b);
+  return v;
+}
+inline void ScatterPlanes(uint8_t* planes, uint32_t count, uint32_t index, int nbytes,
+                          uint64_t v) {
+  for (int b = 0; b < nbytes; ++b) planes[size_t(b) * count + index] = uint8_t(v >> (8 * b));
+}
+
+// Attribute components (width in bytes) in plane order, for delta coding.
+int Components(uint8_t flags, int* widths) {
+  int k = 0;
+  if (flags & kAttrNormal) widths[k++] = 2, widths[k++] = 2;
+  if (flags & kAttrDensity) widths[k++] = 4;
+  if (flags & kAttrColor) widths[k++] = 2, widths[k++] = 2, widths[k++] = 2;
+  if (flags & kAttrCoverage) widths[k++] = 2;
+  return k;
+}
+
+// Replaces each component's values by their differences (mod 2^(8 width))
+// from the previous voxel's, or undoes that. Neighbours in Morton order have
+// similar normals, densities and colours: small differences compress well.
+template <int W>
+void DeltaComponent(uint8_t* planes, uint32_t count, bool encode) {
+  using T = std::conditional_t<W == 2, uint16_t, uint32_t>;
+  uint8_t* p[W];
+  for (int b = 0; b < W; ++b) p[b] = planes + size_t(b) * count;
+  T prev = 0;
+  if (encode) {
+    for (uint32_t i = 0; i < count; ++i) {
+      T v = 0;
+      for (int b = 0; b < W; ++b) v = T(v | (T(p[b][i]) << (8 * b)));
+      const T out = T(v - prev);
+      for (int b = 0; b < W; ++b) p[b][i] = uint8_t(out >> (8 * b));
+      prev = v;
+    }
+    return;
+  }
+  // Decoding runs on every brick a reader loads. Two-byte components (normals,
+  // colours, coverage: nearly all of it) go 8 at a time with SSE2 (x86-64's
+  // baseline): join the byte planes, add each lane's predecessors in three
+  // shifted adds, add the running total, split the planes again.
+  uint32_t i = 0;
+#if defined(__SSE2__)
+  if constexpr (W == 2) {
+    __m128i carry = _mm_set1_epi16(0);
+    for (; i + 8 <= count; i += 8) {
+      const __m128i lo = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(p[0] + i));
+      const __m128i hi = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(p[1] + i));
+      __m128i v = _mm_unpacklo_epi8(lo, hi);  // 8 x uint16
+      v = _mm_add_epi16(v, _mm_slli_si128(v, 2));
+      v = _mm_add_epi16(v, _mm_slli_si128(v, 4));
+      v = _mm_add_epi16(v, _mm_slli_si128(v, 8));
+      v = _mm_add_epi16(v, carry);
+      carry = _mm_shuffle_epi32(_mm_shufflehi_epi16(v, 0xff), 0xff);  // lane 7 everywhere
+      const __m128i mask = _mm_set1_epi16(0xff);
+      const __m128i out_lo = _mm_packus_epi16(_mm_and_si128(v, mask), _mm_setzero_si128());
+      const __m128i out_hi = _mm_packus_epi16(_mm_srli_epi16(v, 8), _mm_setzero_si128());
+      _mm_storel_epi64(reinterpret_cast<__m128i*>(p[0] + i), out_lo);
+      _mm_storel_epi64(reinterpret_cast<__m128i*>(p[1] + i), out_hi);
+    }
+    prev = T(_mm_extract_epi16(carry, 0));
+  }
+#endif
+  for (; i < count; ++i) {
+    T d = 0;
+    for (int b = 0; b < W; ++b) d = T(d | (T(p[b][i]) << (8 * b)));
+    prev = T(prev + d);
+    for (int b = 0; b < W; ++b) p[b][i] = uint8_t(prev >> (8 * b));
+  }
+}
+
+void DeltaPlanes(uint8_t* planes, uint32_t count, uint8_t flags, bool encode) {
+  int widths[6];
+  int n = Components(flags, widths);
+  for (int c = 0; c < n; ++c) {
+    if (widths[c] == 2) DeltaComponent<2>(planes, count, encode);
+    else DeltaComponent<4>(planes, count, encode);
+    planes += size_t(widths[c]) * count;
+  }
+}
+}  // namespace
+
+VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
+                               uint32_t index) {
+  VoxelAttributes a;
+  if (flags & kAttrNormal) {
+    a.normal = DecodeOctNormal(uint32_t(GatherPlanes(planes, count, index, 4)));
+    planes += size_t(4) * count;
+  }
+  if (flags & kAttrDensity) {
+    a.density = std::bit_cast<float>(uint32_t(GatherPlanes(planes, count, index, 4)));
+    planes += size_t(4) * count;
+  }
+  if (flags & kAttrColor) {
+    uint64_t c = GatherPlanes(planes, count, index, 6);
+    for (int k = 0; k < 3; ++k) a.color[k] = glm::unpackHalf1x16(uint16_t(c >> (16 * k)));
+    planes += size_t(6) * count;
+  }
+  if (flags & kAttrCoverage)
+    a.coverage = DecodeCoverage(uint16_t(GatherPlanes(planes, count, index, 2)));
+  return a;
+}
+
+void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
+                     int normal_bits) {
+  const uint32_t count = uint32_t(attrs.size());
+  size_t start = dst->size();
+  dst->resize(start + AttrBytesPerVoxel(flags) * count);
+  uint8_t* planes = reinterpret_cast<uint8_t*>(dst->data()) + start;
+  if (flags & kAttrNormal) {
+    for (uint32_t i = 0; i < count; ++i)
+      ScatterPlanes(planes, count, i, 4, EncodeOctNormal(attrs[i].normal, normal_bits));
+    planes += size_t(4) * count;
+  }
+  if (flags & kAttrDensity) {
+    for (uint32_t i = 0; i < count; ++i)
+      ScatterPlanes(planes, count, i, 4, std::bit_cast<uint32_t>(attrs[i].density));
+    planes += size_t(4) * count;
+  }
+  if (flags & kAttrColor) {
+    for (uint32_t i = 0; i < count; ++i) {
+      uint64_t c = 0;
+      for (int k = 0; k < 3; ++k) c |= uint64_t(glm::packHalf1x16(attrs[i].color[k])) << (16 * k);
+      ScatterPlanes(planes, count, i, 6, c);
+    }
+    planes += size_t(6) * count;
+  }
+  if (flags & kAttrCoverage)
+    for (uint32_t i = 0; i < count; ++i)
+      ScatterPlanes(planes, count, i, 2, EncodeCoverage(attrs[i].coverage));
+}
+
+std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
+                           int depth, uint8_t flags, int normal_bits) {
+  std::string s;
+  s.reserve(kBrickHeaderSize + cells.size() + attrs.size() * AttrBytesPerVoxel(flags));
+  PutFixed32(&s, uint32_t(cells.size()));
+  PutFixed32(&s, uint32_t(attrs.size()));
+  s.push_back(char(depth));
+  s.push_back(char(flags));
+  s.append(6, '\0');
+  for (const Cell& c : cells) {
+    uint8_t mask = 0;
+    for (int d = 0; d < 8; ++d)
+      if (c.child[d] != kEmptyRef) mask |= uint8_t(1u << d);
+    s.push_back(char(mask));
+  }
+  size_t at = s.size();
+  WriteAttributes(attrs, flags, &s, normal_bits);
+  DeltaPlanes(reinterpret_cast<uint8_t*>(s.data()) + at, uint32_t(attrs.size()), flags, true);
+  return s;
+}
+
+namespace {
+
+// Checks pre-order child masks and finds each cell's level: the structure
+// BuildCells would give (every cell has a child, leaves exactly at the last
+// level, as many cells and leaves as the header says). Refuses anything else.
+struct MaskChecker {
+  const uint8_t* masks;
+  uint32_t num_cells, voxel_count;
+  uint8_t* level;  // per cell, 0 for the root
+  uint32_t next_cell = 1, next_payload = 0;
+  const char* error = nullptr;
+
+  bool Check(uint32_t index, int l, int levels) {
+    const uint8_t m = masks[index];
+    level[index] = uint8_t(l);
+    if (m == 0) {
+      error = "a cell with no children";
+      return false;
+    }
+    if (l == levels - 1) {
+      if (uint64_t(next_payload) + uint64_t(Popcount8(m)) > voxel_count) {
+        error = "more voxels than its table row says";
+        return false;
+      }
+      next_payload += Popcount8(m);
+      return true;
+    }
+    for (int k = int(Popcount8(m)); k > 0; --k) {
+      if (next_cell >= num_cells) {
+        error = "more cells than its table row says";
+        return false;
+      }
+      if (!Check(next_cell++, l + 1, levels)) return false;
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
+StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_t n,
+                                                       const BrickEntry& entry, int depth,
+                                                       uint8_t flags) {
+  if (n < kBrickHeaderSize) return CorruptionError("brick shorter than its header");
+  uint32_t num_cells = DecodeFixed32(raw), voxel_count = DecodeFixed32(raw + 4);
+  int d = raw[8];
+  uint8_t f = raw[9];
+  if (num_cells != entry.num_cells || voxel_count != entry.voxel_count)
+    return CorruptionError("brick header says " + std::to_string(num_cells) + " cells, " +
+                           std::to_string(voxel_count) + " voxels; its table row says " +
+                           std::to_string(entry.num_cells) + ", " +
+                           std::to_string(entry.voxel_count));
+  if (d != depth) return CorruptionError("brick has depth " + std::to_string(d) +
+                                         ", the store's bricks have " + std::to_string(depth));
+  if (f != flags) return CorruptionError("brick attribute flags " + std::to_string(f) +
+                                         " differ from the store's " + std::to_string(flags));
+  uint64_t expect = kBrickHeaderSize + uint64_t(num_cells) +
+                    uint64_t(voxel_count) * AttrBytesPerVoxel(flags);
+  if (expect != n)
+    return CorruptionError("brick is " + std::to_string(n) + " bytes; its header implies " +
+                           std::to_string(expect));
+  if (num_cells == 0 || voxel_count == 0 || num_cells > MaxCells(depth, voxel_count))
+    return CorruptionError("brick has " + std::to_string(num_cells) + " cells for " +
+                           std::to_string(voxel_count) + " voxels");
+  if (num_cells > kMaxCompactIndex + 1 || voxel_count > kMaxCompactIndex + 1)
+    return CorruptionError("brick has " + std::to_string(num_cells) + " cells, " +
+                           std::to_string(voxel_count) +
+                           " voxels: more than the 2^24 a traversal pool indexes");
+  if (depth < 1 || depth > kMaxLevels)
+    return CorruptionError("brick depth " + std::to_string(depth) + " out of range");
+  const uint8_t* masks = raw + kBrickHeaderSize;
+  thread_local std::vector<uint8_t> level;
+  level.resize(num_cells);
+  MaskChecker check{masks, num_cells, voxel_count, level.data(), 1, 0, nullptr};
+  if (!check.Check(0, 0, depth))
+    return CorruptionError(std::string("brick topology has ") + check.error);
+  if (check.next_cell != num_cells || check.next_payload != voxel_count)
+    return CorruptionError("brick topology reaches " + std::to_string(check.next_cell) +
+                           " cells, " + std::to_string(check.next_payload) +
+                           " voxels; header says " + std::to_string(num_cells) + ", " +
+                           std::to_string(voxel_count));
+  // Level order from pre-order: a level's cells keep their pre-order order,
+  // and a cell's first child is the next cell in pre-order, so one pass in
+  // pre-order numbers each cell and knows its first child's number.
+  uint32_t start[kMaxLevels + 1] = {}, count[kMaxLevels + 1] = {};
+  for (uint32_t i = 0; i < num_cells; ++i) ++start[level[i] + 1];
+  for (int l = 1; l <= depth; ++l) start[l] += start[l - 1];
+  auto b = std::make_shared<DecodedBrick>();
+  b->cells.resize(num_cells);
+  uint32_t payload = 0;
+  for (uint32_t i = 0; i < num_cells; ++i) {
+    const int l = level[i];
+    uint32_t first;
+    if (l == depth - 1) {
+      first = payload;
+      payload += Popcount8(masks[i]);
+    } else {
+      first = start[l + 1] + count[l + 1];
+    }
+    b->cells[start[l] + count[l]++] = MakeCompactCell(first, masks[i]);
+  }
+  const uint8_t* planes = raw + kBrickHeaderSize + num_cells;
+  b->attr_planes.assign(planes, raw + n);
+  DeltaPlanes(b->attr_planes.data(), voxel_count, flags, false);
+  b->voxel_count = voxel_count;
+  b->flags = flags;
+  return b;
+}
+
+namespace {
+
+struct PoolValidator {
+  const Cell* cells;
+  size_t n;
+  int depth;
+  bool bricks;
+  uint64_t limit;
+  uint64_t next = 1;
+  std::string error;
+
+  bool Visit(uint64_t index, int level) {  // level: 0 for the root
+    for (int d = 0; d < 8; ++d) {
+      NodeRef r = cells[index].child[d];
+      if (r == kEmptyRef) continue;
+      if (level == depth - 1) {
+        if (bricks) {
+          if (!IsBrickRef(r) || (r & kBrickIdMask) >= limit) {
+            error = "cell " + std::to_string(index) + " has ref " + std::to_string(r) +
+                    " where a brick ref below " + std::to_string(limit) + " belongs";
+            return false;
+          }
+        } else if (IsBrickRef(r) || LeafPayload(r) >= limit) {
+          error = "cell " + std::to_string(index) + " has leaf ref " + std::to_string(r) +
+                  " outside " + std::to_string(limit) + " payloads";
+          return false;
+        }
+        continue;
+      }
+      if (IsBrickRef(r) || r != next || next >= n) {
+        error = "cell " + std::to_string(index) + " refers to cell " + std::to_string(r) +
+                " (expected " + std::to_string(next) + " of " + std::to_string(n) + ")";
+        return false;
+      }
+      ++next;
+      if (!Visit(r, level + 1)) return false;
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
+Status ValidatePool(const Cell* cells, size_t n, int depth, bool bricks_at_last_level,
+                    uint64_t limit) {
+  if (n == 0) return CorruptionError("octree pool has no root cell");
+  if (depth < 1 || depth > kMaxLevels) return CorruptionError("octree pool depth out of range");
+  PoolValidator v{cells, n, depth, bricks_at_last_level, limit, 1, {}};
+  if (!v.Visit(0, 0)) return CorruptionError("octree " + v.error);
+  if (v.next != n)
+    return CorruptionError("octree has " + std::to_string(n) + " cells but only " +
+                           std::to_string(v.next) + " are reachable");
+  return OkStatus();
+}
+
+Status ValidateLevelOrderPool(const CompactCell* cells, size_t n, int depth, uint64_t limit) {
+  if (n == 0) return CorruptionError("octree pool has no root cell");
+  if (depth < 1 || depth > kMaxLevels) return CorruptionError("octree pool depth out of range");
+  uint64_t begin = 0, end = 1;  // the current level's cells
+  for (int l = 0; l < depth; ++l) {
+    const bool last = l == depth - 1;
+    uint64_t children = 0;
+    for (uint64_t i = begin; i < end; ++i) {
+      const uint32_t mask = ChildMask(cells[i]);
+      if (mask == 0) return CorruptionError("octree cell " + std::to_string(i) + " has no child");
+      const uint64_t first = last ? children : end + children;
+      if (FirstChild(cells[i]) != first)
+        return CorruptionError("octree cell " + std::to_string(i) + " has first child " +
+                               std::to_string(FirstChild(cells[i])) + ", expected " +
+                               std::to_string(first));
+      children += uint64_t(Popcount8(mask));
+    }
+    if (last) {
+      if (children > limit)
+        return CorruptionError("octree pool has " + std::to_string(children) +
+                               " leaves, more than " + std::to_string(limit));
+      if (end != n)
+        return CorruptionError("octree has " + std::to_string(n) + " cells but only " +
+                               std::to_string(end) + " are reachable");
+      return OkStatus();
+    }
+    if (children > n - end)
+      return CorruptionError("octree level " + std::to_string(l + 1) + " needs " +
+                             std::to_string(children) + " cells past the pool's " +
+                             std::to_string(n));
+    begin = end;
+    end += children;
+  }
+  return OkStatus();
+}
+
+}  // namespace vox::storage_internal

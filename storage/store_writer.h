@@ -1,0 +1,69 @@
+// vox::StoreWriter: writes a store directory (storage/FORMAT.md) brick by
+// brick, in a temporary directory beside the target that Finish() fsyncs and
+// renames into place. BrickVoxel is one voxel handed to it; WriteOptions its
+// settings.
+//
+// Thread safety: AddBrick may be called from several threads at once (bricks
+// are encoded and compressed in parallel, appended in turn); Finish must not
+// race with AddBrick.
+#ifndef VOX_STORAGE_STORE_WRITER_H_
+#define VOX_STORAGE_STORE_WRITER_H_
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "core/status.h"
+#include "storage/meta.h"
+
+namespace vox {
+
+// One occupied voxel handed to the writer, in brick-local coordinates
+// (each < 2^(levels - brick_level)).
+struct BrickVoxel {
+  uint32_t x = 0, y = 0, z = 0;
+  VoxelAttributes attr;
+};
+
+struct WriteOptions {
+  int zstd_level = 3;
+  bool force = false;  // replace an existing store at the target
+  // Precision of each octahedral normal component, 8..16 bits. Readers need
+  // not know: values stay 16-bit, multiples of 2^(16 - bits). 12 bits (max
+  // error 0.06 degrees; 16 bits: 0.004) makes level-set stores about a third smaller.
+  int normal_bits = 16;
+  // The id both files carry (FORMAT.md); 0: random. A fixed id (with bricks
+  // added in a fixed order, one at a time) makes the store byte-reproducible.
+  uint64_t store_id = 0;
+  // Called by Finish with the temporary directory once the store in it is
+  // complete and synced, before it is renamed into place: what it adds to
+  // the directory (e.g. the level-of-detail pyramid, storage/lod.h) is
+  // published with the store, and an error leaves no store at the target.
+  std::function<Status(const std::string& temp_dir)> before_publish;
+};
+
+class StoreWriter {
+ public:
+  // Prepares a store at `dir`: builds in a temporary directory beside it,
+  // which Finish() fsyncs and renames into place. Refuses an existing target
+  // unless options.force. `meta` gives everything but the counts, which the
+  // writer fills in.
+  static StatusOr<std::unique_ptr<StoreWriter>> Create(const std::string& dir,
+                                                       const StoreMeta& meta,
+                                                       const WriteOptions& options);
+  virtual ~StoreWriter() = default;  // without Finish(): removes the temporary directory
+  // Adds the brick of the brick-level octant `brick_coord` (grid coordinates
+  // >> (levels - brick_level)). Bricks come in any order, each octant once,
+  // each with at least one voxel; voxels in any order, no duplicates.
+  virtual Status AddBrick(const glm::u64vec3& brick_coord, std::vector<BrickVoxel> voxels) = 0;
+  // Writes the top and the index, fsyncs and renames into place.
+  virtual Status Finish() = 0;
+};
+
+}  // namespace vox
+
+#endif  // VOX_STORAGE_STORE_WRITER_H_

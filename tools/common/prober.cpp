@@ -1,0 +1,150 @@
+#include "tools/common/prober.h"
+
+#include <climits>
+#include <cmath>
+#include <variant>
+
+#include "core/shapes.h"
+#include "render/camera.h"
+#include "render/lod.h"
+#include "storage/lod.h"
+#include "storage/memory_budget.h"
+#include "storage/store.h"
+#include "storage/store_budget.h"
+
+namespace vox {
+
+struct Prober::Impl {
+  std::unique_ptr<MemoryOctree> memory;
+  std::unique_ptr<Store> store;
+  glm::i64vec3 origin{0};
+  std::variant<Tracer<Fixed128, long double>, DefaultTracer, AutoTracer<long double>> tracer;
+  // --lod
+  std::unique_ptr<LodPyramid> pyramid;
+  std::optional<LodTracer> lod;
+  std::optional<LodLevelTracer> lod_base;
+  double cone_rad = 0, cone_width = 0;
+};
+
+Prober::Prober(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Prober::~Prober() = default;
+
+StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
+  // Messages as vox-probe prints them: some with the status code, some without.
+  auto fail = [](const Status& s, bool with_code) {
+    return Status(s.code(), with_code ? s.ToString() : s.message());
+  };
+  if (opt.generate.empty() == opt.store.empty())
+    return InvalidArgumentError("give either --generate SHAPE or a store directory");
+  if (opt.fixed != 0 && opt.fixed != 64 && opt.fixed != 128)
+    return InvalidArgumentError("--fixed takes auto, 64 or 128");
+  if ((opt.cone_rad >= 0 || opt.cone_width > 0) && opt.lod == 0)
+    return InvalidArgumentError("--cone-rad and --cone-width need --lod F");
+  if (opt.lod > 0) {
+    if (opt.store.empty()) return InvalidArgumentError("--lod needs a store with a level-of-detail pyramid");
+    if (opt.cone_rad < 0) return InvalidArgumentError("--lod needs --cone-rad R (the cone's spread, radians)");
+  }
+  auto impl = std::make_unique<Impl>();
+  OctreeView view;
+  if (!opt.generate.empty()) {
+    auto vol = GenerateShape(opt.generate);
+    if (!vol.ok()) return fail(vol.status(), false);
+    const int bl = opt.brick_level >= 0 ? opt.brick_level : std::max(1, vol->levels - 5);
+    auto tree = MemoryOctree::Build(std::move(vol->voxels), vol->levels, bl);
+    if (!tree.ok()) return fail(tree.status(), false);
+    impl->memory = std::move(tree).value();
+    view = impl->memory->view();
+  } else {
+    auto budget = ChooseProcessBudget(opt.memory_bytes);
+    if (!budget.ok()) return fail(budget.status(), true);
+    OpenOptions oo;
+    oo.cache_bytes = opt.cache_mb > 0 ? opt.cache_mb << 20 : budget->bytes;
+    auto s = Store::Open(opt.store, oo);
+    if (!s.ok()) return fail(s.status(), true);
+    impl->store = std::move(s).value();
+    auto split = BudgetReader(impl->store.get(), budget->bytes, uint64_t(opt.cache_mb) << 20);
+    if (!split.ok()) return fail(split.status(), true);
+    view = impl->store->view();
+    impl->origin = impl->store->meta().origin;
+  }
+  if (opt.lod > 0) {
+    OpenOptions oo;
+    oo.cache_bytes = opt.cache_mb > 0 ? opt.cache_mb << 20 : size_t(256) << 20;
+    auto p = LodPyramid::Open(opt.store, *impl->store, oo);
+    if (!p.ok()) return Status(p.status().code(), "--lod: " + p.status().ToString());
+    impl->pyramid = std::move(p).value();
+    std::vector<Volume*> levels;
+    for (int l = 1; l <= impl->pyramid->max_level(); ++l) levels.push_back(impl->pyramid->level(l));
+    auto lt = LodTracer::Create(impl->store.get(), levels, opt.lod);
+    if (!lt.ok()) return fail(lt.status(), false);
+    impl->lod = *lt;
+    auto bt = LodLevelTracer::Create(view, DefaultFirstStepLevels(view.levels));
+    if (!bt.ok()) return fail(bt.status(), false);
+    impl->lod_base = *bt;
+    impl->cone_rad = opt.cone_rad;
+    impl->cone_width = opt.cone_width;
+  }
+  int n1 = DefaultFirstStepLevels(view.levels);
+  if (opt.single_step) {
+    n1 = view.levels;
+    if (!opt.split.empty())
+      return InvalidArgumentError("--single-step and --split exclude each other");
+  } else if (!opt.split.empty()) {
+    auto s = ParseSplit(opt.split, view.levels);
+    if (!s.ok()) return fail(s.status(), false);
+    n1 = *s;
+  }
+  if (opt.fixed == 128) {
+    auto tr = Tracer<Fixed128, long double>::Create(view, n1);
+    if (!tr.ok()) return fail(tr.status(), false);
+    impl->tracer.emplace<0>(std::move(tr).value());
+  } else if (opt.fixed == 64) {
+    auto tr = DefaultTracer::Create(view, n1);
+    if (!tr.ok()) return fail(tr.status(), false);
+    impl->tracer.emplace<1>(std::move(tr).value());
+  } else {
+    auto tr = AutoTracer<long double>::Create(view, n1);
+    if (!tr.ok()) return fail(tr.status(), false);
+    impl->tracer.emplace<2>(std::move(tr).value());
+  }
+  return std::unique_ptr<Prober>(new Prober(std::move(impl)));
+}
+
+StatusOr<std::optional<Hit>> Prober::Trace(const Ray& index_ray, TraceCounters* counters) const {
+  Ray r = index_ray;
+  r.origin -= glm::dvec3(impl_->origin);  // index space -> grid space
+  auto hit = std::visit([&](const auto& t) { return t.FirstHit(r, counters); }, impl_->tracer);
+  if (hit.ok() && *hit) (*hit)->voxel += impl_->origin;
+  return hit;
+}
+
+bool Prober::lod() const { return impl_->lod.has_value(); }
+
+StatusOr<std::optional<Hit>> Prober::TraceLod(const Ray& index_ray, TraceCounters* counters,
+                                              LodCounters* lc, int* level) const {
+  *level = 0;
+  Ray r = index_ray;
+  r.origin -= glm::dvec3(impl_->origin);
+  const Cone cone{impl_->cone_width, impl_->cone_rad * std::sqrt(glm::dot(r.dir, r.dir))};
+  if (impl_->lod->Exact(r, cone)) {
+    ++lc->exact_rays;
+    auto h = std::visit([&](const auto& t) { return t.FirstHit(r, counters); }, impl_->tracer);
+    if (h.ok() && *h) {
+      (*h)->voxel += impl_->origin;
+      ++lc->stops[0];
+    }
+    return h;
+  }
+  LodSegment seg;
+  auto f = impl_->lod->FirstHit(*impl_->lod_base, nullptr, r, cone, false, 0.0, &seg, nullptr, counters);
+  if (!f.ok()) return f.status();
+  if (!*f) return std::optional<Hit>();
+  Hit hit = seg.hit;
+  hit.t = seg.t0;
+  *level = seg.level;
+  ++lc->stops[seg.level];
+  hit.voxel = (hit.voxel << int64_t(seg.level)) + impl_->origin;
+  return std::optional<Hit>(hit);
+}
+
+}  // namespace vox

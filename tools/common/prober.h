@@ -1,0 +1,45 @@
+// vox::Prober: vox-probe's store opening and ray tracing, for vox-probe and
+// the Python module's vox.probe, from the options tools/common/options.h
+// parses.
+//
+// Thread safety: a Prober is immutable once opened and Trace is
+// thread-compatible (one thread at a time: vox-probe traces on one thread).
+#ifndef VOX_TOOLS_COMMON_PROBER_H_
+#define VOX_TOOLS_COMMON_PROBER_H_
+
+#include <memory>
+#include <optional>
+
+#include "core/core.h"
+#include "core/status.h"
+#include "render/lod.h"
+#include "tools/common/options.h"
+
+namespace vox {
+
+// vox-probe's volume (a store under the memory budget, or a generated shape)
+// and tracer (split, fixed-point word), ready to trace index-space rays.
+class Prober {
+ public:
+  // Errors carry, as their message, the line vox-probe prints.
+  static StatusOr<std::unique_ptr<Prober>> Open(const ProbeOptions& options);
+  ~Prober();
+  // The first hit of an index-space ray (voxel in index coordinates, t along
+  // the ray); nullopt on a miss. Errors: the ray is invalid (ValidateRay).
+  StatusOr<std::optional<Hit>> Trace(const Ray& index_ray, TraceCounters* counters) const;
+  // With --lod: the ray's first stop over the pyramid (render/lod.h). A stop
+  // at a coarse cell of level *level > 0 has voxel = the cell's first voxel
+  // (index coordinates); rays the cone keeps at level 0 answer as Trace.
+  bool lod() const;
+  StatusOr<std::optional<Hit>> TraceLod(const Ray& index_ray, TraceCounters* counters,
+                                        LodCounters* lod_counters, int* level) const;
+
+ private:
+  struct Impl;
+  explicit Prober(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace vox
+
+#endif  // VOX_TOOLS_COMMON_PROBER_H_

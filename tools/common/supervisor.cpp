@@ -1,0 +1,193 @@
+#include "tools/common/supervisor.h"
+
+#include <fcntl.h>
+#include <pthread.h>
+#include <signal.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <thread>
+
+namespace vox {
+namespace {
+
+// Removes the temporary store directories `.NAME.tmp-PID-*` of process `pid`
+// beside `output` (storage/FORMAT.md, "Writing").
+void RemoveOwnTemporaries(const std::string& output, pid_t pid) {
+  namespace fs = std::filesystem;
+  std::string target = output;
+  while (target.size() > 1 && target.back() == '/') target.pop_back();
+  fs::path tp(target), parent = tp.parent_path();
+  if (parent.empty()) parent = ".";
+  const std::string prefix =
+      "." + tp.filename().string() + ".tmp-" + std::to_string(pid) + "-";
+  for (int attempt = 0; attempt < 3; ++attempt) {  // writers may still be adding files
+    std::error_code ec;
+    bool left = false;
+    for (const auto& e : fs::directory_iterator(parent, ec)) {
+      if (e.path().filename().string().compare(0, prefix.size(), prefix) != 0) continue;
+      std::error_code rec;
+      fs::remove_all(e.path(), rec);
+      left = left || fs::exists(e.path(), rec);
+    }
+    if (!left) return;
+  }
+}
+
+// "SIGSEGV (Segmentation fault)".
+std::string SignalName(int sig) {
+  const char* abbrev = sigabbrev_np(sig);
+  const char* text = strsignal(sig);
+  return (abbrev ? "SIG" + std::string(abbrev) : "signal " + std::to_string(sig)) + " (" +
+         (text ? text : "unknown") + ")";
+}
+
+class TestHookProgress : public ProgressSink {
+ public:
+  TestHookProgress(ProgressSink* inner, int crash_signal, int exit_code)
+      : inner_(inner), crash_signal_(crash_signal), exit_code_(exit_code) {}
+  void Message(std::string_view line) override {
+    if (inner_) inner_->Message(line);
+  }
+  void Progress(uint64_t done, uint64_t total, uint64_t voxels) override {
+    if (crash_signal_ > 0) {
+      signal(crash_signal_, SIG_DFL);
+      raise(crash_signal_);
+    }
+    if (exit_code_ >= 0) _exit(exit_code_);
+    std::fprintf(stderr, "vox-ingest: test stall\n");
+    for (;;) pause();
+    if (inner_) inner_->Progress(done, total, voxels);
+  }
+  void Done() override {
+    if (inner_) inner_->Done();
+  }
+
+ private:
+  ProgressSink* inner_;
+  int crash_signal_ = 0;
+  int exit_code_ = -1;
+};
+
+volatile sig_atomic_t g_child = 0;
+
+extern "C" void ForwardToChild(int sig) {
+  if (g_child > 0) kill(pid_t(g_child), sig);
+}
+
+// Runs `work` in the child; tells the parent it returned (one byte on
+// `done_fd`) before exiting with its code.
+[[noreturn]] void RunChild(pid_t parent, int done_fd, const std::function<int()>& work) {
+  prctl(PR_SET_PDEATHSIG, SIGKILL);
+  if (getppid() != parent) _exit(128 + SIGKILL);  // the parent died before prctl
+  const int code = work();
+  std::fflush(nullptr);
+  const char done = 1;
+  while (write(done_fd, &done, 1) < 0 && errno == EINTR) {
+  }
+  _exit(code);
+}
+
+// How the child ended, as the parent reports it and the tool's exit code.
+int ReportChild(const std::string& input, const std::string& output, pid_t child, int status,
+                bool finished) {
+  if (WIFEXITED(status)) {
+    const int code = WEXITSTATUS(status);
+    if (finished || code == 128 + SIGINT || code == 128 + SIGTERM) return code;
+    RemoveOwnTemporaries(output, child);
+    std::fprintf(stderr,
+                 "vox-ingest: %s: the ingest child process (pid %d) crashed: it exited with "
+                 "code %d before finishing (a sanitizer report or an exit in a library; see "
+                 "the messages above); its unfinished store is removed\n",
+                 input.c_str(), int(child), code);
+    return 1;
+  }
+  const int sig = WIFSIGNALED(status) ? WTERMSIG(status) : SIGKILL;
+  RemoveOwnTemporaries(output, child);
+  if (sig == SIGKILL || sig == SIGINT || sig == SIGTERM || sig == SIGHUP) {
+    std::fprintf(stderr, "vox-ingest: the ingest was killed by signal %d (%s)%s; its unfinished "
+                 "store is removed\n", sig, strsignal(sig),
+                 sig == SIGKILL ? ", perhaps for lack of memory" : "");
+    return 128 + sig;
+  }
+  std::fprintf(stderr,
+               "vox-ingest: %s: the ingest child process (pid %d) crashed with %s while "
+               "reading the grid%s; its unfinished store is removed\n",
+               input.c_str(), int(child), SignalName(sig).c_str(),
+               sig == SIGBUS ? " (the file may have been truncated while it was read)" : "");
+  return 1;
+}
+
+}  // namespace
+
+int RunSupervised(const std::string& input, const std::string& output,
+                  const std::function<int()>& work) {
+  std::fflush(nullptr);
+  int done[2];
+  if (pipe2(done, O_CLOEXEC) != 0) return work();  // cannot watch a child: run unprotected
+  const pid_t parent = getpid();
+  const pid_t child = fork();
+  if (child < 0) {  // cannot fork: run unprotected
+    close(done[0]);
+    close(done[1]);
+    return work();
+  }
+  if (child == 0) {
+    close(done[0]);
+    RunChild(parent, done[1], work);
+  }
+  close(done[1]);
+  g_child = child;
+  struct sigaction sa;
+  std::memset(&sa, 0, sizeof sa);
+  sa.sa_handler = ForwardToChild;
+  sigemptyset(&sa.sa_mask);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
+  int status = 0;
+  while (waitpid(child, &status, 0) < 0) {
+    if (errno != EINTR) {
+      std::perror("vox-ingest: waitpid");
+      close(done[0]);
+      return 1;
+    }
+  }
+  char byte = 0;
+  ssize_t n;
+  while ((n = read(done[0], &byte, 1)) < 0 && errno == EINTR) {
+  }
+  close(done[0]);
+  return ReportChild(input, output, child, status, n == 1);
+}
+
+void StartSignalThread(const std::string& output) {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);  // inherited by every thread created later
+  std::thread([set, output] {
+    int sig = 0;
+    if (sigwait(&set, &sig) != 0) return;
+    std::fprintf(stderr, "\nvox-ingest: %s: removing the unfinished store and exiting\n",
+                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)");
+    RemoveOwnTemporaries(output, getpid());
+    std::_Exit(128 + sig);
+  }).detach();
+}
+
+std::unique_ptr<ProgressSink> MakeTestHookProgress(ProgressSink* inner) {
+  const char* crash = std::getenv("VOX_INGEST_TEST_CRASH");
+  const char* exit_code = std::getenv("VOX_INGEST_TEST_EXIT");
+  if (std::getenv("VOX_INGEST_TEST_STALL") == nullptr && crash == nullptr && exit_code == nullptr)
+    return nullptr;
+  return std::make_unique<TestHookProgress>(inner, crash ? std::atoi(crash) : 0,
+                                            exit_code ? std::atoi(exit_code) : -1);
+}
+
+}  // namespace vox

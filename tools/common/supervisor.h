@@ -1,0 +1,54 @@
+// The fork supervisor of vox-ingest: the ingest runs in a forked child, so
+// that a crash while reading a .vdb (OpenVDB's reader can crash on a corrupt
+// file; a file truncated while it is read raises SIGBUS) or a sanitizer's
+// exit ends with a message and a clean directory, not a dead tool and a
+// temporary store left behind.
+//
+// The parent forwards SIGINT, SIGTERM and SIGHUP to the child; if the parent
+// itself is SIGKILLed, the child is killed with it (PR_SET_PDEATHSIG) and the
+// next run removes the temporary directory it leaves. In the child, SIGINT
+// and SIGTERM are taken by one thread (StartSignalThread) that removes the
+// child's temporary store and exits with 128 + the signal.
+//
+// Thread safety: process-wide (signal dispositions, fork); call from main.
+#ifndef VOX_TOOLS_COMMON_SUPERVISOR_H_
+#define VOX_TOOLS_COMMON_SUPERVISOR_H_
+
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "ingest/ingest.h"
+
+namespace vox {
+
+// Runs `work` in a forked child and returns its exit code. A child that
+// ends otherwise than by returning from `work` has its temporary store
+// (`.NAME.tmp-PID-*` beside `output`, storage/file.h) removed and is
+// reported as a crash of the child process, naming `input`:
+//   - killed by SIGKILL, SIGINT, SIGTERM or SIGHUP: "killed", exit 128 + N;
+//   - killed by another signal (SIGSEGV, SIGBUS, SIGABRT...): a crash of
+//     the ingest child process, with the signal's name, exit 1;
+//   - exited without finishing `work` (a sanitizer report, an exit() in a
+//     library): a crash with its exit code, exit 1.
+// Errors `work` reports itself (OpenVDB's exceptions on a corrupt file
+// become a Status) are its own messages. Without fork, `work` runs here.
+int RunSupervised(const std::string& input, const std::string& output,
+                  const std::function<int()>& work);
+
+// In the child: blocks SIGINT and SIGTERM in every thread created later and
+// starts the thread that takes them (see above).
+void StartSignalThread(const std::string& output);
+
+// Test hooks of the child, read from the environment:
+// VOX_INGEST_TEST_STALL stalls the first progress report (the temporary
+// store exists), so tests can signal a real ingest mid-way;
+// VOX_INGEST_TEST_CRASH=N raises signal N there instead (a crash while
+// reading, at a known point); VOX_INGEST_TEST_EXIT=N calls _exit(N) there
+// (as a sanitizer report does). Null when none is set; else a sink that
+// forwards to `inner`.
+std::unique_ptr<ProgressSink> MakeTestHookProgress(ProgressSink* inner);
+
+}  // namespace vox
+
+#endif  // VOX_TOOLS_COMMON_SUPERVISOR_H_
