@@ -44,9 +44,194 @@ std::string ProgressLine(const ProgressSnapshot& s, double elapsed) {
   return buf;
 }
 
-Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameStats* stats) {
+namespace {
+
+// The EXR header's vox attributes: what was rendered, how, and from what.
+ExrAttributes FrameAttributes(const Renderer& renderer, const FrameOptions& options) {
+  ExrAttributes attrs = options.attrs;
+  attrs["vox:camera"] = renderer.camera().ToJson();
+  attrs["vox:scene"] = renderer.scene().ToJson();
+  attrs["vox:split"] = renderer.SplitString();
+  attrs["vox:passes"] = renderer.passes().ToString();
+  attrs["vox:part"] = options.part.ToString();
+  attrs["vox:tileOrder"] = "morton";
+  attrs["vox:store"] =
+      attrs.count("vox:store") ? attrs["vox:store"] : renderer.volume()->description();
+  attrs["software"] = "vox-render";
+  return attrs;
+}
+
+// The tiled EXR the frame's tiles go to (none without options.exr_path).
+StatusOr<std::unique_ptr<TiledExrWriter>> OpenFrameWriter(const Renderer& renderer,
+                                                          const FrameOptions& options) {
+  if (options.exr_path.empty()) return std::unique_ptr<TiledExrWriter>();
+  // Tiles are written one per call as they finish: OpenEXR's pool would
+  // hand each tile to a pool thread and back (measured: 2-3x the write
+  // time of compressing in the calling thread, docs/benchmarks.md).
+  SetExrThreads(0);
   const Camera& cam = renderer.camera();
-  Volume* volume = renderer.volume();
+  const ExrCompression compression = options.compression.value_or(
+      options.part.whole() ? ExrCompression::kRle : ExrCompression::kNone);
+  const ExrCameraAttributes camera_attrs = StandardCameraAttributes(cam);
+  return TiledExrWriter::Create(options.exr_path, cam.width, cam.height, options.tile_size,
+                                renderer.layers(), FrameAttributes(renderer, options),
+                                compression, &camera_attrs);
+}
+
+// One frame in flight: the tile cursor the render threads pull from, their
+// progress, the first error, and the prefetch scout.
+class FrameRun {
+ public:
+  FrameRun(const Renderer& renderer, const FrameOptions& options, const TileLayout& layout,
+           int64_t begin, int64_t end, TiledExrWriter* writer, FrameStats* stats)
+      : renderer_(renderer), options_(options), layout_(layout), begin_(begin), end_(end),
+        writer_(writer), stats_(stats), progress_(options.progress, options.progress_out),
+        cursor_(begin) {}
+  ~FrameRun() { StopScout(); }
+
+  // The scout: a thread that walks the tile order ahead of the workers,
+  // finds the bricks each tile's primary rays enter first (the resident top
+  // only, no brick read) and asks for them, so the volume reads them while
+  // the workers trace. It stays at most prefetch_tiles tiles ahead and waits
+  // while the bytes read ahead and not yet used exceed prefetch_limit.
+  void StartScout() {
+    if (options_.prefetch) scout_ = std::thread([this] { Scout(); });
+  }
+  void StopScout() {
+    scout_stop_ = true;
+    if (scout_.joinable()) scout_.join();
+  }
+
+  // Renders tiles until none is left or one fails (every thread of the frame).
+  void Work(Worker& w);
+
+  // The first error, once the workers are done.
+  Status Error() {
+    std::lock_guard<std::mutex> lock(mu_);  // after the workers' hand-overs
+    return first_error_;
+  }
+  int64_t tiles_done() const { return done_.load(); }
+  void FinishProgress() {
+    const ProgressSnapshot last = Snapshot();
+    progress_.Finish(uint64_t(last.tiles_done), uint64_t(last.tiles_total),
+                     [&](double elapsed) { return ProgressLine(last, elapsed); });
+  }
+
+ private:
+  void Scout();
+  // Renders tile i into w's buffer and hands it to the writer and on_tile.
+  Status RenderOne(Worker& w, int64_t i);
+  // The worker's counters go to the frame's under mu_, which the calling
+  // thread takes after the loop: the hand-over is ordered for
+  // ThreadSanitizer too (an uninstrumented TBB's join is not).
+  void HandOver(Worker& w) {
+    std::lock_guard<std::mutex> lock(mu_);
+    stats_->counters.Add(w.counters);
+    w.counters = RenderCounters();
+    stats_->write_seconds += w.write_seconds;
+    w.write_seconds = 0;
+  }
+  ProgressSnapshot Snapshot() const {
+    ProgressSnapshot s;
+    s.tiles_done = done_.load();
+    s.tiles_total = end_ - begin_;
+    s.rays = rays_.load();
+    // Hit rate over the bricks rays entered: those served by the threads'
+    // tables or the shared cache, against those paged in (the shared cache's
+    // own hits are few when the threads' tables serve most entries).
+    const CacheStats c = renderer_.volume()->cache_stats();
+    const uint64_t misses = c.misses - stats_->cache_start.misses;
+    const uint64_t entries = std::max(brick_entries_.load(), misses);
+    s.cache_hits = entries - misses;
+    s.cache_misses = misses;
+    return s;
+  }
+  static uint64_t TotalRays(const RenderCounters& c) {
+    uint64_t total = 0;
+    for (int k = 0; k < kNumRayKinds; ++k) total += c.rays[k];
+    return total;
+  }
+
+  const Renderer& renderer_;
+  const FrameOptions& options_;
+  const TileLayout& layout_;
+  const int64_t begin_, end_;
+  TiledExrWriter* writer_;
+  FrameStats* stats_;
+  Progress progress_;
+  std::atomic<int64_t> cursor_;
+  std::atomic<int64_t> done_{0};
+  std::atomic<uint64_t> rays_{0};
+  std::atomic<uint64_t> brick_entries_{0};  // bricks rays entered (traversal brick fetches)
+  std::atomic<bool> abort_{false};
+  std::mutex mu_;
+  Status first_error_;
+  std::atomic<bool> scout_stop_{false};
+  std::thread scout_;
+};
+
+void FrameRun::Scout() {
+  try {
+    std::vector<uint32_t> ids;
+    const int64_t ahead = std::max<int64_t>(1, options_.prefetch_tiles);
+    for (int64_t j = begin_; j < end_; ++j) {
+      for (;;) {
+        if (scout_stop_.load() || abort_.load()) return;
+        const bool far = j >= cursor_.load() + ahead;
+        const bool full = options_.prefetch_backlog && options_.prefetch_limit > 0 &&
+                          options_.prefetch_backlog() > options_.prefetch_limit;
+        if (!far && !full) break;
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+      }
+      j = std::max(j, cursor_.load());  // tiles the workers started need no scouting
+      if (j >= end_) return;
+      ids.clear();
+      renderer_.FirstBricks(layout_.order()[size_t(j)], options_.prefetch_stride, &ids);
+      if (!ids.empty()) options_.prefetch(ids);
+    }
+  } catch (const std::exception&) {
+    // Prefetching is an optimisation: without it, the workers read what they need.
+  }
+}
+
+Status FrameRun::RenderOne(Worker& w, int64_t i) {
+  const TileRect& rect = layout_.order()[size_t(i)];
+  Status s = renderer_.RenderTile(rect, &w.buf, &w.counters, w.state.get());
+  const Stopwatch write_clock;
+  if (s.ok() && writer_ != nullptr) s = writer_->WriteTile(rect, w.buf);
+  w.write_seconds += write_clock.Seconds();
+  if (s.ok() && options_.on_tile) s = options_.on_tile(rect, w.buf);
+  if (s.ok()) return s;
+  return s.WithContext("tile (" + std::to_string(rect.tx) + ", " + std::to_string(rect.ty) + ")");
+}
+
+void FrameRun::Work(Worker& w) {
+  for (;;) {
+    if (abort_.load(std::memory_order_relaxed)) return HandOver(w);
+    const int64_t i = cursor_.fetch_add(1);
+    if (i >= end_) return HandOver(w);
+    const uint64_t rays_before = TotalRays(w.counters);
+    const uint64_t entries_before = w.counters.trace.brick_fetches;
+    const Status s = RenderOne(w, i);
+    if (!s.ok()) {
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (first_error_.ok()) first_error_ = s;
+      }
+      abort_ = true;
+      return HandOver(w);
+    }
+    rays_.fetch_add(TotalRays(w.counters) - rays_before, std::memory_order_relaxed);
+    brick_entries_.fetch_add(w.counters.trace.brick_fetches - entries_before,
+                             std::memory_order_relaxed);
+    done_.fetch_add(1, std::memory_order_relaxed);
+    const ProgressSnapshot now = Snapshot();
+    progress_.Update(uint64_t(now.tiles_done), uint64_t(now.tiles_total),
+                     [&](double elapsed) { return ProgressLine(now, elapsed); });
+  }
+}
+
+Status CheckFrameOptions(const Camera& cam, const FrameOptions& options) {
   if (options.tile_size < kMinTileSize || options.tile_size > kMaxTileSize)
     return InvalidArgumentError("tile size " + std::to_string(options.tile_size) + ": must be in " +
                                 std::to_string(kMinTileSize) + ".." +
@@ -55,177 +240,46 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
   if (options.threads < 0)
     return InvalidArgumentError("threads " + std::to_string(options.threads) +
                                 ": must not be negative (0: all cores)");
+  return OkStatus();
+}
+
+}  // namespace
+
+Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameStats* stats) {
+  const Camera& cam = renderer.camera();
+  VOX_RETURN_IF_ERROR(CheckFrameOptions(cam, options));
   const TileLayout layout(cam.width, cam.height, options.tile_size);
   int64_t begin = 0, end = 0;
   layout.PartRange(options.part, &begin, &end);
-
-  ExrAttributes attrs = options.attrs;
-  attrs["vox:camera"] = cam.ToJson();
-  attrs["vox:scene"] = renderer.scene().ToJson();
-  attrs["vox:split"] = renderer.SplitString();
-  attrs["vox:passes"] = renderer.passes().ToString();
-  attrs["vox:part"] = options.part.ToString();
-  attrs["vox:tileOrder"] = "morton";
-  attrs["vox:store"] = attrs.count("vox:store") ? attrs["vox:store"] : volume->description();
-  attrs["software"] = "vox-render";
-
-  const ImageLayers& img_layers = renderer.layers();
-  std::unique_ptr<TiledExrWriter> writer;
-  int threads = options.threads > 0 ? options.threads
-                                    : int(std::max(1u, std::thread::hardware_concurrency()));
-  if (!options.exr_path.empty()) {
-    // Tiles are written one per call as they finish: OpenEXR's pool would
-    // hand each tile to a pool thread and back (measured: 2-3x the write
-    // time of compressing in the calling thread, docs/benchmarks.md).
-    SetExrThreads(0);
-    const ExrCompression compression = options.compression.value_or(
-        options.part.whole() ? ExrCompression::kRle : ExrCompression::kNone);
-    const ExrCameraAttributes camera_attrs = StandardCameraAttributes(cam);
-    VOX_ASSIGN_OR_RETURN(writer, TiledExrWriter::Create(options.exr_path, cam.width, cam.height,
-                                                        options.tile_size, img_layers, attrs,
-                                                        compression, &camera_attrs));
-  }
+  VOX_ASSIGN_OR_RETURN(std::unique_ptr<TiledExrWriter> writer, OpenFrameWriter(renderer, options));
+  const int threads = options.threads > 0 ? options.threads
+                                          : int(std::max(1u, std::thread::hardware_concurrency()));
   stats->threads = threads;
   stats->tiles_total = end - begin;
-  stats->cache_start = volume->cache_stats();
+  stats->cache_start = renderer.volume()->cache_stats();
 
-  Progress progress(options.progress, options.progress_out);
-  std::atomic<int64_t> cursor{begin};
-  std::atomic<int64_t> done{0};
-  std::atomic<uint64_t> rays{0};
-  std::atomic<uint64_t> brick_entries{0};  // bricks rays entered (traversal brick fetches)
-  std::atomic<bool> abort{false};
-  std::mutex err_mu;
-  Status first_error;
   tbb::enumerable_thread_specific<Worker> workers([&] {
     Worker w;
-    w.buf.Allocate(options.tile_size, img_layers);
+    w.buf.Allocate(options.tile_size, renderer.layers());
     w.state = renderer.NewThreadState();
     return w;
   });
-
-  auto snapshot = [&] {
-    ProgressSnapshot s;
-    s.tiles_done = done.load();
-    s.tiles_total = end - begin;
-    s.rays = rays.load();
-    // Hit rate over the bricks rays entered: those served by the threads'
-    // tables or the shared cache, against those paged in (the shared cache's
-    // own hits are few when the threads' tables serve most entries).
-    CacheStats c = volume->cache_stats();
-    const uint64_t misses = c.misses - stats->cache_start.misses;
-    const uint64_t entries = std::max(brick_entries.load(), misses);
-    s.cache_hits = entries - misses;
-    s.cache_misses = misses;
-    return s;
-  };
-
-  // The scout: a thread that walks the tile order ahead of the workers,
-  // finds the bricks each tile's primary rays enter first (the resident top
-  // only, no brick read) and asks for them, so the volume reads them while
-  // the workers trace. It stays at most prefetch_tiles tiles ahead and waits
-  // while the bytes read ahead and not yet used exceed prefetch_limit.
-  std::atomic<bool> scout_stop{false};
-  std::thread scout;
-  if (options.prefetch) {
-    scout = std::thread([&] {
-      try {
-        std::vector<uint32_t> ids;
-        const int64_t ahead = std::max<int64_t>(1, options.prefetch_tiles);
-        for (int64_t j = begin; j < end; ++j) {
-          for (;;) {
-            if (scout_stop.load() || abort.load()) return;
-            const bool far = j >= cursor.load() + ahead;
-            const bool full = options.prefetch_backlog && options.prefetch_limit > 0 &&
-                              options.prefetch_backlog() > options.prefetch_limit;
-            if (!far && !full) break;
-            std::this_thread::sleep_for(std::chrono::microseconds(200));
-          }
-          j = std::max(j, cursor.load());  // tiles the workers started need no scouting
-          if (j >= end) return;
-          ids.clear();
-          renderer.FirstBricks(layout.order()[size_t(j)], options.prefetch_stride, &ids);
-          if (!ids.empty()) options.prefetch(ids);
-        }
-      } catch (const std::exception&) {
-        // Prefetching is an optimisation: without it, the workers read what they need.
-      }
-    });
-  }
-  struct JoinScout {
-    std::atomic<bool>& stop;
-    std::thread& t;
-    ~JoinScout() {
-      stop = true;
-      if (t.joinable()) t.join();
-    }
-  } join_scout{scout_stop, scout};
-
+  FrameRun run(renderer, options, layout, begin, end, writer.get(), stats);
+  run.StartScout();
   Stopwatch frame_clock;
   tbb::task_arena arena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(0, threads, [&](int) {
-      Worker& w = workers.local();
-      // Each worker hands its counters to the frame's under err_mu, which
-      // the calling thread takes after the loop: the hand-over is ordered
-      // for ThreadSanitizer too (an uninstrumented TBB's join is not).
-      auto hand_over = [&] {
-        std::lock_guard<std::mutex> lock(err_mu);
-        stats->counters.Add(w.counters);
-        w.counters = RenderCounters();
-        stats->write_seconds += w.write_seconds;
-        w.write_seconds = 0;
-      };
-      for (;;) {
-        if (abort.load(std::memory_order_relaxed)) return hand_over();
-        const int64_t i = cursor.fetch_add(1);
-        if (i >= end) return hand_over();
-        const TileRect& rect = layout.order()[size_t(i)];
-        uint64_t rays_before = 0;
-        for (int k = 0; k < kNumRayKinds; ++k) rays_before += w.counters.rays[k];
-        const uint64_t entries_before = w.counters.trace.brick_fetches;
-        Status s = renderer.RenderTile(rect, &w.buf, &w.counters, w.state.get());
-        const Stopwatch tw;
-        if (s.ok() && writer) s = writer->WriteTile(rect, w.buf);
-        w.write_seconds += tw.Seconds();
-        if (s.ok() && options.on_tile) s = options.on_tile(rect, w.buf);
-        if (!s.ok()) {
-          std::lock_guard<std::mutex> lock(err_mu);
-          if (first_error.ok())
-            first_error = s.WithContext("tile (" + std::to_string(rect.tx) + ", " +
-                                        std::to_string(rect.ty) + ")");
-          abort = true;
-        }
-        if (!s.ok()) return hand_over();
-        uint64_t rays_after = 0;
-        for (int k = 0; k < kNumRayKinds; ++k) rays_after += w.counters.rays[k];
-        rays.fetch_add(rays_after - rays_before, std::memory_order_relaxed);
-        brick_entries.fetch_add(w.counters.trace.brick_fetches - entries_before,
-                                std::memory_order_relaxed);
-        done.fetch_add(1, std::memory_order_relaxed);
-        const ProgressSnapshot now = snapshot();
-        progress.Update(uint64_t(now.tiles_done), uint64_t(now.tiles_total),
-                        [&](double elapsed) { return ProgressLine(now, elapsed); });
-      }
-    });
-  });
-  scout_stop = true;
-  if (scout.joinable()) scout.join();
+  arena.execute(
+      [&] { tbb::parallel_for(0, threads, [&](int) { run.Work(workers.local()); }); });
+  run.StopScout();
   stats->render_seconds = frame_clock.Lap();
-  Status error;
-  {
-    std::lock_guard<std::mutex> lock(err_mu);  // after the workers' hand-overs
-    error = first_error;
-  }
-  stats->tiles = done.load();
-  stats->cache_end = volume->cache_stats();
+  const Status error = run.Error();
+  stats->tiles = run.tiles_done();
+  stats->cache_end = renderer.volume()->cache_stats();
   if (!error.ok()) {
     if (writer) writer->Abandon();  // an earlier file at exr_path stays intact
     return error;
   }
-  const ProgressSnapshot last = snapshot();
-  progress.Finish(uint64_t(last.tiles_done), uint64_t(last.tiles_total),
-                  [&](double elapsed) { return ProgressLine(last, elapsed); });
+  run.FinishProgress();
   if (!writer) return OkStatus();
   nlohmann::json timings{{"render_seconds", stats->render_seconds},
                          {"write_seconds", stats->write_seconds},
