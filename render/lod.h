@@ -65,7 +65,7 @@ inline constexpr double kDefaultLodFactor = 1.0;
 // is shaded again from G x G sub-pixel rays, each carrying a cone G times
 // narrower; its alpha is the fraction of them that hit. The default G and
 // its limits (--silhouette-aa G; 0: off).
-inline constexpr int kDefaultSilhouetteGrid = 2;
+inline constexpr int kDefaultSilhouetteGrid = 4;
 inline constexpr int kMaxSilhouetteGrid = 8;
 
 // Counts of LOD stops (first hits) by level, and of rays traced exactly.

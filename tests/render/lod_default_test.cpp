@@ -109,7 +109,7 @@ TEST_F(LodDefault, OnByDefaultWhenTheStoreHasAPyramid) {
   const Frame f = Render("store", CameraJson(kFarZ, kFarSize), std::nullopt);
   EXPECT_EQ(f.stats["lod"]["factor"], 1.0);
   EXPECT_EQ(f.stats["lod"]["default"], true);
-  EXPECT_EQ(f.stats["lod"]["setting"], "1 (default), silhouettes from 2x2 rays");
+  EXPECT_EQ(f.stats["lod"]["setting"], "1 (default), silhouettes from 4x4 rays");
   EXPECT_GT(f.stats["lod"]["stops_by_level"]["1"].get<uint64_t>(), 0u);
 
   const Frame none = Render("nolod", CameraJson(kFarZ, kFarSize), std::nullopt);
@@ -160,7 +160,7 @@ TEST_F(LodDefault, CoarseSilhouettesGetFractionalAlpha) {
   EXPECT_EQ(whole_fractional, 0u);
   EXPECT_GT(aa.stats["lod"]["refined_pixels"].get<uint64_t>(), 0u);
   EXPECT_EQ(aa.stats["lod"]["refine_rays"].get<uint64_t>(),
-            4 * aa.stats["lod"]["refined_pixels"].get<uint64_t>());
+            16 * aa.stats["lod"]["refined_pixels"].get<uint64_t>());
   EXPECT_EQ(whole.stats["lod"]["refined_pixels"], 0u);
   const double aa_error = AlphaRmse(aa, reference), whole_error = AlphaRmse(whole, reference),
                exact_error = AlphaRmse(exact, reference);
@@ -202,7 +202,7 @@ TEST_F(LodDefault, HeaderNamesTheSettingAndMergeRefusesMixedParts) {
   ASSERT_EQ(r.code, 0) << r.output;
   auto info = ReadExrInfo(Path("p1.exr"));
   ASSERT_TRUE(info.ok()) << info.status().ToString();
-  EXPECT_EQ(info->attrs["vox:lod"], "1 (default), silhouettes from 2x2 rays");
+  EXPECT_EQ(info->attrs["vox:lod"], "1 (default), silhouettes from 4x4 rays");
   info = ReadExrInfo(Path("p2.exr"));
   ASSERT_TRUE(info.ok());
   EXPECT_EQ(info->attrs["vox:lod"], "0 (exact)");

@@ -11,8 +11,8 @@ background, with the default light, in four modes:
 
   reference  --lod 0 with 16 samples a pixel (the exact frame, supersampled)
   exact      --lod 0, one sample a pixel (the paper's frame)
-  default    no --lod flag (level of detail, silhouettes from 2x2 sub-pixel rays)
-  aa4        --silhouette-aa 4 (silhouettes from 4x4 sub-pixel rays)
+  default    no --lod flag (level of detail, silhouettes from 4x4 sub-pixel rays)
+  aa2        --silhouette-aa 2 (silhouettes from 2x2 sub-pixel rays)
   whole      --silhouette-aa 0 (level of detail, coarse silhouettes whole cells)
 
 and compares each with the reference (build/tools/bench/vox-lod-compare): RMSE
@@ -38,7 +38,7 @@ CAMERAS = {
 MODES = {
     "exact": ["--lod", "0"],
     "default": [],
-    "aa4": ["--silhouette-aa", "4"],
+    "aa2": ["--silhouette-aa", "2"],
     "whole": ["--silhouette-aa", "0"],
 }
 

@@ -56,7 +56,7 @@ const char kUsage[] =
     "               exact frame everywhere. See docs/lod.md\n"
     "  --silhouette-aa G  with level of detail, a coarse stop next to a miss is shaded again\n"
     "               from GxG sub-pixel rays with cones G times narrower, so its alpha is the\n"
-    "               covered fraction (default 2; 0: coarse silhouettes stay whole cells)\n"
+    "               covered fraction (default 4; 0: coarse silhouettes stay whole cells)\n"
     "  --stats      write counters and timings as JSON\n"
     "  --quiet      no progress output\n";
 
