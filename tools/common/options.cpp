@@ -99,8 +99,11 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->single_step = true;
   } else if (a == "--quiet") {
     o->quiet = true;
-  } else if (a == "--prefetch" || a == "--no-prefetch") {  // --prefetch: the default, kept for scripts
-    o->prefetch = a == "--prefetch";
+  } else if (a == "--prefetch") {
+    o->prefetch = true;
+  } else if (a == "--no-prefetch") {  // once accepted and silently the default: refused, saying so
+    return InvalidArgumentError("--no-prefetch was removed: bricks are read without prefetching "
+                                "unless --prefetch is given");
   } else if (a == "--read-windows" || a == "--no-read-windows") {
     o->read_windows = a == "--read-windows";
   } else if (a == "--beam" || a == "--no-beam") {
