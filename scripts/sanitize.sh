@@ -24,7 +24,8 @@ jobs="${VOX_JOBS:-$(nproc)}"
 
 # The build targets of the default tests carrying label $2 in build dir $1:
 # each test's executable (ctest names it once built; before, the test's name,
-# which vox_test gives its executable too), kept if the build knows it.
+# which vox_test gives its executable too) and any argument naming a built
+# file (a test run through sh), kept if the build knows it.
 label_targets() {
   local known
   known="$(cmake --build "$1" --target help | sed -n 's/^\(\.\.\. \)\{0,1\}\([A-Za-z0-9_.+-]*\):\{0,1\} .*$/\2/p')"
@@ -34,6 +35,7 @@ known = set(os.environ["KNOWN"].split())
 names = set()
 for t in json.load(sys.stdin)["tests"]:
     names.add(os.path.basename(t["command"][0]) if t.get("command") else t["name"])
+    names.update(os.path.basename(a) for a in t.get("command", [])[1:])
 print(" ".join(sorted(names & known)))'
 }
 
