@@ -17,6 +17,7 @@
 # VOX_SANITIZED and skip those checks: shadow memory and quarantine change
 # what they measure.
 # VOX_ASAN_DIR overrides the ASan build directory (also read by scripts/fuzz.sh).
+# ctest's results go to DIR/ctest-junit.xml (.ci/run checks them for skips).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mode="${1:-}"
@@ -56,7 +57,8 @@ case "$mode" in
       export ASAN_OPTIONS="detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=0:check_initialization_order=1:${ASAN_OPTIONS:-}"
       export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
       export LSAN_OPTIONS="suppressions=$PWD/scripts/sanitizer/lsan.supp:${LSAN_OPTIONS:-}"
-      ctest --test-dir "$dir" --output-on-failure "${labels[@]}" -LE long -j "$jobs" --timeout 1800
+      ctest --test-dir "$dir" --output-on-failure "${labels[@]}" -LE long -j "$jobs" --timeout 1800 \
+        --output-junit ctest-junit.xml
     )
     secs="${VOX_FUZZ_SECONDS:-25}"
     if [ "$secs" -gt 0 ]; then
@@ -69,7 +71,8 @@ case "$mode" in
     read -ra targets <<<"$(label_targets "$dir" tsan)"
     cmake --build "$dir" -j "$jobs" --target "${targets[@]}"
     export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/scripts/sanitizer/tsan.supp:${TSAN_OPTIONS:-}"
-    ctest --test-dir "$dir" --output-on-failure -L tsan -LE long -j "$jobs" --timeout 1800
+    ctest --test-dir "$dir" --output-on-failure -L tsan -LE long -j "$jobs" --timeout 1800 \
+      --output-junit ctest-junit.xml
     ;;
   *)
     echo "usage: scripts/sanitize.sh asan|tsan" >&2
