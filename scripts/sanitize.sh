@@ -54,8 +54,11 @@ case "$mode" in
       labels=(-L asan)
     fi
     (
-      export ASAN_OPTIONS="detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=0:check_initialization_order=1:${ASAN_OPTIONS:-}"
-      export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
+      # exitcode=86: a report (ASan, UBSan, a leak) in a tool a test runs
+      # must not pass for the tool's own error exit 1, which many tests
+      # expect (a missing store, a corrupt file).
+      export ASAN_OPTIONS="exitcode=86:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=0:check_initialization_order=1:${ASAN_OPTIONS:-}"
+      export UBSAN_OPTIONS="exitcode=86:print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
       export LSAN_OPTIONS="suppressions=$PWD/scripts/sanitizer/lsan.supp:${LSAN_OPTIONS:-}"
       ctest --test-dir "$dir" --output-on-failure "${labels[@]}" -LE long -j "$jobs" --timeout 1800 \
         --output-junit ctest-junit.xml
