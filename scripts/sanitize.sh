@@ -17,6 +17,7 @@
 # VOX_SANITIZED and skip those checks: shadow memory and quarantine change
 # what they measure.
 # VOX_ASAN_DIR overrides the ASan build directory (also read by scripts/fuzz.sh).
+# ctest's results go to DIR/ctest-junit.xml (.ci/run checks them for skips).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mode="${1:-}"
@@ -24,7 +25,8 @@ jobs="${VOX_JOBS:-$(nproc)}"
 
 # The build targets of the default tests carrying label $2 in build dir $1:
 # each test's executable (ctest names it once built; before, the test's name,
-# which vox_test gives its executable too), kept if the build knows it.
+# which vox_test gives its executable too) and any argument naming a built
+# file (a test run through sh), kept if the build knows it.
 label_targets() {
   local known
   known="$(cmake --build "$1" --target help | sed -n 's/^\(\.\.\. \)\{0,1\}\([A-Za-z0-9_.+-]*\):\{0,1\} .*$/\2/p')"
@@ -34,6 +36,7 @@ known = set(os.environ["KNOWN"].split())
 names = set()
 for t in json.load(sys.stdin)["tests"]:
     names.add(os.path.basename(t["command"][0]) if t.get("command") else t["name"])
+    names.update(os.path.basename(a) for a in t.get("command", [])[1:])
 print(" ".join(sorted(names & known)))'
 }
 
@@ -51,10 +54,14 @@ case "$mode" in
       labels=(-L asan)
     fi
     (
-      export ASAN_OPTIONS="detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=0:check_initialization_order=1:${ASAN_OPTIONS:-}"
-      export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
+      # exitcode=86: a report (ASan, UBSan, a leak) in a tool a test runs
+      # must not pass for the tool's own error exit 1, which many tests
+      # expect (a missing store, a corrupt file).
+      export ASAN_OPTIONS="exitcode=86:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=0:check_initialization_order=1:${ASAN_OPTIONS:-}"
+      export UBSAN_OPTIONS="exitcode=86:print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
       export LSAN_OPTIONS="suppressions=$PWD/scripts/sanitizer/lsan.supp:${LSAN_OPTIONS:-}"
-      ctest --test-dir "$dir" --output-on-failure "${labels[@]}" -LE long -j "$jobs" --timeout 1800
+      ctest --test-dir "$dir" --output-on-failure "${labels[@]}" -LE long -j "$jobs" --timeout 1800 \
+        --output-junit ctest-junit.xml
     )
     secs="${VOX_FUZZ_SECONDS:-25}"
     if [ "$secs" -gt 0 ]; then
@@ -67,7 +74,8 @@ case "$mode" in
     read -ra targets <<<"$(label_targets "$dir" tsan)"
     cmake --build "$dir" -j "$jobs" --target "${targets[@]}"
     export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/scripts/sanitizer/tsan.supp:${TSAN_OPTIONS:-}"
-    ctest --test-dir "$dir" --output-on-failure -L tsan -LE long -j "$jobs" --timeout 1800
+    ctest --test-dir "$dir" --output-on-failure -L tsan -LE long -j "$jobs" --timeout 1800 \
+      --output-junit ctest-junit.xml
     ;;
   *)
     echo "usage: scripts/sanitize.sh asan|tsan" >&2

@@ -258,14 +258,21 @@ uint64_t CompactTopology<ValueT>::MemoryBytes() const {
   return b;
 }
 
-template <class ValueT>
-StatusOr<std::unique_ptr<CompactTopology<ValueT>>> CompactTopology<ValueT>::Read(
-    const std::string& path, const VdbLayout& layout, const VdbLayout::Grid& grid) {
-  const std::string where = "grid '" + grid.name + "' in " + path;
+// Refuses, before reading any of its bytes, a grid vox cannot read.
+static Status CheckReadableGrid(const std::string& path, const VdbLayout& layout,
+                                const VdbLayout::Grid& grid, const std::string& where) {
   if (!layout.has_offsets || layout.file_version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION)
     return UnsupportedError(path + ": VDB file format " + std::to_string(layout.file_version) +
                             " predates OpenVDB 3 (format 222); re-save it with a newer OpenVDB");
   if (grid.instance) return UnsupportedError(where + " is an instance of another grid");
+  return OkStatus();
+}
+
+template <class ValueT>
+StatusOr<std::unique_ptr<CompactTopology<ValueT>>> CompactTopology<ValueT>::Read(
+    const std::string& path, const VdbLayout& layout, const VdbLayout::Grid& grid) {
+  const std::string where = "grid '" + grid.name + "' in " + path;
+  VOX_RETURN_IF_ERROR(CheckReadableGrid(path, layout, grid, where));
   std::unique_ptr<CompactTopology> t(new CompactTopology);
   t->path_ = path;
   t->file_version_ = layout.file_version;

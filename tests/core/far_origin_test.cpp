@@ -21,11 +21,17 @@ struct Case {
   int levels;
   Reference ref;
   std::vector<TracerUnderTest<DefaultTracer>> tracers;
+  // The render's tracer (test_util.h), with the occupied box: held to the
+  // same exactness.
+  std::vector<TracerUnderTest<RenderTracerUnderTest>> render;
   Case(std::vector<Voxel> v, int l, const std::vector<int>& bls, const std::vector<int>& n1s)
       : voxels(std::move(v)), levels(l), ref(voxels, levels) {
     auto t = MakeTracers(voxels, levels, bls, n1s);
     EXPECT_TRUE(t.ok()) << t.status().ToString();
     if (t.ok()) tracers = std::move(t).value();
+    auto r = MakeTracers<RenderTracerUnderTest>(voxels, levels, bls, n1s, /*occupied_box=*/true);
+    EXPECT_TRUE(r.ok()) << r.status().ToString();
+    if (r.ok()) render = std::move(r).value();
   }
   // Returns the number of rays the reference says hit.
   int CheckAll(const std::vector<Ray>& rays, const std::string& what) const {
@@ -38,6 +44,11 @@ struct Case {
         const std::string msg = TraceAndCheck(t.tracer, ref, er, expected);
         if (!msg.empty() && ++failures <= 10)
           ADD_FAILURE() << what << " [" << t.name << "]: " << msg;
+      }
+      for (const auto& t : render) {
+        const std::string msg = TraceAndCheck(t.tracer, ref, er, expected);
+        if (!msg.empty() && ++failures <= 10)
+          ADD_FAILURE() << what << " [render " << t.name << "]: " << msg;
       }
     }
     return hits;

@@ -1,5 +1,6 @@
 #include "tests/core/test_util.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <set>
@@ -13,6 +14,11 @@ int RayCount(int default_count) {
   if (env == nullptr || *env == '\0') return default_count;
   long n = std::strtol(env, nullptr, 10);
   return n > 0 ? int(n) : default_count;
+}
+
+double DoubleSetupBound(const Ray& ray, int levels) {
+  const double o = std::max({std::fabs(ray.origin.x), std::fabs(ray.origin.y), std::fabs(ray.origin.z)});
+  return 8 * 0x1p-53 * (o + std::ldexp(1.0, levels));
 }
 
 bool LongRun() {

@@ -4,6 +4,7 @@
 #ifndef VOX_TESTS_CORE_TEST_UTIL_H_
 #define VOX_TESTS_CORE_TEST_UTIL_H_
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <random>
@@ -66,15 +67,40 @@ struct TracerUnderTest {
   TracerT tracer;
 };
 
+// The tracer vox-render traces with: render/renderer.h's RenderTracer and
+// render/lod.h's LodLevelTracer are this type (tests/render/beam_test.cpp
+// checks it), 64-bit words up to kFixed64MaxLevels and 128-bit above, with a
+// double per-ray set-up; the renderer gives it the store's occupied box.
+// vox-probe and vox.probe answer with it by default (--tracer render).
+using RenderTracerUnderTest = AutoTracer<double>;
+
+// How far (in voxels) the double set-up of RenderTracerUnderTest may move a
+// ray, from IEEE double alone: the set-up (clipping to the grid, the entry
+// point, the first h and l, the transition's entry point) evaluates each
+// coordinate in at most 8 rounded operations on values no larger than
+// |origin|_inf + 2^levels, each rounding off by at most 2^-53 of its value:
+// 8 * 2^-53 * (|origin|_inf + 2^levels). A first hit the exact reference
+// refuses but a ray moved by at most this explains (WithinEpsilon) is a
+// precision difference; any other is a logic failure.
+double DoubleSetupBound(const Ray& ray, int levels);
+
 // One tracer per (brick level, n1) pair. Fails when the tree cannot be built
-// or a split is refused.
+// or a split is refused. `occupied_box`: give each tracer the voxels'
+// bounding box (SetOccupiedBox), as the renderer does.
 template <class TracerT = DefaultTracer>
 StatusOr<std::vector<TracerUnderTest<TracerT>>> MakeTracers(const std::vector<Voxel>& voxels,
                                                              int levels,
                                                              const std::vector<int>& brick_levels,
-                                                             const std::vector<int>& n1s) {
+                                                             const std::vector<int>& n1s,
+                                                             bool occupied_box = false) {
   std::vector<TracerUnderTest<TracerT>> out;
   const std::vector<LeafPoint> points = ToLeafPoints(voxels);
+  int64_t lo[3] = {INT64_MAX, INT64_MAX, INT64_MAX}, hi[3] = {INT64_MIN, INT64_MIN, INT64_MIN};
+  for (const Voxel& v : voxels)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min<int64_t>(lo[a], v[a]);
+      hi[a] = std::max<int64_t>(hi[a], v[a]);
+    }
   for (int bl : brick_levels) {
     auto built = MemoryOctree::Build(points, levels, bl);
     if (!built.ok()) return built.status();
@@ -82,6 +108,7 @@ StatusOr<std::vector<TracerUnderTest<TracerT>>> MakeTracers(const std::vector<Vo
     for (int n1 : n1s) {
       auto tr = TracerT::Create(tree->view(), n1);
       if (!tr.ok()) return tr.status();
+      if (occupied_box && !voxels.empty()) tr->SetOccupiedBox(lo, hi);
       out.push_back({"bl=" + std::to_string(bl) + " n1=" + std::to_string(n1), tree, *tr});
     }
   }

@@ -89,12 +89,26 @@ struct Result {
 struct Budget {
   double eps = 1e-6;
   double max_rate = 1e-4;
+  // The render tracer: eps per ray is DoubleSetupBound (test_util.h), and
+  // its tracers get the occupied box as the renderer gives it.
+  bool render = false;
 };
+
+// The render's tracer (RenderTracerUnderTest): wrong answers only within the
+// bound IEEE double puts on its set-up, at most `max_rate` of the rays.
+constexpr Budget RenderBudget(double max_rate) { return Budget{0, max_rate, true}; }
 
 // Fixed64's drift on a 2^30 grid: l += q gains at most 2^-40 step units a
 // move; over up to 2^20 moves of a 20-level step that is 2^-20 step units,
 // 2^-10 voxel when the other step has 10 levels (and alike for 10+20).
 constexpr Budget kFixed64Drift30{0x1p-9, 1e-3};
+// On a 2^40 grid split 20+20 the same drift reaches 2^20 moves * 2^-40 step
+// units = 2^-20 first-step units = 1 second-step voxel: every wrong first
+// hit must be within a voxel of an accepted one. The bound says nothing of
+// how many rays come that close to a boundary, so no rate is asserted
+// (max_rate 1): the 64-bit word is not exact on 2^40 grids, which is why
+// AutoTracer does not use it there.
+constexpr Budget kFixed64Drift40{1, 1};
 
 // The perturbations tried when classifying a failure, to print how far off
 // the tracer was (data for the accuracy study).
@@ -108,7 +122,8 @@ Result<TracerT> RunConfig(const Config& cfg, Budget budget = {}, const char* lab
   Result<TracerT> res;
   auto t0 = std::chrono::steady_clock::now();
   Reference ref(cfg.voxels, cfg.levels);
-  auto tracers = MakeTracers<TracerT>(cfg.voxels, cfg.levels, cfg.brick_levels, cfg.n1s);
+  auto tracers = MakeTracers<TracerT>(cfg.voxels, cfg.levels, cfg.brick_levels, cfg.n1s,
+                                      /*occupied_box=*/budget.render);
   EXPECT_TRUE(tracers.ok()) << tracers.status().ToString();
   if (!tracers.ok()) return res;
   res.near.assign(tracers->size(), 0);
@@ -139,11 +154,14 @@ Result<TracerT> RunConfig(const Config& cfg, Budget budget = {}, const char* lab
         int rung = 0;
         while (rung < kRungs && !WithinEpsilon(ref, er, expected, *got, kLadder[rung])) ++rung;
         ++ladder[k][rung];
-        if (rung < kRungs && kLadder[rung] <= budget.eps) {
+        const double eps = budget.render ? DoubleSetupBound(ray, cfg.levels) : budget.eps;
+        if (budget.render ? WithinEpsilon(ref, er, expected, *got, eps)
+                          : rung < kRungs && kLadder[rung] <= eps) {
           ++res.near[k];
           if (printed_near++ < 3)
             std::printf("  precision failure (within %g voxel): %s [%s] ray %d: %s\n",
-                        kLadder[rung], cfg.name.c_str(), t.name.c_str(), i, msg.c_str());
+                        budget.render ? eps : kLadder[rung], cfg.name.c_str(), t.name.c_str(), i,
+                        msg.c_str());
           continue;
         }
       }
@@ -169,9 +187,10 @@ Result<TracerT> RunConfig(const Config& cfg, Budget budget = {}, const char* lab
               cfg.name.c_str(), label, ref.size(), (unsigned long long)res.rays,
               (unsigned long long)res.hits, (unsigned long long)res.ambiguous, res.seconds);
   for (size_t k = 0; k < tracers->size(); ++k) {
-    std::printf("  %-12s failures: %llu logic, %llu precision (eps %g)",
+    std::printf("  %-12s failures: %llu logic, %llu precision (eps %s)",
                 (*tracers)[k].name.c_str(), (unsigned long long)res.far[k],
-                (unsigned long long)res.near[k], budget.eps);
+                (unsigned long long)res.near[k],
+                budget.render ? "double set-up bound" : std::to_string(budget.eps).c_str());
     if (res.far[k] + res.near[k] > 0) {
       std::printf("; wrong answers explained within eps:");
       for (int r = 0; r < kRungs; ++r)
@@ -209,6 +228,7 @@ TEST(TracerProperty, Grid64DenseRandom) {
                   4000, 101);
   c.traverse_every = 10;
   RunConfig(c);
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 TEST(TracerProperty, Grid64SparseRandom) {
@@ -217,6 +237,7 @@ TEST(TracerProperty, Grid64SparseRandom) {
                   {6, 4, 2, 1}, 4000, 102);
   c.traverse_every = 5;
   RunConfig(c);
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 TEST(TracerProperty, Grid64Sphere) {
@@ -226,6 +247,7 @@ TEST(TracerProperty, Grid64Sphere) {
   ASSERT_EQ(levels, 6);
   c.traverse_every = 10;
   RunConfig(c);
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 // ---------------------------------------------------------------- 2^8 .. 2^10
@@ -237,6 +259,7 @@ TEST(TracerProperty, Grid256Cubes) {
   ASSERT_EQ(levels, 8);
   c.traverse_every = 20;
   RunConfig(c);
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 TEST(TracerProperty, Grid256Torus) {
@@ -245,6 +268,7 @@ TEST(TracerProperty, Grid256Torus) {
                   {8, 5, 3}, 3000, 105);
   ASSERT_EQ(levels, 8);
   RunConfig(c);
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 TEST(TracerProperty, Grid1024Noise) {
@@ -253,6 +277,7 @@ TEST(TracerProperty, Grid1024Noise) {
                   {10, 5, 3, 7}, 1500, 106);
   ASSERT_EQ(levels, 10);
   RunConfig(c);
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 // ---------------------------------------------------------------- 2^16, 2^20
@@ -287,6 +312,7 @@ TEST(TracerProperty, Grid2p16Blobs) {
   Config c = Make("2^16 blobs", 16, Blobs(rng, 16, 12, 16, 0.4, 3000), {16, 9},
                   {16, 9, 5, 12}, 1000, 116);
   RunConfig(c);
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 TEST(TracerProperty, Grid2p20Blobs) {
@@ -295,6 +321,7 @@ TEST(TracerProperty, Grid2p20Blobs) {
                   {20, 11, 6, 14}, 600, 120);
   c.make_ray = NearRay;
   RunConfig(c);
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 // ---------------------------------------------------------------- 2^30, 2^40
@@ -305,6 +332,7 @@ TEST(TracerProperty, Grid2p30Blobs) {
                   {10, 15, 20}, 600, 130);
   c.make_ray = NearRay;
   RunConfig<DefaultTracer>(c, kFixed64Drift30, "Fixed64");
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 TEST(TracerProperty, Grid2p40Blobs) {
@@ -312,10 +340,13 @@ TEST(TracerProperty, Grid2p40Blobs) {
   Config c = Make("2^40 blobs", 40, Blobs(rng, 40, 10, 16, 0.4, 100), {12, 30}, {20}, 600, 140);
   c.make_ray = NearRay;
   // 2% of NearRay's rays come from far outside: over a 20-level first step
-  // Fixed64 drifts by up to half a voxel (TracerPrecision below). Measured
-  // with 10^5 rays: 49 wrong first hits (0.05%), all within 0.5 voxel.
-  RunConfig<DefaultTracer>(c, Budget{1, 0.005}, "Fixed64");
+  // Fixed64 drifts by up to one voxel (kFixed64Drift40). Measured with 10^5
+  // rays: 49 wrong first hits (0.05%), all within 0.5 voxel. No rate is
+  // asserted for the 64-bit word here: no tracer vox uses takes it above
+  // 2^26 (AutoTracer); Fixed128 and the render's tracer must be exact.
+  RunConfig<DefaultTracer>(c, kFixed64Drift40, "Fixed64");
   RunConfig<Tracer<Fixed128, long double>>(c, Budget{}, "Fixed128");
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 // ---------------------------------------------------------------- precision
@@ -335,12 +366,15 @@ TEST(TracerPrecision, Grid2p40FromFarOutside) {
   Rng rng(41);
   Config c = Make("2^40 far rays", 40, Blobs(rng, 40, 10, 16, 0.4, 100), {12}, {20}, 400, 141);
   c.make_ray = FarRay;
-  // Fixed64 (39 fractional bits) accumulates up to 2^20 * 2^-40 first-step
-  // units = 1 second-step voxel of error in l += q over a 20-level first
-  // step: measured 3.1% wrong first hits, all within 0.5 voxel (1000 rays).
-  // Bounded here so that a regression shows; Fixed128 must be exact.
-  RunConfig<DefaultTracer>(c, Budget{1, 0.15}, "Fixed64");
+  // Fixed64 (39 fractional bits) is not exact here: measured 18 of these 400
+  // rays (4.5%; 3.1% of 1000 in an earlier run) with a wrong first hit, all
+  // within 0.5 voxel. The test asserts only what the drift bound
+  // (kFixed64Drift40) gives, that each is within a voxel of an accepted
+  // answer; AutoTracer, vox's default and the render's, takes 128-bit words
+  // above 2^26, and those must be exact.
+  RunConfig<DefaultTracer>(c, kFixed64Drift40, "Fixed64");
   RunConfig<Tracer128>(c, Budget{}, "Fixed128");
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 TEST(TracerPrecision, Grid2p30FromFarOutside) {
@@ -351,6 +385,7 @@ TEST(TracerPrecision, Grid2p30FromFarOutside) {
   // within 0.001 voxel.
   RunConfig<DefaultTracer>(c, kFixed64Drift30, "Fixed64");
   RunConfig<Tracer128>(c, Budget{}, "Fixed128");
+  RunConfig<RenderTracerUnderTest>(c, RenderBudget(1e-4), "render");
 }
 
 }  // namespace

@@ -8,9 +8,22 @@
 //   3  the ingest failed with a Status that names the input file and left
 //      no store and no temporary behind
 //   4  a broken promise: the message, store or leftovers say what
-// The parent aborts on 4 (libFuzzer keeps the input) and on any exit the
-// child did not choose other than a signal or a sanitizer report (a crash in
-// OpenVDB, or the watchdog). Limits keep hostile but valid grids short:
+//   5  a sanitizer (ASan, UBSan) reported an error in the child: the
+//      sanitizers' death callback, set in the child, exits with this code
+//      whatever ASAN_OPTIONS' exitcode says (its default, 1, is what exit
+//      codes alone could not tell apart)
+// The parent aborts (libFuzzer keeps the input) on 4, on 5 and on any exit
+// the child did not choose. What stays a rejection: a Status (3; OpenVDB's
+// exceptions on a corrupt file become one), libFuzzer's out-of-memory exit
+// (71, below) and a signal no sanitizer caught (the watchdog; in a build
+// without ASan, a crash in OpenVDB's reader, as vox-ingest contains it).
+// Under ASan a SEGV anywhere, OpenVDB's reader included, is a sanitizer
+// report and fails: a finding to triage by its stack (vox must refuse such
+// a file before OpenVDB reads it, as ingest/internal/vdb_topology.cpp does
+// for oversized value chunks). Built with VOX_FUZZ_PLANTED_FAULT, the child
+// reads one byte past a heap buffer after each ingest: the test
+// fuzz_vdb_planted_fault (asan builds only) checks that the gate fails on
+// it. Limits keep hostile but valid grids short:
 // 256 MiB of ingest budget, at most 1e7 voxels from tiles, one thread, a
 // 15 s alarm in the child; libFuzzer's -malloc_limit_mb applies in the child
 // too: an allocation over it ends the child with libFuzzer's out-of-memory
@@ -30,7 +43,9 @@
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
+#include <cstring>
 #include <fstream>
+#include <memory>
 #include <string>
 
 #include "ingest/ingest.h"
@@ -41,8 +56,23 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr int kOk = 0, kCleanError = 3, kBroken = 4;
+constexpr int kOk = 0, kCleanError = 3, kBroken = 4, kSanitizerReport = 5;
 constexpr int kLibFuzzerOutOfMemory = 71;  // libFuzzer's -malloc_limit_mb exit
+
+// The sanitizers' runtime (sanitizer/common_interface_defs.h), absent from a
+// build without them: then the weak reference is null.
+extern "C" void __sanitizer_set_death_callback(void (*callback)(void)) __attribute__((weak));
+
+#ifdef VOX_FUZZ_PLANTED_FAULT
+// The planted fault: a heap read one byte past the end, which only a
+// sanitizer sees (the volatile keeps the compiler from dropping it).
+void PlantedOutOfBoundsRead(const std::string& text) {
+  std::unique_ptr<char[]> copy(new char[text.size() + 1]);
+  std::memcpy(copy.get(), text.c_str(), text.size() + 1);
+  volatile char past = copy[text.size() + 1];
+  (void)past;
+}
+#endif
 
 int Broken(const std::string& what) {
   std::fprintf(stderr, "fuzz_vdb: %s\n", what.c_str());
@@ -59,6 +89,9 @@ int IngestAndCheck(const std::string& input, const std::string& output) {
   vox::IngestLimits limits;
   limits.max_tile_voxels = 10000000;
   auto stats = vox::Ingest(o, limits);
+#ifdef VOX_FUZZ_PLANTED_FAULT
+  PlantedOutOfBoundsRead(input);
+#endif
   const fs::path dir = fs::path(output).parent_path();
   if (!stats.ok()) {
     const std::string msg = stats.status().ToString();
@@ -121,6 +154,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       // before the parent's libFuzzer -timeout (20 s in scripts/fuzz.sh).
       signal(SIGALRM, SIG_DFL);
       alarm(15);
+      // A sanitizer's report ends the child with its own code, so the parent
+      // cannot take it for a crash in OpenVDB.
+      if (__sanitizer_set_death_callback != nullptr)
+        __sanitizer_set_death_callback([] { _exit(kSanitizerReport); });
       const int c = IngestAndCheck(input, output);
       std::fflush(nullptr);
       _exit(c);
@@ -128,13 +165,23 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     int status = 0;
     while (waitpid(child, &status, 0) < 0) {
     }
-    // A signal (OpenVDB's reader crashed, or the watchdog), a sanitizer's
-    // report (exit 1, e.g. a SEGV inside OpenVDB) or an allocation over the
-    // malloc cap: isolated, as in vox-ingest.
-    code = WIFEXITED(status) ? WEXITSTATUS(status) : kOk;
-    if (code == 1 || code == kLibFuzzerOutOfMemory) code = kOk;
+    // A signal no sanitizer caught (the watchdog, or OpenVDB's reader
+    // crashing in a build without ASan) or an allocation over the malloc
+    // cap: isolated, as in vox-ingest. Every other exit is the child's code.
+    if (WIFSIGNALED(status)) {
+      std::fprintf(stderr, "fuzz_vdb: the ingest's child ended by signal %d (contained)\n",
+                   WTERMSIG(status));
+      code = kOk;
+    } else {
+      code = WEXITSTATUS(status);
+      if (code == kLibFuzzerOutOfMemory) code = kOk;
+    }
   }
   fs::remove_all(base, ec);
+  if (code == kSanitizerReport) {
+    std::fprintf(stderr, "fuzz_vdb: a sanitizer reported an error in the ingest (see above)\n");
+    std::abort();
+  }
   if (code != kOk && code != kCleanError) {
     std::fprintf(stderr, "fuzz_vdb: the ingest broke a promise (exit %d, see above)\n", code);
     std::abort();

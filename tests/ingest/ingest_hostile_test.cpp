@@ -124,14 +124,16 @@ TEST_F(IngestHostileTest, AnEarlierStoreSurvivesACrashedReplace) {
 // Byte mutations (seeded) and truncations of a real .vdb: every run either
 // ingests (a valid store) or fails with exit 1 and a message naming the file;
 // never a signal, never a temporary left. A crash inside OpenVDB shows as the
-// crash of the child process. Bounded by count and by time.
+// crash of the child process. A fixed number of mutations, whatever the
+// machine's load (the same files every run: the seed is fixed); the fuzzer
+// goes further.
 TEST_F(IngestHostileTest, MutatedAndTruncatedFilesNeverKillTheTool) {
   const std::string good = ReadBytes(vdb_);
   ASSERT_GT(good.size(), 1000u);
   std::mt19937_64 rng(20261201);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(25);
+  constexpr int kMutations = 40;  // 5 of them truncations
   int runs = 0, ingested = 0, refused = 0, crashes = 0;
-  for (int i = 0; i < 160 && std::chrono::steady_clock::now() < deadline; ++i) {
+  for (int i = 0; i < kMutations; ++i) {
     std::string bytes = good;
     if (i % 8 == 7) {
       bytes.resize(std::uniform_int_distribution<size_t>(1, good.size() - 1)(rng));
@@ -161,7 +163,7 @@ TEST_F(IngestHostileTest, MutatedAndTruncatedFilesNeverKillTheTool) {
     ASSERT_TRUE(Leftovers(dir_.path()).empty()) << "mutation " << i;
     fs::remove_all(out);
   }
-  EXPECT_GE(runs, 20);
+  EXPECT_EQ(runs, kMutations);
   std::printf("%d mutated files: %d ingested, %d refused, %d crashes reported\n", runs,
               ingested, refused, crashes);
 }

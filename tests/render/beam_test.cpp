@@ -19,13 +19,21 @@
 #include <set>
 #include <string>
 #include <tuple>
+#include <type_traits>
 #include <vector>
 
 #include "core/tracer.h"
+#include "render/lod.h"
+#include "render/renderer.h"
 #include "tests/core/test_util.h"
 
 namespace vox::testing {
 namespace {
+
+// tests/core hold RenderTracerUnderTest to the exact reference as the
+// render's tracer: it must stay the type vox-render traces with.
+static_assert(std::is_same_v<RenderTracer, RenderTracerUnderTest>);
+static_assert(std::is_same_v<LodLevelTracer, RenderTracerUnderTest>);
 
 struct HitRec {
   glm::i64vec3 voxel;

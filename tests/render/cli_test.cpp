@@ -250,6 +250,24 @@ TEST_F(CliTest, BadFlagsAndMissingStore) {
   RunResult split = testing::RunCommand(Render("--split 4+4 --quiet -o " + Path("s.exr")));
   EXPECT_EQ(split.code, 1);
   EXPECT_NE(split.output.find("6 levels"), std::string::npos) << split.output;
+  // Flags that would do nothing are refused, saying why (exit 2, before any work).
+  RunResult io = testing::RunCommand(Render("--io-threads 4 --quiet -o " + Path("io.exr")));
+  EXPECT_EQ(io.code, 2);
+  EXPECT_NE(io.output.find("--io-threads sets the background readers of --prefetch"),
+            std::string::npos) << io.output;
+  EXPECT_FALSE(fs::exists(Path("io.exr")));
+  RunResult no_prefetch = testing::RunCommand(Render("--no-prefetch --quiet -o " + Path("np.exr")));
+  EXPECT_EQ(no_prefetch.code, 2);
+  EXPECT_NE(no_prefetch.output.find("--no-prefetch was removed"), std::string::npos)
+      << no_prefetch.output;
+  // With --prefetch, --io-threads is taken and the job uses it (at most the given number).
+  RunResult with = testing::RunCommand(Render("--prefetch --io-threads 2 --quiet -o " + Path("io.exr") +
+                                              " --stats " + Path("io.json")));
+  ASSERT_EQ(with.code, 0) << with.output;
+  std::ifstream io_stats(Path("io.json"));
+  const auto io_json = nlohmann::json::parse(io_stats);
+  EXPECT_GE(io_json["memory"]["io_threads"].get<int>(), 1);
+  EXPECT_LE(io_json["memory"]["io_threads"].get<int>(), 2);
   RunResult missing = testing::RunCommand(std::string(VOX_RENDER_BIN) + " " + Path("nostore") + " --quiet");
   EXPECT_EQ(missing.code, 1);
   EXPECT_NE(missing.output.find("nostore"), std::string::npos) << missing.output;

@@ -2,9 +2,15 @@
 // surviving eviction, and single-flight loading under many threads.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <atomic>
-#include <chrono>
 #include <cstring>
+#include <functional>
+#include <fstream>
+#include <iterator>
+#include <latch>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -19,6 +25,35 @@ using Cache = PageCache<int>;
 
 StatusOr<std::pair<Cache::Value, size_t>> Make(int v, size_t charge) {
   return std::make_pair(std::make_shared<const int>(v), charge);
+}
+
+// Waits until thread `tid` of this process sleeps in the kernel (state S in
+// /proc/self/task/TID/stat). A thread that has published its id and then
+// calls GetOrLoad on a key being loaded or claimed can sleep only on the
+// cache's condition variable (its mutex is free: no other thread holds it
+// for long), so this orders "the asker waits" before what follows by an
+// event, not by a delay.
+void WaitUntilAsleep(pid_t tid) {
+  const std::string path = "/proc/self/task/" + std::to_string(tid) + "/stat";
+  for (;;) {
+    std::ifstream in(path);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const size_t paren = text.rfind(')');  // the name may hold spaces; the state follows it
+    if (paren != std::string::npos && paren + 2 < text.size() && text[paren + 2] == 'S') return;
+    std::this_thread::yield();
+  }
+}
+
+// Starts `ask` on a new thread and returns once that thread sleeps in it.
+std::thread StartAsleep(std::function<void()> ask) {
+  std::atomic<pid_t> tid{0};
+  std::thread t([&tid, ask = std::move(ask)] {
+    tid = gettid();
+    ask();
+  });
+  while (tid == 0) std::this_thread::yield();
+  WaitUntilAsleep(tid);
+  return t;
 }
 
 TEST(PageCache, LruEvictionWithinBudget) {
@@ -84,7 +119,6 @@ TEST(PageCache, SingleFlightUnderManyThreads) {
         int k = (i + t) % kKeys;
         auto v = c.GetOrLoad(k, [&] {
           ++loads;
-          std::this_thread::sleep_for(std::chrono::milliseconds(5));  // widen the race
           return Make(k * 10, 100);
         });
         if (!v.ok() || **v != k * 10) ++bad;
@@ -97,7 +131,42 @@ TEST(PageCache, SingleFlightUnderManyThreads) {
   PageCacheCounters cc = c.counters();
   EXPECT_EQ(cc.misses, uint64_t(kKeys));
   EXPECT_EQ(cc.hits, uint64_t(32 * kKeys - kKeys));
-  EXPECT_GT(cc.joined, 0u);
+}
+
+// An ask for a key whose load is running waits for that load and shares its
+// value, counted as joined. The order is made, not hoped for: the load
+// blocks until the second asker sleeps in GetOrLoad.
+TEST(PageCache, AnAskDuringALoadJoinsIt) {
+  Cache c(100);
+  std::latch loading(1), release(1);
+  std::atomic<int> loads{0};
+  std::thread first([&] {
+    auto v = c.GetOrLoad(7, [&] {
+      ++loads;
+      loading.count_down();
+      release.wait();
+      return Make(70, 10);
+    });
+    ASSERT_TRUE(v.ok());
+    EXPECT_EQ(**v, 70);
+  });
+  loading.wait();
+  std::thread second = StartAsleep([&] {
+    auto v = c.GetOrLoad(7, [&] {
+      ++loads;
+      return Make(-1, 10);
+    });
+    ASSERT_TRUE(v.ok());
+    EXPECT_EQ(**v, 70);
+  });
+  release.count_down();
+  first.join();
+  second.join();
+  EXPECT_EQ(loads.load(), 1);
+  const PageCacheCounters cc = c.counters();
+  EXPECT_EQ(cc.misses, 1u);
+  EXPECT_EQ(cc.hits, 1u);
+  EXPECT_EQ(cc.joined, 1u);
 }
 
 // A claim (a prefetch reading many values at once) makes askers wait for it;
@@ -111,7 +180,9 @@ TEST(PageCache, ClaimsMakeAskersWaitAndReleaseThem) {
   EXPECT_FALSE(c.Claim(1));  // claimed already
   EXPECT_TRUE(c.Contains(1));
   std::atomic<bool> loaded{false};
-  std::thread asker([&] {
+  // The asker waits on the claim (asleep in GetOrLoad; it cannot have
+  // loaded: the claim is held).
+  std::thread asker = StartAsleep([&] {
     auto v = c.GetOrLoad(1, [&] {
       loaded = true;
       return Make(-1, 10);
@@ -119,27 +190,28 @@ TEST(PageCache, ClaimsMakeAskersWaitAndReleaseThem) {
     ASSERT_TRUE(v.ok());
     EXPECT_EQ(**v, 11);
   });
-  // The asker waits on the claim (it cannot have loaded: the claim is held).
-  std::this_thread::sleep_for(std::chrono::milliseconds(50));
   EXPECT_FALSE(loaded.load());
   c.FinishClaim(1, std::make_shared<const int>(11), 10);
   asker.join();
   EXPECT_FALSE(loaded.load());
+  EXPECT_EQ(c.counters().joined, 1u);  // it waited for the claim
   EXPECT_EQ(c.counters().prefetched, 1u);
   EXPECT_EQ(c.counters().prefetch_hits, 1u);  // it had a waiter
   EXPECT_EQ(c.counters().prefetch_unused, 0u);
 
   // Released without a value: the waiter loads it itself.
   ASSERT_TRUE(c.Claim(2));
-  std::thread asker2([&] {
+  const uint64_t misses = c.counters().misses;
+  std::thread asker2 = StartAsleep([&] {
     auto v = c.GetOrLoad(2, [&] { return Make(22, 10); });
     ASSERT_TRUE(v.ok());
     EXPECT_EQ(**v, 22);
   });
-  std::this_thread::sleep_for(std::chrono::milliseconds(50));
   c.FinishClaim(2, nullptr, 0);
   asker2.join();
   EXPECT_EQ(*c.Peek(2), 22);
+  EXPECT_EQ(c.counters().misses, misses + 1);  // it loaded the value itself
+  EXPECT_EQ(c.counters().joined, 1u);
 
   // Nobody waiting: cached as prefetched until first asked for.
   ASSERT_TRUE(c.Claim(3));
@@ -176,7 +248,6 @@ TEST(ShardedPageCache, BudgetAcrossShardsAndSingleFlight) {
       for (int k = 0; k < 32; ++k)
         (void)d.GetOrLoad(k, [&] {
           ++loads;
-          std::this_thread::sleep_for(std::chrono::milliseconds(1));
           return Make(k, 10);
         });
     });

@@ -376,16 +376,23 @@ TEST(GenTool, InterruptedRunLeavesNoStore) {
             "--quiet", (char*)nullptr);
       _exit(127);
     }
-    // Let it start writing bricks (its temporary directory appears).
-    bool started = false;
-    for (int i = 0; i < 200 && !started; ++i) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-      for (const std::string& e : t.Entries()) started |= e.find(".tmp-") != std::string::npos;
-    }
-    EXPECT_TRUE(started);
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
-    kill(pid, sig);
+    // Kill it once it has written bricks: its temporary directory holds a
+    // non-empty bricks.vxb (so its signal handling is set up). An event, not
+    // a delay: no load makes it come too early or too late; if the
+    // generator ends first, the test fails.
     int status = 0;
+    bool exited = false, writing = false;
+    while (!writing && !exited) {
+      for (const std::string& e : t.Entries()) {
+        std::error_code ec;
+        if (e.find(".tmp-") != std::string::npos && fs::file_size(t / e + "/bricks.vxb", ec) > 0 && !ec)
+          writing = true;
+      }
+      exited = waitpid(pid, &status, WNOHANG) == pid;
+      if (!writing && !exited) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    ASSERT_FALSE(exited) << "vox-gen ended before it was interrupted, status " << status;
+    kill(pid, sig);
     waitpid(pid, &status, 0);
     EXPECT_FALSE(fs::exists(s));
     EXPECT_FALSE(Store::Open(s, OpenOptions()).ok());

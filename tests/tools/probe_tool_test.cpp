@@ -7,13 +7,19 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <cmath>
 #include <map>
+#include <random>
+#include <vector>
 #include <sstream>
 #include <tuple>
 #include <string>
 
 #include "core/core.h"
+#include "core/octree.h"
+#include "core/ray_text.h"
 #include "core/shapes.h"
+#include "core/tracer.h"
 #include "storage/store.h"
 #include "storage/store_writer.h"
 
@@ -67,6 +73,74 @@ TEST(ProbeTool, BadFlagsAndMissingStore) {
   Result r = RunProbe("/nonexistent/store", "");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("/nonexistent/store"), std::string::npos) << r.err;
+}
+
+// The tracer behind each --tracer, by comparing vox-probe's answers with the
+// tracers themselves on the same tree: by default AutoTracer<double>, the
+// type vox-render traces with (render/renderer.h RenderTracer), with
+// --tracer long-double AutoTracer<long double>. Rays from far away with
+// tiny components, where a double and a long-double set-up can part
+// (tests/core hold both to the exact reference).
+TEST(ProbeTool, TracerFlagChoosesTheRendersOrTheLongDoubleTracer) {
+  for (const char* shape : {"sphere:256", "corner:40"}) {
+    SCOPED_TRACE(shape);
+    auto vol = GenerateShape(shape);
+    ASSERT_TRUE(vol.ok());
+    const int levels = vol->levels;
+    auto tree = MemoryOctree::Build(vol->voxels, levels, std::max(1, levels - 5));
+    ASSERT_TRUE(tree.ok());
+    const int n1 = DefaultFirstStepLevels(levels);
+    auto render = AutoTracer<double>::Create((*tree)->view(), n1);
+    auto long_double = AutoTracer<long double>::Create((*tree)->view(), n1);
+    ASSERT_TRUE(render.ok() && long_double.ok());
+    std::mt19937_64 rng(27);
+    std::uniform_real_distribution<double> u(-1, 1);
+    const double g = std::ldexp(1.0, levels);
+    std::vector<Ray> rays;
+    std::string input;
+    for (int i = 0; i < 400; ++i) {
+      const LeafPoint& v = vol->voxels[rng() % vol->voxels.size()];
+      const glm::dvec3 target(v.x + 0.5 + 0.5 * u(rng), v.y + 0.5 + 0.5 * u(rng), v.z + 0.5 + 0.5 * u(rng));
+      glm::dvec3 dir(u(rng), u(rng), u(rng));
+      dir[rng() % 3] *= std::ldexp(1.0, -int(rng() % 60));  // tiny components
+      const double far = g * std::ldexp(1.0, int(rng() % 20));
+      Ray r{target - far * dir, dir};
+      rays.push_back(r);
+      char line[256];
+      std::snprintf(line, sizeof line, "%a %a %a %a %a %a\n", r.origin.x, r.origin.y, r.origin.z,
+                    r.dir.x, r.dir.y, r.dir.z);
+      input += line;
+    }
+    auto expect = [&](const auto& tracer, const std::string& flags) {
+      Result res = RunProbe(std::string("--generate ") + shape + flags, input);
+      ASSERT_EQ(res.exit_code, 0) << flags << ": " << res.err;
+      std::istringstream out(res.out);
+      std::string line;
+      for (const Ray& r : rays) {
+        ASSERT_TRUE(std::getline(out, line)) << flags;
+        auto h = tracer.FirstHit(r);
+        ASSERT_TRUE(h.ok());
+        EXPECT_EQ(line, FormatHitLine(h->has_value() ? &(*h)->voxel : nullptr,
+                                      h->has_value() ? (*h)->t : 0.0))
+            << flags;
+      }
+    };
+    expect(*render, "");
+    expect(*render, " --tracer render");
+    expect(*long_double, " --tracer long-double");
+    int differ = 0;
+    for (const Ray& r : rays) {
+      auto a = render->FirstHit(r), b = long_double->FirstHit(r);
+      differ += a.ok() && b.ok() && (a->has_value() != b->has_value() ||
+                                     (a->has_value() && ((*a)->voxel != (*b)->voxel || (*a)->t != (*b)->t)));
+    }
+    std::printf("%s: %d of %zu rays answered differently by the two tracers\n", shape, differ,
+                rays.size());
+  }
+  Result bad = RunProbe("--generate sphere:64 --tracer exact", "");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("--tracer 'exact': expected render or long-double"), std::string::npos)
+      << bad.err;
 }
 
 TEST(ProbeTool, StoreAnswersEqualMemoryAnswersAtEverySplit) {

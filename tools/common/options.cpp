@@ -99,8 +99,11 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->single_step = true;
   } else if (a == "--quiet") {
     o->quiet = true;
-  } else if (a == "--prefetch" || a == "--no-prefetch") {  // --prefetch: the default, kept for scripts
-    o->prefetch = a == "--prefetch";
+  } else if (a == "--prefetch") {
+    o->prefetch = true;
+  } else if (a == "--no-prefetch") {  // once accepted and silently the default: refused, saying so
+    return InvalidArgumentError("--no-prefetch was removed: bricks are read without prefetching "
+                                "unless --prefetch is given");
   } else if (a == "--read-windows" || a == "--no-read-windows") {
     o->read_windows = a == "--read-windows";
   } else if (a == "--beam" || a == "--no-beam") {
@@ -168,7 +171,7 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
 FlagArity ProbeFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--single-step", "--stats"})) return FlagArity::kSwitch;
   if (OneOf(flag, {"--generate", "--split", "--memory-mb", "--brick-level", "--cache-mb",
-                   "--fixed", "--lod", "--cone-rad", "--cone-width"}))
+                   "--fixed", "--tracer", "--lod", "--cone-rad", "--cone-width"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -180,6 +183,10 @@ Status ApplyProbeFlag(ProbeOptions* o, const std::string& a, const std::string& 
     o->stats = true;
   } else if (a == "--generate") {
     o->generate = v;
+  } else if (a == "--tracer") {
+    if (v != "render" && v != "long-double")
+      return InvalidArgumentError("--tracer '" + v + "': expected render or long-double");
+    o->tracer = v;
   } else if (a == "--split") {
     o->split = v;
   } else if (a == "--memory-mb") {

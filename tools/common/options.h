@@ -51,6 +51,10 @@ struct ProbeOptions {
   size_t cache_mb = 0;        // 0: from the memory budget
   uint64_t memory_bytes = 0;  // 0: detected
   int fixed = 0;              // 0: auto, else 64 or 128
+  // --tracer: "render" (default) traces as vox-render does (AutoTracer<double>,
+  // render/renderer.h's RenderTracer, with the store's occupied box);
+  // "long-double" with a long-double set-up (DefaultTracer's arithmetic).
+  std::string tracer = "render";
   double lod = 0.0;           // --lod F over the store's pyramid; 0: off
   double cone_rad = -1.0, cone_width = 0.0;  // the cone per ray: W + R t |dir| voxels at t
 };

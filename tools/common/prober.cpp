@@ -14,11 +14,25 @@
 
 namespace vox {
 
+namespace {
+// Creates a T into alternative kIndex of `out`.
+template <size_t kIndex, class T, class Variant>
+Status EmplaceTracer(const OctreeView& view, int n1, Variant* out) {
+  auto tr = T::Create(view, n1);
+  if (!tr.ok()) return tr.status();
+  out->template emplace<kIndex>(std::move(tr).value());
+  return OkStatus();
+}
+}  // namespace
+
 struct Prober::Impl {
   std::unique_ptr<MemoryOctree> memory;
   std::unique_ptr<Store> store;
   glm::i64vec3 origin{0};
-  std::variant<Tracer<Fixed128, long double>, DefaultTracer, AutoTracer<long double>> tracer;
+  // --fixed 128, 64, auto; with --tracer long-double, then render (double).
+  std::variant<Tracer<Fixed128, long double>, DefaultTracer, AutoTracer<long double>,
+               Tracer<Fixed128, double>, Tracer<Fixed64, double>, AutoTracer<double>>
+      tracer;
   // --lod
   std::unique_ptr<LodPyramid> pyramid;
   std::optional<LodTracer> lod;
@@ -94,18 +108,27 @@ StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
     if (!s.ok()) return fail(s.status(), false);
     n1 = *s;
   }
-  if (opt.fixed == 128) {
-    auto tr = Tracer<Fixed128, long double>::Create(view, n1);
-    if (!tr.ok()) return fail(tr.status(), false);
-    impl->tracer.emplace<0>(std::move(tr).value());
-  } else if (opt.fixed == 64) {
-    auto tr = DefaultTracer::Create(view, n1);
-    if (!tr.ok()) return fail(tr.status(), false);
-    impl->tracer.emplace<1>(std::move(tr).value());
-  } else {
-    auto tr = AutoTracer<long double>::Create(view, n1);
-    if (!tr.ok()) return fail(tr.status(), false);
-    impl->tracer.emplace<2>(std::move(tr).value());
+  const bool render = opt.tracer != "long-double";
+  Status made;
+  if (opt.fixed == 128)
+    made = render ? EmplaceTracer<3, Tracer<Fixed128, double>>(view, n1, &impl->tracer)
+                  : EmplaceTracer<0, Tracer<Fixed128, long double>>(view, n1, &impl->tracer);
+  else if (opt.fixed == 64)
+    made = render ? EmplaceTracer<4, Tracer<Fixed64, double>>(view, n1, &impl->tracer)
+                  : EmplaceTracer<1, DefaultTracer>(view, n1, &impl->tracer);
+  else
+    made = render ? EmplaceTracer<5, AutoTracer<double>>(view, n1, &impl->tracer)
+                  : EmplaceTracer<2, AutoTracer<long double>>(view, n1, &impl->tracer);
+  if (!made.ok()) return fail(made, false);
+  // The render tracer's misses first, as vox-render (render/lod.h ClipToOccupiedBox).
+  if (render && impl->store != nullptr && impl->store->meta().voxel_count != 0) {
+    const StoreMeta& m = impl->store->meta();
+    const int64_t lo[3] = {m.bbox_min.x - m.origin.x, m.bbox_min.y - m.origin.y,
+                           m.bbox_min.z - m.origin.z};
+    const int64_t hi[3] = {m.bbox_max.x - m.origin.x, m.bbox_max.y - m.origin.y,
+                           m.bbox_max.z - m.origin.z};
+    if (lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2])
+      std::visit([&](auto& t) { t.SetOccupiedBox(lo, hi); }, impl->tracer);
   }
   return std::unique_ptr<Prober>(new Prober(std::move(impl)));
 }

@@ -5,6 +5,10 @@
 //   vox-probe --generate sphere:1024 [--brick-level L] [options] < rays.txt
 //   vox-probe store/ [options] < rays.txt
 // Options: --split N1+N2|N1, --single-step, --memory-mb M, --cache-mb M, --stats,
+//   --tracer render|long-double (render, the default: the tracer vox-render
+//   traces with, AutoTracer<double> with the store's occupied box, so the
+//   probe's answers are the render's; long-double: a long-double set-up, the
+//   arithmetic of DefaultTracer; docs/accuracy.md has how they differ),
 //   --fixed auto|64|128 (fixed-point word; auto: 64 up to 2^26 grids, else 128),
 //   --lod F --cone-rad R [--cone-width W]: level of detail over the store's
 //   pyramid (render/lod.h) with a cone per ray of width W + R * t |dir|
@@ -29,7 +33,10 @@ namespace {
 constexpr const char* kUsage =
     "usage: vox-probe (--generate SHAPE | STORE_DIR) [--split N1+N2|N1] [--single-step]\n"
     "                 [--brick-level L] [--memory-mb M] [--cache-mb M] [--fixed auto|64|128]\n"
-    "                 [--stats] [--lod F --cone-rad R [--cone-width W]] < rays.txt\n"
+    "                 [--tracer render|long-double] [--stats] [--lod F --cone-rad R [--cone-width W]]\n"
+    "                 < rays.txt\n"
+    "  --tracer: render (default) answers as vox-render traces (double set-up, the store's\n"
+    "  occupied box); long-double with a long-double set-up (docs/accuracy.md)\n"
     "  --lod F: stop at the first occupied cell of the store's level-of-detail pyramid whose\n"
     "  size is at most F times the ray's cone width (W + R t |dir| voxels at t); prints\n"
     "  'lod L i j k t' for a cell of level L > 0\n"

@@ -472,7 +472,9 @@ PYBIND11_MODULE(vox, m) {
   m.def("probe", &Probe, py::arg("store"), py::arg("rays"),
         "First hits of index-space rays, as vox-probe: rays is (N, 6) (ox oy oz dx dy dz). "
         "store is a store path, or None with generate='sphere:64'; options are vox-probe's "
-        "flags (split, single_step, memory_mb, cache_mb, fixed, generate, brick_level, stats). "
+        "flags (split, single_step, memory_mb, cache_mb, fixed, tracer, generate, brick_level, "
+        "stats); tracer='render' (default) answers as vox-render traces, tracer='long-double' "
+        "with a long-double set-up. "
         "Returns (voxels (N, 3) int64, t (N,) float64, hit (N,) bool); misses have t = inf.");
   m.def("read_exr", &ReadExr, py::arg("path"),
         "Reads a complete EXR written by vox: {'width', 'height', 'channels': {name: (H, W) "

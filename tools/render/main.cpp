@@ -17,7 +17,7 @@ const char kUsage[] =
     "                  [--preview out.png] [--split N1+N2|N1] [--single-step] [--memory-mb M]\n"
     "                  [--cache-mb M] [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
     "                  [--layers normal,voxel] [--size WxH] [--lod F] [--silhouette-aa G] [--float]\n"
-    "                  [--compression C]\n"
+    "                  [--compression C] [--prefetch [--io-threads N]] [--no-read-windows] [--no-beam]\n"
     "  --cam        camera JSON (world space of the source VDB); without it a default\n"
     "               camera frames the whole volume (--size sets its image size, default "
     "1024x1024)\n"
@@ -39,7 +39,8 @@ const char kUsage[] =
     "  --prefetch   read bricks in the background: the next tiles' first bricks, and a\n"
     "               pixel's missing brick while other pixels are shaded (same image; helps\n"
     "               on busy machines, reads more bytes under tight memory limits)\n"
-    "  --io-threads reads in flight with --prefetch (default 8)\n"
+    "  --io-threads background reader threads of --prefetch (default 8; refused without\n"
+    "               --prefetch, where the render threads read)\n"
     "  --no-read-windows  read each brick record alone, not with its file neighbours\n"
     "               (by default a miss reads the window of records around it, up to 1 MiB,\n"
     "               kept compressed in 1/8 of the brick cache, at most 64 MiB)\n"
@@ -71,6 +72,7 @@ int Usage(const std::string& error) {
 static int RunTool(int argc, char** argv) {
   vox::RenderJobOptions o;
   vox::FlagReader flags(argc, argv);
+  bool io_threads_given = false;
   while (flags.Next()) {
     const std::string a = flags.arg();
     if (flags.IsHelp()) {
@@ -84,6 +86,7 @@ static int RunTool(int argc, char** argv) {
         return Usage(a + " needs a value");
       vox::Status s = vox::ApplyRenderFlag(&o, a, value.value_or(""));
       if (!s.ok()) return Usage(s.message());
+      io_threads_given |= a == "--io-threads";
     } else if (o.store_dir.empty()) {
       o.store_dir = a;
     } else {
@@ -91,6 +94,9 @@ static int RunTool(int argc, char** argv) {
     }
   }
   if (o.store_dir.empty()) return Usage("no store given");
+  if (io_threads_given && !o.prefetch)
+    return Usage("--io-threads sets the background readers of --prefetch; without --prefetch "
+                 "the render threads read bricks themselves");
   vox::Status s = vox::RunRenderJob(o);
   if (!s.ok()) {
     fprintf(stderr, "vox-render: %s\n", s.ToString().c_str());
