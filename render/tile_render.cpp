@@ -303,7 +303,8 @@ Status Renderer::RefineSilhouettes(const TileRect& rect, const std::vector<int8_
   // A silhouette pixel: a coarse stop next to a miss (8-neighbourhood). A
   // coarse cell is conservative (occupied when any of its voxels is), so
   // such a pixel is covered by less than its centre ray says. (Refining the
-  // misses next to a coarse stop as well halved no error: docs/lod.md.)
+  // misses next to a coarse stop too doubled the work for no measurable
+  // gain: docs/lod.md.)
   auto silhouette = [&](int px, int py) {
     if (levels[size_t(py) * rect.w + px] <= 0) return false;
     for (int dy = -1; dy <= 1; ++dy)
