@@ -49,8 +49,10 @@ case "$mode" in
       labels=()
     else
       read -ra targets <<<"$(label_targets "$dir" asan)"
-      # fuzz_seed_gen: the seed corpus the fuzz replays read (test fuzz_seeds).
-      cmake --build "$dir" -j "$jobs" --target "${targets[@]}" fuzz_seed_gen
+      # fuzz_seed_gen: the seed corpus the fuzz replays read (test fuzz_seeds);
+      # vox-ingest: ingest_corrupt_chunk_test runs it by target name, which
+      # ctest cannot report before it is built (label_targets misses it).
+      cmake --build "$dir" -j "$jobs" --target "${targets[@]}" fuzz_seed_gen vox-ingest
       labels=(-L asan)
     fi
     (
