@@ -347,6 +347,7 @@ std::string StatsJson(const Renderer& renderer, const FrameStats& st,
   j["io"] = {{"brick_bytes_read", b.bytes_read - a.bytes_read},
              {"read_bytes", b.process_read_bytes - a.process_read_bytes},
              {"windows_read", b.windows_read - a.windows_read},
+             {"table_pages_read", b.table_pages_read - a.table_pages_read},
              {"window_bytes", b.window_bytes}};
   json timings{{"render_seconds", st.render_seconds},
                {"write_seconds", st.write_seconds},

@@ -39,17 +39,21 @@ nlohmann::json LodStatsJson(const Renderer& r, const FrameStats& st,
   j["refine_rays"] = st.counters.lod.refine_rays;
   j["border_rays"] = st.counters.lod.border_rays;
   nlohmann::json stops = nlohmann::json::object(), paged = nlohmann::json::array(),
-                 bytes = nlohmann::json::array();
+                 bytes = nlohmann::json::array(), pages = nlohmann::json::array();
   for (int l = 0; l <= kMaxLevels; ++l)
     if (st.counters.lod.stops[l] > 0) stops[std::to_string(l)] = st.counters.lod.stops[l];
   uint64_t total_paged = st.cache_end.misses - st.cache_start.misses;
   uint64_t total_bytes = st.cache_end.bytes_read - st.cache_start.bytes_read;
+  uint64_t total_pages = st.cache_end.table_pages_read - st.cache_start.table_pages_read;
   paged.push_back(total_paged);
   bytes.push_back(total_bytes);
+  pages.push_back(total_pages);
   for (size_t i = 0; i < levels.size(); ++i) {
     const CacheStats e = levels[i]->cache_stats();
     paged.push_back(e.misses - start[i].misses);
     bytes.push_back(e.bytes_read - start[i].bytes_read);
+    pages.push_back(e.table_pages_read - start[i].table_pages_read);
+    total_pages += e.table_pages_read - start[i].table_pages_read;
     total_paged += e.misses - start[i].misses;
     total_bytes += e.bytes_read - start[i].bytes_read;
   }
@@ -58,6 +62,8 @@ nlohmann::json LodStatsJson(const Renderer& r, const FrameStats& st,
   j["brick_bytes_read_by_level"] = bytes;
   j["bricks_paged_total"] = total_paged;
   j["brick_bytes_read_total"] = total_bytes;
+  j["table_pages_read_by_level"] = pages;  // brick table pages (storage/FORMAT.md)
+  j["table_pages_read_total"] = total_pages;
   return j;
 }
 

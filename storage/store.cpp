@@ -34,8 +34,7 @@ ZSTD_DCtx* ThreadDCtx() {
 
 }  // namespace
 
-Status StoreImpl::CheckBrickFits(uint32_t id) const {
-  const BrickEntry& e = table_[id];
+Status StoreImpl::CheckBrickFits(uint32_t id, const BrickEntry& e) const {
   // Decoding holds the decompressed bytes and the decoded brick at once.
   const uint64_t need = DecodedCharge(e) + e.raw_size;
   const uint64_t allowed = std::max<uint64_t>(cache_.capacity(), kMinBrickAllowance);
@@ -50,7 +49,8 @@ Status StoreImpl::CheckBrickFits(uint32_t id) const {
 }
 
 StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
-  VOX_RETURN_IF_ERROR(CheckBrickFits(id));
+  VOX_ASSIGN_OR_RETURN(const BrickEntry e, table_->Entry(id));
+  VOX_RETURN_IF_ERROR(CheckBrickFits(id, e));
   // Read the record (with its window's neighbours, or alone), then check
   // and decode it.
   thread_local std::vector<uint8_t> record;
@@ -59,16 +59,15 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::LoadBrick(uint32_t id) {
       if (record.capacity() > (size_t(64) << 20)) std::vector<uint8_t>().swap(record);
     }
   } trim;
-  VOX_ASSIGN_OR_RETURN(RecordWindows::Record r, windows_->Read(id, &record));
-  auto b = DecodeRecord(id, r.data);
-  if (!b.ok() && r.hold) windows_->Forget(id);  // bad bytes are not cached, as read errors are not
+  VOX_ASSIGN_OR_RETURN(RecordWindows::Record r, windows_->Read(id, e, &record));
+  auto b = DecodeRecord(id, e, r.data);
+  if (!b.ok() && r.hold) windows_->Forget(e);  // bad bytes are not cached, as read errors are not
   return b;
 }
 
-StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id,
+StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id, const BrickEntry& e,
                                                                 const uint8_t* record) {
-  VOX_RETURN_IF_ERROR(CheckBrickFits(id));
-  const BrickEntry& e = table_[id];
+  VOX_RETURN_IF_ERROR(CheckBrickFits(id, e));
   const std::string& path = bricks_->path();
   auto where = [&] {
     return "brick " + std::to_string(id) + " (offset " + std::to_string(e.offset) + ") in '" +
@@ -124,57 +123,6 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id,
   return b;
 }
 
-namespace {
-
-// The brick table block of a store (`meta`, bricks of `depth` levels, the
-// brick file `bpath` of `brick_file_size` bytes), each row checked: its
-// record inside the file, sizes consistent, coordinates in the brick grid,
-// and the voxels summing to the metadata's. Errors name `ipath`.
-StatusOr<std::vector<BrickEntry>> DecodeBrickTable(const std::vector<uint8_t>& table_b,
-                                                   const StoreMeta& meta, int depth,
-                                                   uint64_t brick_file_size,
-                                                   const std::string& ipath,
-                                                   const std::string& bpath) {
-  auto bad = [&](const std::string& m) { return CorruptionError("'" + ipath + "': " + m); };
-  if (table_b.size() != meta.brick_count * kTableEntrySize)
-    return bad("brick table is " + std::to_string(table_b.size()) + " bytes for " +
-               std::to_string(meta.brick_count) + " bricks");
-  std::vector<BrickEntry> table(meta.brick_count);
-  uint64_t voxels = 0;
-  const uint64_t bsize = brick_file_size;
-  const uint64_t brick_grid = uint64_t(1) << meta.brick_level;
-  const size_t attr_bytes = AttrBytesPerVoxel(AttrFlags(meta));
-  for (size_t i = 0; i < table.size(); ++i) {
-    BrickEntry e = DecodeBrickEntry(table_b.data() + i * kTableEntrySize);
-    auto row = [&](const std::string& m) { return bad("brick " + std::to_string(i) + " " + m); };
-    if (e.offset < kFileHeaderSize || e.offset > bsize ||
-        uint64_t(e.stored_size) + kTrailerSize > bsize - e.offset)
-      return row("record [" + std::to_string(e.offset) + ", +" + std::to_string(e.stored_size) +
-                 ") lies outside '" + bpath + "' (" + std::to_string(bsize) + " bytes)");
-    if (e.codec != kCodecZstd && e.codec != kCodecRaw)
-      return row("has unknown codec " + std::to_string(e.codec));
-    if (e.raw_size > kMaxBrickRawBytes ||
-        e.raw_size != kBrickHeaderSize + uint64_t(e.num_cells) + uint64_t(e.voxel_count) * attr_bytes)
-      return row("sizes are inconsistent (" + std::to_string(e.raw_size) + " bytes, " +
-                 std::to_string(e.num_cells) + " cells, " + std::to_string(e.voxel_count) +
-                 " voxels)");
-    if (e.num_cells == 0 || e.voxel_count == 0 || e.num_cells > MaxCells(depth, e.voxel_count))
-      return row("has " + std::to_string(e.num_cells) + " cells for " +
-                 std::to_string(e.voxel_count) + " voxels: impossible at depth " +
-                 std::to_string(depth));
-    if (e.x >= brick_grid || e.y >= brick_grid || e.z >= brick_grid)
-      return row("coordinate lies outside the brick grid");
-    voxels += e.voxel_count;
-    table[i] = e;
-  }
-  if (depth != 0 && voxels != meta.voxel_count)
-    return bad("bricks hold " + std::to_string(voxels) + " voxels, the metadata says " +
-               std::to_string(meta.voxel_count));
-  return table;
-}
-
-}  // namespace
-
 Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
                        std::unique_ptr<RandomAccessFile> bricks) {
   const std::string& ipath = index->path();
@@ -196,10 +144,13 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
 
   // Each block: in bounds, checksum, raw codec.
   const uint64_t blocks_end = isize - kFooterSize;
+  auto in_file = [&](const BlockHandle& h) {
+    return h.offset >= kFileHeaderSize && h.offset <= blocks_end && h.size <= blocks_end - h.offset &&
+           kTrailerSize <= blocks_end - h.offset - h.size;
+  };
   auto read_block = [&](const BlockHandle& h, const char* what,
                         std::vector<uint8_t>* out) -> Status {
-    if (h.offset < kFileHeaderSize || h.offset > blocks_end || h.size > blocks_end - h.offset ||
-        kTrailerSize > blocks_end - h.offset - h.size)
+    if (!in_file(h))
       return CorruptionError("'" + ipath + "': " + what + " block [" + std::to_string(h.offset) +
                              ", +" + std::to_string(h.size) + ") lies outside the file (" +
                              std::to_string(isize) + " bytes)");
@@ -214,12 +165,16 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
     out->resize(h.size);
     return OkStatus();
   };
-  std::vector<uint8_t> meta_b, top_b, attr_b, table_b;
+  std::vector<uint8_t> meta_b, top_b, attr_b;
   VOX_RETURN_IF_ERROR(read_block(f.meta, "metadata", &meta_b));
   VOX_RETURN_IF_ERROR(read_block(f.top, "top octree", &top_b));
   VOX_RETURN_IF_ERROR(read_block(f.top_attr, "top attributes", &attr_b));
-  VOX_RETURN_IF_ERROR(read_block(f.table, "brick table", &table_b));
-  VOX_ASSIGN_OR_RETURN(meta_, DecodeMeta(meta_b.data(), meta_b.size(), ipath));
+  if (!in_file(f.table))  // read by TablePages, whole or a page at a time
+    return CorruptionError("'" + ipath + "': brick table block [" + std::to_string(f.table.offset) +
+                           ", +" + std::to_string(f.table.size) + ") lies outside the file (" +
+                           std::to_string(isize) + " bytes)");
+  TableSummary summary;
+  VOX_ASSIGN_OR_RETURN(meta_, DecodeMeta(meta_b.data(), meta_b.size(), ipath, &summary));
   depth_ = meta_.levels - meta_.brick_level;
   flags_ = AttrFlags(meta_);
   auto bad = [&](const std::string& m) { return CorruptionError("'" + ipath + "': " + m); };
@@ -232,7 +187,7 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   std::memcpy(top_cells.data(), top_b.data(), top_b.size());
   const bool top_only = depth_ == 0;
   if (top_only) {
-    if (meta_.brick_count != 0 || !table_b.empty()) return bad("a top-only store has bricks");
+    if (meta_.brick_count != 0 || f.table.size != 0) return bad("a top-only store has bricks");
     if (meta_.voxel_count >= kBrickBit) return bad("too many voxels for a top-only store");
     if (attr_b.size() != meta_.voxel_count * AttrBytesPerVoxel(flags_))
       return bad("top attribute block is " + std::to_string(attr_b.size()) + " bytes for " +
@@ -265,11 +220,13 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
                            " bytes; the index expects " + std::to_string(f.brick_file_size) +
                            (bricks->size() < f.brick_file_size ? " (truncated)" : ""));
 
-  // The brick table: every record inside the brick file, sizes consistent.
-  VOX_ASSIGN_OR_RETURN(table_, DecodeBrickTable(table_b, meta_, depth_, f.brick_file_size, ipath,
-                                                bpath));
+  // The brick table: read whole now if small, else a page at a time when used.
+  TablePages::Bounds bounds{&meta_, depth_, f.brick_file_size, ipath, bpath};
+  VOX_ASSIGN_OR_RETURN(table_, TablePages::Open(index.get(), f.table, std::move(summary),
+                                                std::move(bounds), options_.whole_table_bytes));
+  index_ = std::move(index);
   bricks_ = std::move(bricks);
-  windows_ = std::make_unique<RecordWindows>(bricks_.get(), table_);
+  windows_ = std::make_unique<RecordWindows>(bricks_.get(), table_.get());
   SetCacheCapacity(options_.cache_bytes);
   return OkStatus();
 }
@@ -283,8 +240,8 @@ StatusOr<std::unique_ptr<Store>> OpenStoreFromFiles(const std::string& dir,
   return std::unique_ptr<Store>(std::move(store));
 }
 
-const std::vector<BrickEntry>& BrickTable(const Store& store) {
-  return static_cast<const StoreImpl&>(store).table();
+StatusOr<std::vector<BrickEntry>> BrickTable(const Store& store) {
+  return static_cast<const StoreImpl&>(store).table().ReadAll();
 }
 
 }  // namespace storage_internal

@@ -36,6 +36,11 @@ struct OpenOptions {
   // read serves the bricks next in space), keeping the compressed windows in
   // a share of cache_bytes; off: each miss reads its record alone.
   bool read_windows = true;
+  // A brick table of at most this many bytes (56 per brick: 75,000 bricks)
+  // is read and checked whole at open; a larger one a page of rows at a time
+  // when first used (storage/internal/table_pages.h), so that opening a
+  // store does not cost its brick count.
+  uint64_t whole_table_bytes = uint64_t(4) << 20;
 };
 inline constexpr int kMaxIoThreads = 256;
 

@@ -36,7 +36,7 @@ StatusOr<StoreInfo> InspectStore(const std::string& dir, bool verify_bricks, siz
   info.brick_file_bytes = uint64_t(st.st_size);
   info.top_bytes = uint64_t(store->view().top_cells) * sizeof(CompactCell);
   info.resident_bytes = store->resident_bytes();
-  const auto& table = BrickTable(*store);
+  VOX_ASSIGN_OR_RETURN(const std::vector<BrickEntry> table, BrickTable(*store));
   const size_t attr = AttrBytesPerVoxel(AttrFlags(info.meta));
   info.min_brick_voxels = table.empty() ? 0 : UINT64_MAX;
   for (const BrickEntry& e : table) {

@@ -18,28 +18,36 @@ constexpr uint64_t kMaxGap = 4 << 10;  // a page: measured 7% fewer bytes than 3
 constexpr uint64_t kMaxRun = kPrefetchRunBytes;
 
 void StoreImpl::Prefetch(std::span<const uint32_t> brick_ids) {
-  if (brick_ids.empty() || table_.empty()) return;
+  if (brick_ids.empty() || table_->size() == 0) return;
   std::vector<uint32_t> ids;
   ids.reserve(brick_ids.size());
   for (uint32_t id : brick_ids)
-    if (id < table_.size() && !cache_.Contains(id)) ids.push_back(id);
+    if (id < table_->size() && !cache_.Contains(id)) ids.push_back(id);
   std::sort(ids.begin(), ids.end());
   ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
-  // File order (records lie in the order the ingest wrote them: spatial
-  // neighbours close together), so neighbours merge into runs.
-  std::sort(ids.begin(), ids.end(),
-            [&](uint32_t a, uint32_t b) { return table_[a].offset < table_[b].offset; });
+  // Their rows (a row that cannot be read is left to the brick's own fetch,
+  // which reports it), in file order (records lie in the order the ingest
+  // wrote them: spatial neighbours close together), so neighbours merge into runs.
+  std::vector<std::pair<BrickEntry, uint32_t>> rows;
+  rows.reserve(ids.size());
+  for (uint32_t id : ids) {
+    auto e = table_->Entry(id);
+    if (e.ok()) rows.emplace_back(*e, id);
+  }
+  std::sort(rows.begin(), rows.end(),
+            [](const auto& a, const auto& b) { return a.first.offset < b.first.offset; });
   std::vector<Run> runs;
-  for (size_t i = 0; i < ids.size();) {
-    const uint64_t begin = table_[ids[i]].offset;
-    uint64_t end = begin + table_[ids[i]].stored_size + kTrailerSize;
+  for (size_t i = 0; i < rows.size();) {
+    const uint64_t begin = rows[i].first.offset;
+    uint64_t end = begin + rows[i].first.stored_size + kTrailerSize;
     uint64_t useful = end - begin, gaps = 0;
     Run run;
-    run.ids.push_back(ids[i]);
-    run.raw = DecodedCharge(table_[ids[i]]);
+    run.ids.push_back(rows[i].second);
+    run.rows.push_back(rows[i].first);
+    run.raw = DecodedCharge(rows[i].first);
     size_t j = i + 1;
-    for (; j < ids.size(); ++j) {
-      const BrickEntry& e = table_[ids[j]];
+    for (; j < rows.size(); ++j) {
+      const BrickEntry& e = rows[j].first;
       const uint64_t size = e.stored_size + kTrailerSize;
       const uint64_t gap = e.offset >= end ? e.offset - end : 0;
       if (e.offset < end || gap > kMaxGap || 2 * (gaps + gap) > useful + size + 8192 ||
@@ -48,7 +56,8 @@ void StoreImpl::Prefetch(std::span<const uint32_t> brick_ids) {
       gaps += gap;
       useful += size;
       end = e.offset + size;
-      run.ids.push_back(ids[j]);
+      run.ids.push_back(rows[j].second);
+      run.rows.push_back(e);
       run.raw += DecodedCharge(e);
     }
     runs.push_back(std::move(run));
@@ -105,9 +114,13 @@ void StoreImpl::ReadRun(const Run& run, uint64_t generation, std::vector<uint8_t
   // Claim the bricks nobody has cached or started meanwhile: from here their
   // fetches wait for this read instead of making their own.
   std::vector<uint32_t> claimed;
+  std::vector<const BrickEntry*> rows;  // claimed bricks' rows
   claimed.reserve(run.ids.size());
-  for (uint32_t id : run.ids)
-    if (cache_.Claim(id)) claimed.push_back(id);
+  for (size_t k = 0; k < run.ids.size(); ++k)
+    if (cache_.Claim(run.ids[k])) {
+      claimed.push_back(run.ids[k]);
+      rows.push_back(&run.rows[k]);
+    }
   if (claimed.empty()) return;
   size_t next = 0;  // claimed[next..] still to finish
   auto release_rest = [&] {
@@ -118,8 +131,8 @@ void StoreImpl::ReadRun(const Run& run, uint64_t generation, std::vector<uint8_t
     release_rest();
     return;
   }
-  const uint64_t begin = table_[claimed.front()].offset;
-  const uint64_t end = table_[claimed.back()].offset + table_[claimed.back()].stored_size + kTrailerSize;
+  const uint64_t begin = rows.front()->offset;
+  const uint64_t end = rows.back()->offset + rows.back()->stored_size + kTrailerSize;
   try {
     buf->resize(end - begin);
     Status rs = bricks_->Read(begin, buf->size(), buf->data());
@@ -131,7 +144,7 @@ void StoreImpl::ReadRun(const Run& run, uint64_t generation, std::vector<uint8_t
     }
     for (; next < claimed.size(); ++next) {
       const uint32_t id = claimed[next];
-      auto b = DecodeRecord(id, buf->data() + (table_[id].offset - begin));
+      auto b = DecodeRecord(id, *rows[next], buf->data() + (rows[next]->offset - begin));
       if (!b.ok()) {
         pf_failed_.fetch_add(1, std::memory_order_relaxed);
         cache_.FinishClaim(id, nullptr, 0);

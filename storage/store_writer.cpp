@@ -338,13 +338,13 @@ class StoreWriterImpl : public StoreWriter {
       VOX_RETURN_IF_ERROR(index->Append(block));
       return index->Append(BlockTrailer(block.data(), block.size(), kCodecRaw));
     };
-    VOX_RETURN_IF_ERROR(put_block(EncodeMeta(meta_), &f.meta));
-    std::string top_bytes(reinterpret_cast<const char*>(top.data()), top.size() * sizeof(Cell));
-    VOX_RETURN_IF_ERROR(put_block(top_bytes, &f.top));
-    VOX_RETURN_IF_ERROR(put_block(top_attr, &f.top_attr));
     std::string table;
     table.reserve(entries_.size() * kTableEntrySize);
     for (const BrickEntry& e : entries_) EncodeBrickEntry(e, &table);
+    VOX_RETURN_IF_ERROR(put_block(EncodeMeta(meta_, SummarizeTable(entries_, table)), &f.meta));
+    std::string top_bytes(reinterpret_cast<const char*>(top.data()), top.size() * sizeof(Cell));
+    VOX_RETURN_IF_ERROR(put_block(top_bytes, &f.top));
+    VOX_RETURN_IF_ERROR(put_block(top_attr, &f.top_attr));
     VOX_RETURN_IF_ERROR(put_block(table, &f.table));
     f.brick_file_size = bricks_->size();
     f.store_id = store_id_;

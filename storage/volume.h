@@ -33,6 +33,9 @@ struct CacheStats {
   uint64_t process_read_bytes = 0;  // the process's bytes read from storage (ProcessIoBytes)
   uint64_t windows_read = 0;        // record windows read (OpenOptions::read_windows)
   uint64_t window_bytes = 0;        // their size now (0: records read alone)
+  // Brick table pages read from the index file since open (a table read
+  // whole at open counts its pages too), and their bytes.
+  uint64_t table_pages_read = 0, table_bytes_read = 0;
 };
 
 class Volume {

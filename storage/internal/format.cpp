@@ -125,7 +125,7 @@ StatusOr<uint8_t> CheckTrailer(const uint8_t* data, size_t n, const std::string&
   return codec;
 }
 
-std::string EncodeMeta(const StoreMeta& m) {
+std::string EncodeMeta(const StoreMeta& m, const TableSummary& t) {
   std::string s;
   PutString(&s, m.source_file);
   PutString(&s, m.grid_name);
@@ -149,10 +149,20 @@ std::string EncodeMeta(const StoreMeta& m) {
   s.push_back(char(m.lod_level));
   PutFixed64(&s, m.lod_base_store_id);
   s.push_back(char(m.lod_base_levels));
+  if (t.page_rows != 0) {  // 1.2: the brick table's pages
+    PutFixed32(&s, t.page_rows);
+    PutFixed32(&s, t.max_stored_size);
+    PutFixed32(&s, t.max_num_cells);
+    PutFixed32(&s, t.max_voxel_count);
+    PutFixed64(&s, t.sum_num_cells);
+    PutFixed32(&s, uint32_t(t.page_crcs.size()));
+    for (uint32_t c : t.page_crcs) PutFixed32(&s, c);
+  }
   return s;
 }
 
-StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& path) {
+StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& path,
+                               TableSummary* summary) {
   Reader r(p, n);
   StoreMeta m;
   m.source_file = r.String();
@@ -179,6 +189,24 @@ StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& pa
     m.lod_base_store_id = r.U64();
     m.lod_base_levels = r.U8();
   }
+  TableSummary t;
+  if (r.remaining() >= 28) {  // 1.2 fields
+    t.page_rows = r.U32();
+    t.max_stored_size = r.U32();
+    t.max_num_cells = r.U32();
+    t.max_voxel_count = r.U32();
+    t.sum_num_cells = r.U64();
+    const uint32_t count = r.U32();
+    if (t.page_rows == 0 || t.page_rows > kMaxTablePageRows || count != t.pages(m.brick_count) ||
+        r.remaining() < uint64_t(count) * 4)
+      return CorruptionError("'" + path + "': metadata has an inconsistent brick table summary (" +
+                             std::to_string(t.page_rows) + " rows per page, " +
+                             std::to_string(count) + " pages for " +
+                             std::to_string(m.brick_count) + " bricks)");
+    t.page_crcs.resize(count);
+    for (uint32_t& c : t.page_crcs) c = r.U32();
+  }
+  if (summary != nullptr) *summary = std::move(t);
   auto bad = [&](const std::string& what) {
     return CorruptionError("'" + path + "': metadata has " + what);
   };
@@ -216,6 +244,25 @@ void EncodeBrickEntry(const BrickEntry& e, std::string* dst) {
   EncodeFixed32(b + 48, e.crc);
   b[52] = e.codec;
   dst->append(reinterpret_cast<char*>(b), sizeof(b));
+}
+
+uint32_t TablePageCrc(const uint8_t* p, size_t n) { return crc32c::Mask(crc32c::Value(p, n)); }
+
+TableSummary SummarizeTable(const std::vector<BrickEntry>& rows, const std::string& table,
+                            uint32_t page_rows) {
+  TableSummary t;
+  t.page_rows = page_rows;
+  for (const BrickEntry& e : rows) {
+    t.max_stored_size = std::max(t.max_stored_size, e.stored_size);
+    t.max_num_cells = std::max(t.max_num_cells, e.num_cells);
+    t.max_voxel_count = std::max(t.max_voxel_count, e.voxel_count);
+    t.sum_num_cells += e.num_cells;
+  }
+  const size_t page_bytes = size_t(page_rows) * kTableEntrySize;
+  const auto* p = reinterpret_cast<const uint8_t*>(table.data());
+  for (size_t off = 0; off < table.size(); off += page_bytes)
+    t.page_crcs.push_back(TablePageCrc(p + off, std::min(page_bytes, table.size() - off)));
+  return t;
 }
 
 BrickEntry DecodeBrickEntry(const uint8_t* b) {

@@ -24,7 +24,7 @@ namespace vox::storage_internal {
 inline constexpr uint64_t kIndexMagic = 0x5845444e49584f56ull;
 inline constexpr uint64_t kBrickMagic = 0x4b43495242584f56ull;
 inline constexpr uint16_t kFormatMajor = 1;
-inline constexpr uint16_t kFormatMinor = 1;
+inline constexpr uint16_t kFormatMinor = 2;
 inline constexpr char kIndexFileName[] = "index.vxi";
 inline constexpr char kBrickFileName[] = "bricks.vxb";
 inline constexpr char kLodDirName[] = "lod";  // the level-of-detail pyramid (storage/lod.h)
@@ -77,8 +77,24 @@ std::string BlockTrailer(const void* data, size_t n, uint8_t codec);
 StatusOr<uint8_t> CheckTrailer(const uint8_t* data, size_t n, const std::string& what,
                                const std::string& path, uint64_t offset);
 
-std::string EncodeMeta(const StoreMeta& m);
-StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& path);
+// Format 1.2 appends to the metadata what a reader needs to page the brick
+// table in on demand instead of reading it whole at open (FORMAT.md, "Brick
+// table pages"): the largest row values and a CRC per page of rows.
+inline constexpr uint32_t kTablePageRows = 1024;
+inline constexpr uint32_t kMaxTablePageRows = uint32_t(1) << 20;
+struct TableSummary {
+  uint32_t page_rows = 0;  // rows per page; 0: absent (a 1.0 or 1.1 store)
+  uint32_t max_stored_size = 0, max_num_cells = 0, max_voxel_count = 0;
+  uint64_t sum_num_cells = 0;
+  std::vector<uint32_t> page_crcs;  // masked CRC32C of each page's encoded rows
+  size_t pages(uint64_t rows) const { return page_rows ? (rows + page_rows - 1) / page_rows : 0; }
+};
+
+// `summary` (page_rows != 0) is appended as the 1.2 fields.
+std::string EncodeMeta(const StoreMeta& m, const TableSummary& summary = {});
+// Fills `summary` (when not null) from the 1.2 fields, page_rows 0 when absent.
+StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& path,
+                               TableSummary* summary = nullptr);
 
 // One brick table row (FORMAT.md, "Brick table").
 struct BrickEntry {
@@ -93,6 +109,12 @@ struct BrickEntry {
 };
 void EncodeBrickEntry(const BrickEntry& e, std::string* dst);
 BrickEntry DecodeBrickEntry(const uint8_t* p);
+
+// The summary of brick table `rows`, whose encoded bytes are `table`.
+TableSummary SummarizeTable(const std::vector<BrickEntry>& rows, const std::string& table,
+                            uint32_t page_rows = kTablePageRows);
+// The masked CRC32C of one page's encoded rows (`n` bytes at `p`).
+uint32_t TablePageCrc(const uint8_t* p, size_t n);
 
 }  // namespace vox::storage_internal
 

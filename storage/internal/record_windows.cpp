@@ -15,12 +15,8 @@ uint64_t WindowKey(uint64_t w, uint64_t window) {
 
 }  // namespace
 
-RecordWindows::RecordWindows(const RandomAccessFile* file, std::span<const BrickEntry> table)
-    : file_(file), table_(table), order_(table.size()) {
-  for (uint32_t i = 0; i < order_.size(); ++i) order_[i] = i;
-  std::sort(order_.begin(), order_.end(),
-            [&](uint32_t a, uint32_t b) { return table_[a].offset < table_[b].offset; });
-}
+RecordWindows::RecordWindows(const RandomAccessFile* file, TablePages* table)
+    : file_(file), table_(table) {}
 
 uint64_t RecordWindows::ShareOf(uint64_t cache_bytes) {
   return std::min(cache_bytes / 8, kMaxCapacity);
@@ -42,8 +38,7 @@ void RecordWindows::SetCapacity(uint64_t bytes) {
     cache_ = std::make_unique<ShardedPageCache<Window>>(bytes);
 }
 
-Status RecordWindows::ReadAlone(uint32_t id, std::vector<uint8_t>* scratch) {
-  const BrickEntry& e = table_[id];
+Status RecordWindows::ReadAlone(uint32_t id, const BrickEntry& e, std::vector<uint8_t>* scratch) {
   scratch->resize(size_t(e.stored_size) + kTrailerSize);
   Status rs = file_->Read(e.offset, scratch->size(), scratch->data());
   bytes_read_.fetch_add(scratch->size(), std::memory_order_relaxed);
@@ -53,19 +48,31 @@ Status RecordWindows::ReadAlone(uint32_t id, std::vector<uint8_t>* scratch) {
   return OkStatus();
 }
 
-StatusOr<std::shared_ptr<const RecordWindows::Window>> RecordWindows::LoadWindow(uint64_t w,
-                                                                                 uint64_t size) {
-  // The records starting in [w * size, (w + 1) * size), in file order.
-  auto starts_before = [&](uint64_t off) {
-    return std::partition_point(order_.begin(), order_.end(),
-                                [&](uint32_t id) { return table_[id].offset < off; });
-  };
-  auto first = starts_before(w * size), last = starts_before((w + 1) * size);
+StatusOr<std::shared_ptr<const RecordWindows::Window>> RecordWindows::LoadWindow(
+    uint64_t w, uint64_t size, uint32_t id, const BrickEntry& e) {
+  // The records starting in [lo, hi) next to brick `id` in the file: from
+  // its row outwards, while the ids' records follow each other in the file.
+  const uint64_t lo = w * size, hi = (w + 1) * size;
+  uint64_t begin = e.offset, end = e.offset + e.stored_size + kTrailerSize;
+  for (int dir : {-1, 1}) {
+    uint64_t prev = e.offset;
+    for (int64_t i = int64_t(id) + dir; i >= 0 && i < int64_t(table_->size());) {
+      VOX_ASSIGN_OR_RETURN(TablePages::Rows r, table_->RowsOf(uint32_t(i)));
+      bool more = true;
+      for (; more && i >= int64_t(r.first) && i < int64_t(r.first + r.rows.size()); i += dir) {
+        const BrickEntry& n = r.rows[size_t(i - r.first)];
+        more = n.offset >= lo && n.offset < hi && (dir < 0 ? n.offset < prev : n.offset > prev);
+        if (!more) break;
+        prev = n.offset;
+        begin = std::min(begin, n.offset);
+        end = std::max(end, n.offset + n.stored_size + kTrailerSize);
+      }
+      if (!more) break;
+    }
+  }
   auto window = std::make_shared<Window>();
-  if (first == last) return window;  // unreachable: the asking record starts here
-  const BrickEntry& tail = table_[*(last - 1)];
-  window->begin = table_[*first].offset;
-  window->bytes.resize(tail.offset + tail.stored_size + kTrailerSize - window->begin);
+  window->begin = begin;
+  window->bytes.resize(end - begin);
   Status rs = file_->Read(window->begin, window->bytes.size(), window->bytes.data());
   bytes_read_.fetch_add(window->bytes.size(), std::memory_order_relaxed);
   windows_read_.fetch_add(1, std::memory_order_relaxed);
@@ -73,12 +80,12 @@ StatusOr<std::shared_ptr<const RecordWindows::Window>> RecordWindows::LoadWindow
   return std::shared_ptr<const Window>(std::move(window));
 }
 
-void RecordWindows::Forget(uint32_t id) {
-  if (window_ != 0) cache_->Erase(WindowKey(table_[id].offset / window_, window_));
+void RecordWindows::Forget(const BrickEntry& e) {
+  if (window_ != 0) cache_->Erase(WindowKey(e.offset / window_, window_));
 }
 
-StatusOr<RecordWindows::Record> RecordWindows::Read(uint32_t id, std::vector<uint8_t>* scratch) {
-  const BrickEntry& e = table_[id];
+StatusOr<RecordWindows::Record> RecordWindows::Read(uint32_t id, const BrickEntry& e,
+                                                    std::vector<uint8_t>* scratch) {
   const uint64_t record = uint64_t(e.stored_size) + kTrailerSize;
   const uint64_t size = window_;
   if (size != 0 && record <= size) {
@@ -87,7 +94,7 @@ StatusOr<RecordWindows::Record> RecordWindows::Read(uint32_t id, std::vector<uin
         WindowKey(w, size),
         [&]() -> StatusOr<std::pair<std::shared_ptr<const Window>, size_t>> {
           try {
-            VOX_ASSIGN_OR_RETURN(auto win, LoadWindow(w, size));
+            VOX_ASSIGN_OR_RETURN(auto win, LoadWindow(w, size, id, e));
             const size_t charge = win->bytes.capacity() + sizeof(Window);
             return std::make_pair(std::move(win), charge);
           } catch (const std::bad_alloc&) {
@@ -102,7 +109,7 @@ StatusOr<RecordWindows::Record> RecordWindows::Read(uint32_t id, std::vector<uin
     }
     // Otherwise the record alone: its own read reports what went wrong.
   }
-  VOX_RETURN_IF_ERROR(ReadAlone(id, scratch));
+  VOX_RETURN_IF_ERROR(ReadAlone(id, e, scratch));
   return Record{nullptr, scratch->data()};
 }
 

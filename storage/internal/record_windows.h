@@ -4,6 +4,11 @@
 // window with one pread, and the compressed bytes stay in a cache of their
 // own, so the records of the neighbouring bricks (writers append bricks in
 // Morton order: close in space, close in the file) cost no further read.
+// The records of a window are found from the asking brick's table row
+// outwards, over ids whose records follow each other in the file (the
+// writers' order; TablePages pages the rows in), so no table-wide order is
+// held. In a store written in another order, a window holds fewer records
+// and the others are read alone: slower, never wrong.
 // Reads cost about the bytes the bricks need (see SetCapacity) in a few
 // thousand reads instead of one per brick (110,286 for a full view of the
 // 8192^3 sphere).
@@ -22,6 +27,7 @@
 #include "core/status.h"
 #include "storage/file.h"
 #include "storage/internal/format.h"
+#include "storage/internal/table_pages.h"
 #include "storage/memory_budget.h"
 #include "storage/page_cache.h"
 
@@ -30,7 +36,7 @@ namespace vox::storage_internal {
 class RecordWindows {
  public:
   // `file` and `table` must outlive this object.
-  RecordWindows(const RandomAccessFile* file, std::span<const BrickEntry> table);
+  RecordWindows(const RandomAccessFile* file, TablePages* table);
 
   // The memory the window cache may hold. The window size is the largest
   // power of two of at most 1/128 of it, at most kMaxWindow; below kMinWindow
@@ -58,31 +64,31 @@ class RecordWindows {
     std::shared_ptr<const void> hold;
     const uint8_t* data = nullptr;
   };
-  StatusOr<Record> Read(uint32_t id, std::vector<uint8_t>* scratch);
+  // `e` is brick `id`'s table row.
+  StatusOr<Record> Read(uint32_t id, const BrickEntry& e, std::vector<uint8_t>* scratch);
 
-  // Drops brick `id`'s window from the cache (its record failed its
-  // checksum: a later read goes to the file again, as a lone record's does).
-  void Forget(uint32_t id);
+  // Drops the window of the brick whose row is `e` from the cache (its
+  // record failed its checksum: a later read goes to the file again, as a
+  // lone record's does).
+  void Forget(const BrickEntry& e);
 
   // Bytes read from the file since construction, and windows read.
   uint64_t bytes_read() const { return bytes_read_.load(std::memory_order_relaxed); }
   uint64_t windows_read() const { return windows_read_.load(std::memory_order_relaxed); }
   // Bytes the window cache holds now.
   uint64_t charge() const { return cache_ ? cache_->TotalCharge() : 0; }
-  // Heap bytes of the offset order (4 per brick).
-  uint64_t resident_bytes() const { return order_.size() * sizeof(uint32_t); }
 
  private:
   struct Window {
     uint64_t begin = 0;
     std::vector<uint8_t> bytes;
   };
-  StatusOr<std::shared_ptr<const Window>> LoadWindow(uint64_t w, uint64_t size);
-  Status ReadAlone(uint32_t id, std::vector<uint8_t>* scratch);
+  StatusOr<std::shared_ptr<const Window>> LoadWindow(uint64_t w, uint64_t size, uint32_t id,
+                                                     const BrickEntry& e);
+  Status ReadAlone(uint32_t id, const BrickEntry& e, std::vector<uint8_t>* scratch);
 
   const RandomAccessFile* file_;
-  std::span<const BrickEntry> table_;
-  std::vector<uint32_t> order_;  // brick ids by record offset
+  TablePages* table_;
   uint64_t capacity_ = 0, window_ = 0;
   std::unique_ptr<ShardedPageCache<Window>> cache_;
   std::atomic<uint64_t> bytes_read_{0}, windows_read_{0};

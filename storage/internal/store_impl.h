@@ -14,14 +14,16 @@
 namespace vox::storage_internal {
 
 // Opens the store `dir` whose index and brick files are given. The index
-// file is read fully at open; the brick file is read on each cache miss.
+// file is read at open (its brick table whole or by pages: OpenOptions::
+// whole_table_bytes); the brick file is read on each cache miss.
 StatusOr<std::unique_ptr<Store>> OpenStoreFromFiles(const std::string& dir,
                                                     std::unique_ptr<RandomAccessFile> index,
                                                     std::unique_ptr<RandomAccessFile> bricks,
                                                     const OpenOptions& options);
 
-// The brick table of an open store (for vox-info and tests).
-const std::vector<BrickEntry>& BrickTable(const Store& store);
+// The brick table of an open store, read whole and checked (the block's
+// CRC, every row, the voxel sum): for vox-info and tests.
+StatusOr<std::vector<BrickEntry>> BrickTable(const Store& store);
 
 }  // namespace vox::storage_internal
 

@@ -24,6 +24,7 @@
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/internal/record_windows.h"
+#include "storage/internal/table_pages.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"
 
@@ -57,9 +58,9 @@ class StoreImpl : public Store {
   }
 
   StatusOr<BrickView> FetchBrickIfReady(uint32_t id) override {
-    std::shared_ptr<const DecodedBrick> b = id < table_.size() ? cache_.Peek(id) : nullptr;
+    std::shared_ptr<const DecodedBrick> b = id < table_->size() ? cache_.Peek(id) : nullptr;
     if (!b) {
-      if (id >= table_.size()) return Get(id).status();  // the error naming the bad id
+      if (id >= table_->size()) return Get(id).status();  // the error naming the bad id
       return UnavailableError("brick " + std::to_string(id) + " of store '" + dir_ +
                               "' is not in memory");
     }
@@ -100,6 +101,8 @@ class StoreImpl : public Store {
     s.prefetch_failed = pf_failed_.load(std::memory_order_relaxed);
     s.bytes_read = bytes_read_.load(std::memory_order_relaxed) +
                    (windows_ ? windows_->bytes_read() : 0);
+    s.table_pages_read = table_ ? table_->pages_read() : 0;
+    s.table_bytes_read = table_ ? table_->bytes_read() : 0;
     s.windows_read = windows_ ? windows_->windows_read() : 0;
     s.window_bytes = windows_ ? windows_->window_bytes() : 0;
     auto io = ProcessIoBytes();
@@ -123,20 +126,25 @@ class StoreImpl : public Store {
   uint64_t store_id() const override { return store_id_; }
 
   uint64_t resident_bytes() const override {
-    return top_.size() * sizeof(CompactCell) + top_attr_.size() +
-           table_.size() * (sizeof(BrickEntry) + sizeof(uint32_t));  // + RecordWindows' order
+    return top_.size() * sizeof(CompactCell) + top_attr_.size() + table_->resident_bytes();
   }
 
+  // From the table's summary (the 1.2 metadata's, or computed at open): the
+  // largest cells and voxels may come from two bricks, so max_decoded bounds
+  // the largest brick's charge from above.
   BrickSizes brick_sizes() const override {
     BrickSizes z;
-    uint64_t sum = 0;
-    for (const BrickEntry& e : table_) {
-      const uint64_t decoded = DecodedCharge(e);
-      z.max_decoded = std::max(z.max_decoded, decoded);
-      z.max_stored = std::max<uint64_t>(z.max_stored, uint64_t(e.stored_size) + kTrailerSize);
-      sum += decoded;
-    }
-    if (!table_.empty()) z.mean_decoded = sum / table_.size();
+    const uint64_t n = table_->size();
+    if (n == 0) return z;
+    const TableSummary& t = table_->summary();
+    BrickEntry big;
+    big.num_cells = t.max_num_cells;
+    big.voxel_count = t.max_voxel_count;
+    z.max_decoded = DecodedCharge(big);
+    z.max_stored = uint64_t(t.max_stored_size) + kTrailerSize;
+    z.mean_decoded = sizeof(DecodedBrick) + DecodedBrick::kOverheadBytes +
+                     t.sum_num_cells * sizeof(CompactCell) / n +
+                     meta_.voxel_count * AttrBytesPerVoxel(flags_) / n;
     return z;
   }
 
@@ -151,13 +159,13 @@ class StoreImpl : public Store {
     cache_.SetCapacity(size_t(bytes - windows));
   }
 
-  const std::vector<BrickEntry>& table() const { return table_; }
+  const TablePages& table() const { return *table_; }
 
  private:
   StatusOr<std::shared_ptr<const DecodedBrick>> Get(uint32_t id) {
-    if (id >= table_.size())
+    if (id >= table_->size())
       return InvalidArgumentError("brick " + std::to_string(id) + " does not exist (store '" +
-                                  dir_ + "' has " + std::to_string(table_.size()) + " bricks)");
+                                  dir_ + "' has " + std::to_string(table_->size()) + " bricks)");
     return cache_.GetOrLoad(id, [&]() -> StatusOr<std::pair<std::shared_ptr<const DecodedBrick>,
                                                             size_t>> {
       StatusOr<std::shared_ptr<DecodedBrick>> b = InternalError("unreached");
@@ -188,14 +196,17 @@ class StoreImpl : public Store {
   // cache still decodes ordinary bricks and evicts them at once). Checked
   // from the table row, before anything is allocated or read.
   static constexpr uint64_t kMinBrickAllowance = uint64_t(4) << 20;
-  Status CheckBrickFits(uint32_t id) const;
+  Status CheckBrickFits(uint32_t id, const BrickEntry& e) const;
   StatusOr<std::shared_ptr<DecodedBrick>> LoadBrick(uint32_t id);
-  // Checks and decodes brick `id` from its record (stored_size + trailer bytes).
-  StatusOr<std::shared_ptr<DecodedBrick>> DecodeRecord(uint32_t id, const uint8_t* record);
+  // Checks and decodes brick `id` (table row `e`) from its record
+  // (stored_size + trailer bytes).
+  StatusOr<std::shared_ptr<DecodedBrick>> DecodeRecord(uint32_t id, const BrickEntry& e,
+                                                       const uint8_t* record);
   // A run of bricks neighbouring in the brick file, in file order, read with
   // one pread.
   struct Run {
     std::vector<uint32_t> ids;
+    std::vector<BrickEntry> rows;  // their table rows
     uint64_t raw = 0;  // their decoded charge
   };
   void PrefetchLoop();
@@ -218,7 +229,8 @@ class StoreImpl : public Store {
   uint8_t flags_ = 0;
   std::vector<CompactCell> top_;  // traversal form (the file holds the build form)
   std::vector<uint8_t> top_attr_;
-  std::vector<BrickEntry> table_;
+  std::unique_ptr<RandomAccessFile> index_;  // the table's pages are read from it
+  std::unique_ptr<TablePages> table_;        // set by Load
   std::unique_ptr<RandomAccessFile> bricks_;
   std::unique_ptr<RecordWindows> windows_;  // reads records; set by Load
   ShardedPageCache<DecodedBrick> cache_;

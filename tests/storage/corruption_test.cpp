@@ -96,7 +96,7 @@ TEST_F(Corruption, EveryIndexByteFlipped) {
 TEST_F(Corruption, EveryBrickByteFlipped) {
   auto pristine = OpenMem(index_, bricks_);
   ASSERT_TRUE(pristine.ok());
-  const auto& table = BrickTable(**pristine);
+  const std::vector<BrickEntry> table = *BrickTable(**pristine);
   int unverified_ok = 0;
   for (size_t off = 0; off < bricks_.size(); ++off) {
     std::string bad = bricks_;
@@ -279,7 +279,7 @@ TEST_F(Corruption, InjectedReadErrorsAreReportedAndNotCached) {
     o.read_windows = windows;
     auto s2 = OpenStoreFromFiles("mem", NewMemoryFile("mem/index.vxi", index_), std::move(f2), o);
     ASSERT_TRUE(s2.ok());
-    flips->FlipByte(BrickTable(**s2)[2].offset + 3, 0x10);
+    flips->FlipByte((*BrickTable(**s2))[2].offset + 3, 0x10);
     auto c = (*s2)->FetchBrick(2);
     EXPECT_EQ(c.status().code(), StatusCode::kCorruption);
     EXPECT_TRUE(Contains(c.status().message(), "checksum")) << c.status().ToString();

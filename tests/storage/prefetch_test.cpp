@@ -66,7 +66,7 @@ class Prefetch : public ::testing::Test {
       ASSERT_TRUE(b.ok());
       truth_.push_back(BrickBytes(*b));
     }
-    table_ = BrickTable(**plain);
+    table_ = *BrickTable(**plain);
   }
 
   std::vector<uint32_t> AllIds() const {
@@ -272,11 +272,13 @@ TEST(PreadFile, ReadsAndRefusesRangesPastTheEnd) {
 
 // A sphere:256 store with bricks of 32^3 voxels (records of a few KB, as
 // vox-ingest makes them), in `dir`.
-Status WriteSphereStore(const std::string& dir) {
+// Bricks shuffled in the file, or in Morton order as vox-ingest and vox-gen
+// write them (`morton`): windows gather the records of neighbouring ids.
+Status WriteSphereStore(const std::string& dir, bool morton = false) {
   auto vol = GenerateShape("sphere:256");
   if (!vol.ok()) return vol.status();
   StoreMeta meta = storage_test::MetaFor(vol->levels, vol->levels - 5, GridClass::kLevelSet, true);
-  return storage_test::WriteVoxels(dir, vol->voxels, meta);
+  return storage_test::WriteVoxels(dir, vol->voxels, meta, {}, 1, true, /*shuffle_bricks=*/!morton);
 }
 
 // Bytes read from disk for a brick: its record's pages, not a read-around.
@@ -304,7 +306,7 @@ TEST(PrefetchIo, DiskBytesPerBrickAreTheBricksOwn) {
   alone.read_windows = false;
   auto s = Store::Open(dir, alone);
   ASSERT_TRUE(s.ok());
-  const std::vector<BrickEntry> table = BrickTable(**s);
+  const std::vector<BrickEntry> table = *BrickTable(**s);
   const uint32_t n = uint32_t(table.size());
   drop();
   // Every 5th brick: records far enough apart not to share pages.
@@ -365,11 +367,12 @@ TEST(PrefetchIo, DiskBytesPerBrickAreTheBricksOwn) {
 
 // A brick file that shrinks under an open store read in windows: the records
 // of windows read before (checksums verified then) still serve, every other
-// brick fails with an I/O error naming the file.
+// brick fails with an I/O error naming the file. (A Morton-ordered store, so
+// that brick 0's window holds every record starting in its span.)
 TEST(PrefetchIo, WindowsKeepOnlyWhatTheyReadBeforeAShrink) {
   storage_test::TempDir tmp;
   const std::string dir = tmp / "s";
-  ASSERT_TRUE(WriteSphereStore(dir).ok());
+  ASSERT_TRUE(WriteSphereStore(dir, /*morton=*/true).ok());
   OpenOptions windows;
   windows.cache_bytes = size_t(64) << 20;  // windows of 64 KiB
   auto w = Store::Open(dir, windows);
@@ -377,7 +380,7 @@ TEST(PrefetchIo, WindowsKeepOnlyWhatTheyReadBeforeAShrink) {
   ASSERT_TRUE((*w)->FetchBrick(0).ok());
   const uint64_t window = (*w)->cache_stats().window_bytes;
   ASSERT_EQ(window, uint64_t(64) << 10);
-  const auto& table = BrickTable(**w);
+  const std::vector<BrickEntry> table = *BrickTable(**w);
   ASSERT_GT(std::filesystem::file_size(dir + "/bricks.vxb"), 4 * window);
   ASSERT_EQ(truncate((dir + "/bricks.vxb").c_str(), kFileHeaderSize), 0);
   int served = 0;

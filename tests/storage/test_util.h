@@ -76,11 +76,22 @@ inline StoreMeta MetaFor(int levels, int brick_level, GridClass gc, bool color) 
   return m;
 }
 
+// Interleaves the bits of a brick coordinate (z highest): brick id order.
+inline uint64_t MortonKey(const glm::u64vec3& c) {
+  uint64_t k = 0;
+  for (int b = 0; b < 21; ++b)
+    k |= ((c.x >> b) & 1) << (3 * b) | ((c.y >> b) & 1) << (3 * b + 1) |
+         ((c.z >> b) & 1) << (3 * b + 2);
+  return k;
+}
+
 // Writes `voxels` (global grid coordinates) as a store: bricks in a shuffled
-// order, voxels shuffled within each brick (or kept in the given order).
+// order (or in Morton order, as vox-ingest and vox-gen write them, when
+// `shuffle_bricks` is false), voxels shuffled within each brick (or kept in
+// the given order).
 inline Status WriteVoxels(const std::string& dir, const std::vector<LeafPoint>& voxels,
                           const StoreMeta& meta, WriteOptions opts = {}, uint64_t seed = 1,
-                          bool shuffle_voxels = true) {
+                          bool shuffle_voxels = true, bool shuffle_bricks = true) {
   const int sub = meta.levels - meta.brick_level;
   std::map<std::tuple<uint64_t, uint64_t, uint64_t>, std::vector<BrickVoxel>> bricks;
   const uint64_t lm = (uint64_t(1) << sub) - 1;
@@ -96,7 +107,12 @@ inline Status WriteVoxels(const std::string& dir, const std::vector<LeafPoint>& 
   for (auto& [k, v] : bricks)
     list.push_back({glm::u64vec3(std::get<0>(k), std::get<1>(k), std::get<2>(k)), std::move(v)});
   std::mt19937_64 rng(seed);
-  std::shuffle(list.begin(), list.end(), rng);
+  if (shuffle_bricks)
+    std::shuffle(list.begin(), list.end(), rng);
+  else
+    std::sort(list.begin(), list.end(), [](const auto& a, const auto& b) {
+      return MortonKey(a.first) < MortonKey(b.first);
+    });
   auto w = StoreWriter::Create(dir, meta, opts);
   if (!w.ok()) return w.status();
   for (auto& [c, v] : list) {
