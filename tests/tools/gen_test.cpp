@@ -234,9 +234,37 @@ TEST(GenBumpy, NoOccupiedVoxelIsSkippedAndNormalsPointOutward) {
   CheckStore(t / "b", expected, 64, 1, /*radial=*/false);
 }
 
+TEST(GenRough, TheSpheresVoxelsWithJitteredNormalsInABiggerStore) {
+  TempDir t;
+  auto sphere = gen::Generate(Options("sphere", 256, t / "s"));
+  auto rough = gen::Generate(Options("rough", 256, t / "r"));
+  ASSERT_TRUE(sphere.ok() && rough.ok());
+  EXPECT_EQ(rough->voxels, sphere->voxels);
+  EXPECT_EQ(rough->bricks, sphere->bricks);
+  // Normals: unit, outward, not the sphere's (tilted by about 20 degrees, at most 37).
+  auto shape = gen::MakeShape("rough", 256);
+  ASSERT_TRUE(shape.ok());
+  double min_cos = 1, sum_cos = 0;
+  const int n = 1000;
+  for (int i = 0; i < n; ++i) {
+    const glm::dvec3 p(double(i % 37) - 18, double(i % 91) - 45, 120.0);
+    const glm::dvec3 a = (*shape)->Normal(p), r = p / glm::length(p);
+    EXPECT_NEAR(glm::length(a), 1.0, 1e-12);
+    min_cos = std::min(min_cos, glm::dot(a, r));
+    sum_cos += glm::dot(a, r);
+  }
+  // A jitter of at most 0.35 sqrt(3) tilts a unit normal by at most asin(0.606) = 37.3 degrees.
+  EXPECT_GT(min_cos, 0.795);
+  EXPECT_LT(sum_cos / n, 0.995);       // but tilted: not the sphere's normals
+  auto bytes = [](const std::string& dir) {
+    return std::filesystem::file_size(dir + "/bricks.vxb");
+  };
+  EXPECT_GT(bytes(t / "r"), 3 * bytes(t / "s") / 2) << "jittered normals compress less";
+}
+
 TEST(GenStore, SameOptionsGiveByteIdenticalStores) {
   TempDir t;
-  for (const char* shape : {"sphere", "bumpy"}) {
+  for (const char* shape : {"sphere", "bumpy", "rough"}) {
     gen::GenerateOptions a = Options(shape, 128, t / (std::string(shape) + "1"));
     a.threads = 1;
     gen::GenerateOptions b = Options(shape, 128, t / (std::string(shape) + "2"));

@@ -26,6 +26,8 @@ constexpr char kUsage[] =
     "               [--zstd-level L] [--normal-bits B] [--no-lod] [--force] [--quiet]\n"
     "  SHAPE            sphere: a level-set sphere shell (like vdb_tool -sphere)\n"
     "                   bumpy: that sphere displaced by fixed multi-octave noise (fine detail)\n"
+    "                   rough: the sphere's voxels with normals jittered per voxel (~3 B/voxel\n"
+    "                   on disk against the sphere's 1: big stores for out-of-core tests)\n"
     "                   Both are the unit sphere, 15/16 of the grid across, centred on index 0\n"
     "                   (world about [-1,1]^3, voxel size 32/(15 N)); occupied voxels are those\n"
     "                   whose centre's signed distance d (voxels) has -W < d <= 0, with normals.\n"
