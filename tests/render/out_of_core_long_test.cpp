@@ -14,11 +14,11 @@
 // Environment: VOX_LONG_STORE_8192 names an existing 8192^3 sphere store to
 // use (else vox-gen writes one, about 550 MiB); VOX_LONG_BIG_STORE an
 // existing big store (a vox-gen sphere or rough shell of the unit sphere);
-// else VOX_LONG_BIG_SHAPE (default rough: jittered normals, about 4.8 bytes
-// per voxel with the pyramid, against the sphere's 1.4), VOX_LONG_BIG_SIZE
-// (default 16384) and VOX_LONG_BIG_BAND (default: the smallest band whose
-// estimated store exceeds MemTotal by 10%: band 8, about 29 GB, 25-45
-// minutes on 2 cores) choose what vox-gen writes; VOX_LONG_DIR holds the
+// else VOX_LONG_BIG_SHAPE (default rough: jittered normals and speckled
+// colours, about 10 bytes per voxel with the pyramid, against the sphere's
+// 1.4), VOX_LONG_BIG_SIZE (default 16384) and VOX_LONG_BIG_BAND (default:
+// the smallest band whose estimated store exceeds MemTotal by 10%: band 4,
+// about 30 GB, 30-40 minutes on 2 cores) choose what vox-gen writes; VOX_LONG_DIR holds the
 // stores (default: the test's temp dir; several tens of GB).
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -219,11 +219,11 @@ TEST_F(OutOfCoreLong, StoreLargerThanRamRendersIn1GiB) {
     const std::string shape = Env("VOX_LONG_BIG_SHAPE", "rough");
     const uint64_t size = std::stoull(Env("VOX_LONG_BIG_SIZE", "16384"));
     // A band-b shell of the unit sphere (radius 15/32 of the grid) holds
-    // about 4 pi r^2 b voxels; with its pyramid a rough store takes about 4.8
-    // bytes per voxel on disk, a sphere store 1.4 (vox-gen at 2048^3: 172 and
+    // about 4 pi r^2 b voxels; with its pyramid a rough store takes about 10
+    // bytes per voxel on disk, a sphere store 1.4 (vox-gen at 2048^3: 352 and
     // 64 MiB for 34.6 M voxels). The band is the smallest that passes
-    // MemTotal by 10% (16384^3 rough with 23.5 GiB of RAM: band 8, ~29 GB).
-    const double r = double(size) * 15 / 32, per_voxel = shape == "rough" ? 4.8 : 1.4;
+    // MemTotal by 10% (16384^3 rough with 23.5 GiB of RAM: band 4, ~30 GB).
+    const double r = double(size) * 15 / 32, per_voxel = shape == "rough" ? 10.0 : 1.4;
     double band = 3;
     if (!Env("VOX_LONG_BIG_BAND").empty()) {
       band = std::stod(Env("VOX_LONG_BIG_BAND"));

@@ -234,7 +234,7 @@ TEST(GenBumpy, NoOccupiedVoxelIsSkippedAndNormalsPointOutward) {
   CheckStore(t / "b", expected, 64, 1, /*radial=*/false);
 }
 
-TEST(GenRough, TheSpheresVoxelsWithJitteredNormalsInABiggerStore) {
+TEST(GenRough, TheSpheresVoxelsWithJitteredNormalsAndColoursInABiggerStore) {
   TempDir t;
   auto sphere = gen::Generate(Options("sphere", 256, t / "s"));
   auto rough = gen::Generate(Options("rough", 256, t / "r"));
@@ -259,7 +259,12 @@ TEST(GenRough, TheSpheresVoxelsWithJitteredNormalsInABiggerStore) {
   auto bytes = [](const std::string& dir) {
     return std::filesystem::file_size(dir + "/bricks.vxb");
   };
-  EXPECT_GT(bytes(t / "r"), 3 * bytes(t / "s") / 2) << "jittered normals compress less";
+  EXPECT_GT(bytes(t / "r"), 4 * bytes(t / "s")) << "jittered normals and speckles compress less";
+  // Colours: in the store, speckled around a sand colour.
+  auto store = Store::Open(t / "r", OpenOptions());
+  ASSERT_TRUE(store.ok());
+  EXPECT_TRUE((*store)->meta().has_color);
+  EXPECT_FALSE(shape->get()->Color(glm::dvec3(1, 2, 3)) == shape->get()->Color(glm::dvec3(1, 2, 4)));
 }
 
 TEST(GenStore, SameOptionsGiveByteIdenticalStores) {

@@ -91,7 +91,7 @@ class BrickEnumerator {
 class BrickFiller {
  public:
   BrickFiller(const Shape& shape, int levels, int depth, double band)
-      : shape_(shape), depth_(depth), band_(band),
+      : shape_(shape), color_(shape.HasColor()), depth_(depth), band_(band),
         half_(double(uint64_t(1) << (levels - 1))) {}
 
   std::vector<BrickVoxel> Fill(const glm::u64vec3& brick) const {
@@ -126,6 +126,7 @@ class BrickFiller {
           bv.y = uint32_t(v.y);
           bv.z = uint32_t(v.z);
           bv.attr.normal = glm::vec3(shape_.Normal(p));
+          if (color_) bv.attr.color = glm::vec3(shape_.Color(p));
           out->push_back(bv);
         }
       }
@@ -137,6 +138,7 @@ class BrickFiller {
   }
 
   const Shape& shape_;
+  const bool color_;
   const int depth_;
   const double band_, half_;
 };
@@ -228,6 +230,7 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   meta.index_to_world[3][3] = 1.0;
   meta.voxel_size = vs;
   meta.has_normal = true;
+  meta.has_color = shape->HasColor();
   meta.isovalue = 0.0;
   meta.build_options = CanonicalOptions(o);
 

@@ -45,24 +45,37 @@ uint64_t SplitMix(uint64_t* s);
 double Uniform(uint64_t* s);
 
 // The sphere's shell (the same voxels) with every voxel's normal tilted by a
-// fixed pseudo-random jitter of up to kJitter per axis (about 20 degrees, at most 37): a rough
-// surface whose normals hardly compress, about 3 bytes per voxel on disk
-// against the sphere's 1, so a store larger than RAM takes a third of the
-// voxels and of the time to write (tests/render/out_of_core_long_test.cpp).
+// fixed pseudo-random jitter of up to kJitter per axis (about 20 degrees, at
+// most 37) and a speckled colour (each channel of a sand colour scaled by
+// 0.6..1): a rough surface whose attributes hardly compress, about 10 bytes
+// per voxel on disk against the sphere's 1, so a store larger than RAM takes
+// a tenth of the voxels and a fraction of the time to write
+// (tests/render/out_of_core_long_test.cpp).
 class Rough : public Sphere {
  public:
   static constexpr double kJitter = 0.35;
   using Sphere::Sphere;
   glm::dvec3 Normal(const glm::dvec3& p) const override {
     const glm::dvec3 n = Sphere::Normal(p);
-    // Voxel centres are integer points: one stream per voxel.
-    uint64_t s = uint64_t(std::llround(p.x)) * 0x9E3779B97F4A7C15ull ^
-                 uint64_t(std::llround(p.y)) * 0xC2B2AE3D27D4EB4Full ^
-                 uint64_t(std::llround(p.z)) * 0x165667B19E3779F9ull;
+    uint64_t s = Stream(p, 0);
     const glm::dvec3 j(2 * Uniform(&s) - 1, 2 * Uniform(&s) - 1, 2 * Uniform(&s) - 1);
     const glm::dvec3 m = n + kJitter * j;
     const double l = glm::length(m);
     return l > 0 ? m / l : n;
+  }
+  bool HasColor() const override { return true; }
+  glm::dvec3 Color(const glm::dvec3& p) const override {
+    uint64_t s = Stream(p, 1);
+    const double a = 0.6 + 0.4 * Uniform(&s), b = 0.6 + 0.4 * Uniform(&s), c = 0.6 + 0.4 * Uniform(&s);
+    return glm::dvec3(0.85 * a, 0.75 * b, 0.6 * c);
+  }
+
+ private:
+  // Voxel centres are integer points: one stream per voxel and attribute.
+  static uint64_t Stream(const glm::dvec3& p, uint64_t attribute) {
+    return uint64_t(std::llround(p.x)) * 0x9E3779B97F4A7C15ull ^
+           uint64_t(std::llround(p.y)) * 0xC2B2AE3D27D4EB4Full ^
+           uint64_t(std::llround(p.z)) * 0x165667B19E3779F9ull ^ attribute * 0xD6E8FEB86659FD93ull;
   }
 };
 
