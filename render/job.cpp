@@ -354,6 +354,7 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   open.cache_bytes = options.cache_mb > 0 ? options.cache_mb << 20 : process.bytes;
   open.io_threads = std::max(io_threads, 1);
   open.read_windows = options.read_windows;
+  open.budget_bytes = process.bytes;
   VOX_ASSIGN_OR_RETURN(RenderStores stores, OpenRenderStores(options.store_dir, options.lod, open));
   const double open_seconds = phase.Lap();
 

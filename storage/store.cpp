@@ -165,6 +165,23 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
     out->resize(h.size);
     return OkStatus();
   };
+  // What reading the index takes at its peak: the top's block and its
+  // copy as cells, its traversal form, the top attributes, and a table
+  // read whole (its bytes and rows).
+  if (options_.budget_bytes != 0) {
+    const uint64_t cells = f.top.size / sizeof(Cell);
+    const uint64_t need = f.meta.size + 2 * f.top.size + cells * sizeof(CompactCell) +
+                          2 * f.top_attr.size +
+                          (f.table.size <= options_.whole_table_bytes
+                               ? f.table.size + f.table.size / kTableEntrySize * sizeof(BrickEntry)
+                               : 0);
+    if (need > options_.budget_bytes)
+      return ResourceExhaustedError(
+          "store '" + dir_ + "' needs about " + std::to_string((need >> 20) + 1) +
+          " MiB to open (its resident top of " + std::to_string(cells) +
+          " cells), more than the memory budget of " + std::to_string(options_.budget_bytes >> 20) +
+          " MiB: give the job more memory (--memory-mb, or the job's limit)");
+  }
   std::vector<uint8_t> meta_b, top_b, attr_b;
   VOX_RETURN_IF_ERROR(read_block(f.meta, "metadata", &meta_b));
   VOX_RETURN_IF_ERROR(read_block(f.top, "top octree", &top_b));

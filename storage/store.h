@@ -41,6 +41,11 @@ struct OpenOptions {
   // when first used (storage/internal/table_pages.h), so that opening a
   // store does not cost its brick count.
   uint64_t whole_table_bytes = uint64_t(4) << 20;
+  // The memory budget of the process (0: unchecked): a store whose index
+  // would take more than this to read and hold at open is refused before it
+  // is read (ResourceExhausted, saying how much it needs), instead of the
+  // process being killed by its memory limit.
+  uint64_t budget_bytes = 0;
 };
 inline constexpr int kMaxIoThreads = 256;
 

@@ -4,7 +4,8 @@
 // row; a corrupt row is reported, naming the index file and the page, by the
 // fetches of its page only, and by the whole read vox-info --verify makes; a
 // store of format 1.1 (no page CRCs) is checked whole at open, then pages;
-// record windows still serve neighbours without a table-wide order.
+// record windows still serve neighbours without a table-wide order; an
+// index larger than the memory budget is refused before it is read.
 #include <gtest/gtest.h>
 
 #include <string>
@@ -205,6 +206,19 @@ TEST_F(TablePagesTest, Format11StoresAreCheckedWholeThenPaged) {
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), StatusCode::kCorruption);
   EXPECT_TRUE(Contains(bad.status().message(), "index.vxi")) << bad.status().ToString();
+}
+
+TEST_F(TablePagesTest, AnIndexLargerThanTheBudgetIsRefusedBeforeItIsRead) {
+  OpenOptions o;
+  o.budget_bytes = 4096;
+  auto s = Store::Open(dir_, o);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_TRUE(Contains(s.status().message(), "needs about") &&
+              Contains(s.status().message(), dir_))
+      << s.status().ToString();
+  o.budget_bytes = uint64_t(64) << 20;
+  EXPECT_TRUE(Store::Open(dir_, o).ok());
 }
 
 }  // namespace
