@@ -135,9 +135,15 @@ bool ProcessGone(long pid);
 // for a name in the root.
 void SplitPath(const std::string& path, std::string* dir, std::string* name);
 
+// The most bytes a camera or scene file may hold (16 MiB; a camera is a few
+// hundred bytes): a larger one is refused before it is read.
+inline constexpr uint64_t kMaxTextFileBytes = uint64_t(16) << 20;
+
 // The bytes of a whole (small) text file, such as cam.json; NotFound and
-// IoError name the file.
-StatusOr<std::string> ReadTextFile(const std::string& path);
+// IoError name the file; InvalidArgument when it holds more than
+// `max_bytes` (a regular file's size is checked before reading).
+StatusOr<std::string> ReadTextFile(const std::string& path,
+                                   uint64_t max_bytes = kMaxTextFileBytes);
 
 // Temporaries and atomic publication. An output DIR/NAME (a file or a store
 // directory) is built as a temporary beside it, synced, and published by a
