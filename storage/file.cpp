@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <random>
 #include <sstream>
 #include <string>
@@ -463,7 +464,13 @@ void RemoveStaleTemporaries(const std::string& dir, const std::string& name) {
   closedir(d);
 }
 
+std::mutex& TemporaryMutex() {
+  static std::mutex mu;
+  return mu;
+}
+
 StatusOr<std::string> CreateTemporary(const std::string& target, bool directory) {
+  std::lock_guard<std::mutex> creating(TemporaryMutex());
   std::string dir, name;
   SplitPath(target, &dir, &name);
   RemoveStaleTemporaries(dir, name);

@@ -161,9 +161,16 @@ StatusOr<std::string> ReadTextFile(const std::string& path,
 // writing the same output), this process's and anything else stay.
 void RemoveStaleTemporaries(const std::string& dir, const std::string& name);
 
+// Held while CreateTemporary makes a temporary and while an OutputGroup
+// publishes (storage/atomic_file.h). A tool's signal thread takes it for
+// good before removing the process's temporaries, so that none is created,
+// and no group half-published, after that.
+std::mutex& TemporaryMutex();
+
 // Creates an empty temporary file (`directory` false, mode 0644 less the
 // umask) or directory beside `target`, named as above, after removing the
-// stale temporaries of `target`. Returns its path.
+// stale temporaries of `target`. Returns its path. Writers open the file
+// without O_CREAT, so a temporary removed under them is not made again.
 StatusOr<std::string> CreateTemporary(const std::string& target, bool directory);
 
 // Puts the finished temporary `temp` (a synced file or directory, beside
