@@ -34,6 +34,7 @@
 #include "ingest/internal/grid_ingest.h"
 #include "ingest/internal/vdb_layout.h"
 #include "storage/memory_budget.h"
+#include "storage/path_identity.h"
 
 namespace vox {
 namespace {
@@ -107,6 +108,9 @@ StatusOr<uint64_t> CheckInputAndOutput(const IngestOptions& o) {
     return errno == ENOENT ? NotFoundError(o.input + ": no such file")
                            : IoError(o.input + ": " + std::strerror(errno));
   if (!S_ISREG(st.st_mode)) return InvalidArgumentError(o.input + ": not a regular file");
+  // The store written (and with --force, the one replaced) must be neither
+  // the input nor a directory holding it.
+  VOX_RETURN_IF_ERROR(CheckDistinctPaths({{"input", o.input}}, {{"output store", o.output}}));
   if (!o.force && ::access(o.output.c_str(), F_OK) == 0)
     return InvalidArgumentError(o.output + ": already exists; pass --force to replace it");
   return uint64_t(st.st_size);

@@ -86,6 +86,10 @@ class ProgressSink {
   virtual void Message(std::string_view line) = 0;
   virtual void Progress(uint64_t bricks_done, uint64_t bricks_total, uint64_t voxels_done) = 0;
   virtual void Done() = 0;
+  // Polled at each progress point (a brick) and before the store is
+  // finished: true stops the ingest (an Unavailable status, "cancelled"), and the
+  // temporary store is removed (the Python module's KeyboardInterrupt).
+  virtual bool Cancelled() { return false; }
 };
 
 // A bar redrawn in place when `terminal` (stderr is a tty), else a plain line

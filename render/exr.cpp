@@ -12,7 +12,9 @@
 #include <OpenEXR/ImfTiledOutputFile.h>
 #include <Imath/ImathMatrix.h>
 #include <Imath/half.h>
+#include <fcntl.h>
 #include <png.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -22,6 +24,7 @@
 #include <fstream>
 #include <glm/geometric.hpp>
 #include <limits>
+#include <stdexcept>
 
 #include "render/camera.h"
 #include "render/internal/exr_header.h"
@@ -75,6 +78,34 @@ constexpr CompressionEntry kCompressions[] = {
     {"piz", ExrCompression::kPiz, Imf::PIZ_COMPRESSION},
     {"rle", ExrCompression::kRle, Imf::RLE_COMPRESSION},
     {"none", ExrCompression::kNone, Imf::NO_COMPRESSION}};
+
+// An OpenEXR output stream over the temporary, opened without O_CREAT: once a
+// signal's cleanup has removed the temporary (tools/common/signals.h),
+// nothing makes it again.
+class TemporaryOStream : public Imf::OStream {
+ public:
+  TemporaryOStream(const std::string& path, int fd) : Imf::OStream(path.c_str()), fd_(fd) {}
+  ~TemporaryOStream() override { close(fd_); }
+  void write(const char c[], int n) override {
+    size_t done = 0;
+    while (done < size_t(n)) {
+      const ssize_t w = pwrite(fd_, c + done, size_t(n) - done, off_t(pos_ + done));
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) throw std::runtime_error(std::string("write failed: ") + std::strerror(errno));
+      done += size_t(w);
+    }
+    pos_ += done;
+  }
+  uint64_t tellp() override { return pos_; }
+  void seekp(uint64_t pos) override { pos_ = pos; }
+
+ private:
+  int fd_;
+  uint64_t pos_ = 0;
+};
+
+// Opens the existing temporary `path` for writing (never creating it).
+int OpenTemporary(const std::string& path) { return open(path.c_str(), O_WRONLY | O_CLOEXEC); }
 
 }  // namespace
 
@@ -138,7 +169,12 @@ StatusOr<std::unique_ptr<TiledExrWriter>> TiledExrWriter::Create(const std::stri
     if (camera != nullptr) AddStandardCameraAttributes(*camera, &header);
     header.insert("renderTimeSeconds", Imf::FloatAttribute(0.0f));
     header.insert("vox:timings", Imf::StringAttribute(std::string(kTimingsSlot, ' ')));
-    w->file_ = std::make_unique<Imf::TiledOutputFile>(w->out_->temp_path().c_str(), header);
+    const int fd = OpenTemporary(w->out_->temp_path());
+    if (fd < 0)
+      return IoError(path + ": cannot open the temporary " + w->out_->temp_path() + ": " +
+                     std::strerror(errno));
+    w->stream_ = std::make_unique<TemporaryOStream>(w->out_->temp_path(), fd);
+    w->file_ = std::make_unique<Imf::TiledOutputFile>(*w->stream_, header);
   } catch (const std::bad_alloc&) {
     return ResourceExhaustedError(path + ": out of memory creating the EXR (" +
                                   std::to_string(width) + "x" + std::to_string(height) + ")");
@@ -185,7 +221,8 @@ Status TiledExrWriter::WriteTile(const TileRect& rect, const TileBuffer& buf) {
   return OkStatus();
 }
 
-Status TiledExrWriter::Finish(double render_seconds, const std::string& timings_json) {
+Status TiledExrWriter::Finish(double render_seconds, const std::string& timings_json,
+                              OutputGroup* group) {
   std::lock_guard<std::mutex> lock(mu_);
   if (!file_ || !out_) return InternalError(path_ + ": EXR already finished");
   if (!failed_.ok()) {
@@ -193,6 +230,7 @@ Status TiledExrWriter::Finish(double render_seconds, const std::string& timings_
       file_.reset();
     } catch (const std::exception&) {
     }
+    stream_.reset();
     out_.reset();  // removes the temporary
     return failed_;
   }
@@ -202,12 +240,17 @@ Status TiledExrWriter::Finish(double render_seconds, const std::string& timings_
   } catch (const std::exception& e) {
     s = IoError(path_ + ": closing EXR failed: " + e.what());
   }
+  stream_.reset();
   if (s.ok()) {
     s = PatchTimings(out_->temp_path(), render_seconds, timings_json);
     if (!s.ok()) s = s.WithContext(path_);
   }
-  if (s.ok()) s = out_->Commit();
-  out_.reset();  // removes the temporary unless committed
+  if (s.ok() && group != nullptr) {
+    group->AddFile(std::move(*out_));
+  } else if (s.ok()) {
+    s = out_->Commit();
+  }
+  out_.reset();  // removes the temporary unless committed or handed over
   return s;
 }
 
@@ -217,6 +260,7 @@ void TiledExrWriter::Abandon() {
     file_.reset();
   } catch (const std::exception&) {
   }
+  stream_.reset();
   out_.reset();
 }
 
@@ -415,10 +459,12 @@ struct PngFile {
 
 }  // namespace
 
-Status WritePngPreview(const std::string& exr_path, const std::string& png_path) {
-  VOX_RETURN_IF_ERROR(CheckExrHeaders(exr_path));
+Status WritePngPreview(const std::string& exr_path, const std::string& png_path,
+                       OutputGroup* group, const std::string& exr_read_path) {
+  const std::string& read_path = exr_read_path.empty() ? exr_path : exr_read_path;
+  VOX_RETURN_IF_ERROR(CheckExrHeaders(read_path));
   try {
-    Imf::TiledInputFile in(exr_path.c_str());
+    Imf::TiledInputFile in(read_path.c_str());
     ExrInfo info = InfoFromFile(in);
     if (!info.complete)
       return InvalidArgumentError(exr_path +
@@ -431,8 +477,12 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
 
     VOX_ASSIGN_OR_RETURN(AtomicFile atomic, AtomicFile::Create(png_path));
     PngFile out;
-    out.fp = fopen(atomic.temp_path().c_str(), "wb");
-    if (!out.fp) return IoError(png_path + ": cannot open for writing");
+    const int fd = OpenTemporary(atomic.temp_path());
+    out.fp = fd >= 0 ? fdopen(fd, "wb") : nullptr;
+    if (!out.fp) {
+      if (fd >= 0) close(fd);
+      return IoError(png_path + ": cannot open for writing");
+    }
     out.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
     if (!out.png) return ResourceExhaustedError(png_path + ": libpng init failed");
     out.info = png_create_info_struct(out.png);
@@ -463,7 +513,9 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path)
     const bool closed = fclose(out.fp) == 0;
     out.fp = nullptr;
     if (!flushed || !closed) return IoError(png_path + ": write failed");
-    return atomic.Commit();
+    if (group == nullptr) return atomic.Commit();
+    group->AddFile(std::move(atomic));
+    return OkStatus();
   } catch (const std::exception& e) {
     return IoError(exr_path + ": cannot read EXR for the preview: " + e.what());
   }

@@ -102,6 +102,7 @@ const char* ExrCompressionName(ExrCompression c);
 void SetExrThreads(int threads);
 
 class AtomicFile;
+class OutputGroup;
 struct ExrCameraAttributes;
 
 class TiledExrWriter {
@@ -120,8 +121,11 @@ class TiledExrWriter {
   // buffer's floats, rounding to nearest, before the writer's lock).
   Status WriteTile(const TileRect& rect, const TileBuffer& buf);
   // Finishes the file (tiles not written are left missing: a partial image),
-  // records the timings (JSON, at most 1000 bytes) and renames it to `path`.
-  Status Finish(double render_seconds, const std::string& timings_json);
+  // records the timings (JSON, at most 1000 bytes) and renames it to `path`;
+  // given a `group`, leaves it in its temporary and adds it to the group,
+  // published with the run's other outputs (storage/atomic_file.h).
+  Status Finish(double render_seconds, const std::string& timings_json,
+                OutputGroup* group = nullptr);
   // Finish without timings.
   Status Close() { return Finish(0.0, ""); }
   // Drops the temporary; an earlier file at `path` stays as it was.
@@ -133,6 +137,7 @@ class TiledExrWriter {
   std::unique_ptr<AtomicFile> out_;
   ImageLayers layers_;
   std::mutex mu_;
+  std::unique_ptr<Imf::OStream> stream_;  // the temporary, outlives file_
   std::unique_ptr<Imf::TiledOutputFile> file_;
   Status failed_;  // the first failed WriteTile: the file is unusable after it
 };
@@ -164,8 +169,11 @@ struct ExrImage {
 StatusOr<ExrImage> ReadExr(const std::string& path);
 
 // Writes an 8-bit sRGB PNG of the R, G, B channels of a complete tiled EXR,
-// one row of tiles at a time (bounded memory), atomically.
-Status WritePngPreview(const std::string& exr_path, const std::string& png_path);
+// one row of tiles at a time (bounded memory), atomically. Given a `group`,
+// the finished PNG is added to it instead of published, and the EXR is read
+// from `exr_read_path` (its temporary, not yet published) when not empty.
+Status WritePngPreview(const std::string& exr_path, const std::string& png_path,
+                       OutputGroup* group = nullptr, const std::string& exr_read_path = "");
 
 }  // namespace vox
 

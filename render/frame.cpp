@@ -196,6 +196,7 @@ void FrameRun::Scout() {
 
 Status FrameRun::RenderOne(Worker& w, int64_t i) {
   const TileRect& rect = layout_.order()[size_t(i)];
+  if (options_.interrupted) VOX_RETURN_IF_ERROR(options_.interrupted());
   Status s = renderer_.RenderTile(rect, &w.buf, &w.counters, w.state.get());
   const Stopwatch write_clock;
   if (s.ok() && writer_ != nullptr) s = writer_->WriteTile(rect, w.buf);
@@ -284,7 +285,7 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
   nlohmann::json timings{{"render_seconds", stats->render_seconds},
                          {"write_seconds", stats->write_seconds},
                          {"threads", threads}};
-  VOX_RETURN_IF_ERROR(writer->Finish(stats->render_seconds, timings.dump()));
+  VOX_RETURN_IF_ERROR(writer->Finish(stats->render_seconds, timings.dump(), options.outputs));
   stats->close_seconds = frame_clock.Seconds();
   return OkStatus();
 }

@@ -64,6 +64,13 @@ struct FrameOptions {
   // Called with each rendered tile, from the render threads concurrently
   // (after the EXR write); an error stops the frame.
   std::function<Status(const TileRect&, const TileBuffer&)> on_tile;
+  // Polled before each tile, from the render threads: an error (the Python
+  // caller's KeyboardInterrupt) stops the frame, and the EXR's temporary is
+  // removed.
+  std::function<Status()> interrupted;
+  // Set: the finished EXR stays in its temporary and joins this group, to be
+  // published with the run's other outputs (storage/atomic_file.h).
+  OutputGroup* outputs = nullptr;
   int prefetch_stride = 2;  // trace every n-th pixel's primary ray in x and y
 };
 

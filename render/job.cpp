@@ -4,6 +4,7 @@
 #include <cmath>
 #include <charconv>
 #include <malloc.h>
+#include <sys/statvfs.h>
 #include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -18,7 +19,9 @@
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "storage/atomic_file.h"
+#include "storage/file.h"
 #include "storage/lod.h"
+#include "storage/path_identity.h"
 #include "storage/store.h"
 #include "storage/store_budget.h"
 
@@ -104,6 +107,17 @@ Status CheckJobOptions(const RenderJobOptions& options) {
   // not after the render. The files are written atomically at the end.
   for (const std::string* path : {&options.exr_path, &options.preview_path, &options.stats_path})
     if (!path->empty()) VOX_RETURN_IF_ERROR(CheckOutputPath(*path));
+  if (!options.exr_path.empty()) VOX_RETURN_IF_ERROR(CheckExtension("-o", options.exr_path, ".exr"));
+  if (!options.preview_path.empty())
+    VOX_RETURN_IF_ERROR(CheckExtension("--preview", options.preview_path, ".png"));
+  // No output may be an input (a store file, the camera, the scene) or
+  // another output.
+  std::vector<NamedPath> inputs = StoreInputs(options.store_dir);
+  inputs.push_back({"camera", options.camera_path});
+  inputs.push_back({"scene", options.scene_path});
+  VOX_RETURN_IF_ERROR(CheckDistinctPaths(inputs, {{"-o", options.exr_path},
+                                                  {"--preview", options.preview_path},
+                                                  {"--stats", options.stats_path}}));
   if (options.threads < 0)
     return InvalidArgumentError("threads " + std::to_string(options.threads) +
                                 ": must not be negative (0: all cores)");
@@ -118,6 +132,39 @@ Status CheckJobOptions(const RenderJobOptions& options) {
                                 ": must be 0 (off) or 1.." + std::to_string(kMaxSilhouetteGrid));
   if (options.single_step && !options.split.empty())
     return InvalidArgumentError("--split and --single-step both choose the split; give one");
+  return OkStatus();
+}
+
+// A frame over kMaxPixelsUnlessAllowed is refused without --allow-huge;
+// the EXR's uncompressed size (an upper bound) is printed and must fit the
+// free space of its directory.
+Status CheckFrameSize(const RenderJobOptions& options, const Camera& camera) {
+  // The layout's own limit first (the most tiles an image may have).
+  VOX_RETURN_IF_ERROR(CheckTileCount(camera.width, camera.height,
+                                     std::clamp(options.tile_size, kMinTileSize, kMaxTileSize)));
+  const int64_t pixels = int64_t(camera.width) * int64_t(camera.height);
+  const std::string size = std::to_string(camera.width) + "x" + std::to_string(camera.height);
+  if (pixels > kMaxPixelsUnlessAllowed && !options.allow_huge)
+    return InvalidArgumentError("a " + size + " frame has " + std::to_string(pixels) +
+                                " pixels, more than " + std::to_string(kMaxPixelsUnlessAllowed) +
+                                "; pass --allow-huge to render it");
+  if (options.exr_path.empty()) return OkStatus();
+  const int bytes_per_pixel = (options.layers.float_color ? 16 : 8) + 4 +
+                              (options.layers.normal ? 12 : 0) + (options.layers.voxel ? 12 : 0);
+  const double fraction = options.part.whole() ? 1.0 : 1.0 / options.part.count;
+  const uint64_t estimate = uint64_t(double(pixels) * bytes_per_pixel * fraction);
+  if (!options.quiet)
+    fprintf(options.log, "vox-render: %s: %s, at most %.1f MiB\n", options.exr_path.c_str(),
+            size.c_str(), double(estimate) / double(kMiB));
+  std::string dir, name;
+  SplitPath(options.exr_path, &dir, &name);
+  struct statvfs vfs;
+  if (statvfs(dir.c_str(), &vfs) != 0) return OkStatus();
+  const uint64_t free_bytes = uint64_t(vfs.f_bavail) * uint64_t(vfs.f_frsize);
+  if (estimate > free_bytes)
+    return ResourceExhaustedError("-o " + options.exr_path + ": the " + size + " image may take " +
+                                  std::to_string(estimate >> 20) + " MiB and " + dir + " has " +
+                                  std::to_string(free_bytes >> 20) + " MiB free");
   return OkStatus();
 }
 
@@ -359,6 +406,7 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   const double open_seconds = phase.Lap();
 
   VOX_ASSIGN_OR_RETURN(const Camera camera, JobCamera(options, stores.base->meta()));
+  VOX_RETURN_IF_ERROR(CheckFrameSize(options, camera));
   VOX_ASSIGN_OR_RETURN(const Scene scene, JobScene(options));
   const int threads =
       options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
@@ -383,12 +431,18 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
 
   FrameOptions frame = JobFrameOptions(options, stores, *renderer, budget, threads);
   if (keep) KeepImage(camera, options.layers, out, &frame);
+  frame.interrupted = options.interrupted;
+  // The EXR, the preview and the stats are published together, once all
+  // are written: a failed one leaves every earlier output as it was.
+  OutputGroup outputs;
+  frame.outputs = &outputs;
   FrameStats stats;
   VOX_RETURN_IF_ERROR(RenderFrame(*renderer, frame, &stats));
   const double frame_seconds = phase.Lap();
   if (!options.preview_path.empty()) {
     SetExrThreads(threads);  // the preview reads a row of tiles per call: decoded in parallel
-    VOX_RETURN_IF_ERROR(WritePngPreview(options.exr_path, options.preview_path));
+    VOX_RETURN_IF_ERROR(WritePngPreview(options.exr_path, options.preview_path, &outputs,
+                                        outputs.TempOf(options.exr_path)));
   }
   const double preview_seconds = phase.Lap();
   if (!options.stats_path.empty() || out != nullptr) {
@@ -402,8 +456,10 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
          {"total_seconds", total.Seconds()}});
     if (out) out->stats_json = json;
     if (!options.stats_path.empty())
-      VOX_RETURN_IF_ERROR(WriteFileAtomically(options.stats_path, json + "\n"));
+      VOX_RETURN_IF_ERROR(outputs.AddBytes(options.stats_path, json + "\n"));
   }
+  if (options.interrupted) VOX_RETURN_IF_ERROR(options.interrupted());
+  VOX_RETURN_IF_ERROR(outputs.Commit());
   if (!options.quiet) PrintSummary(options, *renderer, stats);
   return OkStatus();
 }

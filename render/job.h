@@ -12,6 +12,7 @@
 
 #include <cstddef>
 #include <cstdio>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -74,6 +75,11 @@ struct RenderJobOptions {
   // Keep the image in RenderJobOutput; its bytes are charged to the memory
   // budget before the brick cache is sized.
   bool keep_image = false;
+  // --allow-huge: frames over kMaxPixelsUnlessAllowed (render/limits.h).
+  bool allow_huge = false;
+  // Polled between tiles; an error stops the render, removes the
+  // temporaries and is returned (the Python module's KeyboardInterrupt).
+  std::function<Status()> interrupted;
 };
 
 // What a job hands back besides its files.

@@ -20,6 +20,11 @@ inline constexpr int kMinTileSize = 8, kMaxTileSize = 4096;
 // 131072 x 131072 pixels in 64-pixel tiles; larger tiles allow larger images.
 inline constexpr int64_t kMaxTiles = int64_t(1) << 22;
 
+// The most pixels vox-render renders without --allow-huge: 2^28, a 16384 x
+// 16384 frame (about 3 GiB as an uncompressed EXR with every layer). A
+// larger one is refused before the store is read, saying its size.
+inline constexpr int64_t kMaxPixelsUnlessAllowed = int64_t(1) << 28;
+
 }  // namespace vox
 
 #endif  // VOX_RENDER_LIMITS_H_

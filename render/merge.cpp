@@ -13,6 +13,7 @@
 #include "render/frame.h"
 #include "render/tiles.h"
 #include "storage/atomic_file.h"
+#include "storage/path_identity.h"
 
 namespace vox {
 
@@ -135,16 +136,25 @@ Status CopyPartTiles(const std::string& path, const PartSpec& spec, const TileLa
 }  // namespace
 
 Status MergeParts(const std::vector<std::string>& parts, const std::string& out_path,
-                  MergeResult* result) {
+                  MergeResult* result, const std::string& preview_path) {
   if (parts.empty()) return InvalidArgumentError("vox-merge: no part files given");
-  // Before reading anything: the output must not be one of the parts (by
-  // device and inode, so ./p1.exr and p1.exr or a hard link are caught), and
-  // its directory must be writable.
+  // Before reading anything: no output may be one of the parts (by device
+  // and inode, so ./p1.exr and p1.exr or a hard link are caught) or the
+  // other output, and their directories must be writable.
   for (const std::string& p : parts)
-    if (p == out_path || SameFile(p, out_path))
+    if (p == out_path)
       return InvalidArgumentError("output " + out_path + " is the part " + p +
                                   "; writing it would destroy that part");
   VOX_RETURN_IF_ERROR(CheckOutputPath(out_path));
+  VOX_RETURN_IF_ERROR(CheckExtension("-o", out_path, ".exr"));
+  if (!preview_path.empty()) {
+    VOX_RETURN_IF_ERROR(CheckOutputPath(preview_path));
+    VOX_RETURN_IF_ERROR(CheckExtension("--preview", preview_path, ".png"));
+  }
+  std::vector<NamedPath> inputs;
+  for (const std::string& p : parts) inputs.push_back({"part", p});
+  VOX_RETURN_IF_ERROR(
+      CheckDistinctPaths(inputs, {{"-o", out_path}, {"--preview", preview_path}}));
   std::vector<ExrInfo> infos;
   std::vector<PartSpec> specs;
   VOX_RETURN_IF_ERROR(ReadParts(parts, &infos, &specs));
@@ -193,7 +203,12 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
   nlohmann::json timings{{"parts", n},
                          {"sum_render_seconds", res.sum_render_seconds},
                          {"max_render_seconds", res.max_render_seconds}};
-  VOX_RETURN_IF_ERROR(writer->Finish(res.max_render_seconds, timings.dump()));
+  OutputGroup outputs;
+  VOX_RETURN_IF_ERROR(writer->Finish(res.max_render_seconds, timings.dump(), &outputs));
+  if (!preview_path.empty())
+    VOX_RETURN_IF_ERROR(
+        WritePngPreview(out_path, preview_path, &outputs, outputs.TempOf(out_path)));
+  VOX_RETURN_IF_ERROR(outputs.Commit());
   if (result) *result = res;
   return OkStatus();
 }

@@ -23,8 +23,13 @@ struct MergeResult {
   double sum_render_seconds = 0, max_render_seconds = 0;
 };
 
+// With a `preview_path`, also the PNG preview (render/exr.h); the EXR and
+// the preview are published together once both are written. Before reading
+// anything, refuses an output that is a part or the other output
+// (storage/path_identity.h), a bad directory, and a name whose extension is
+// not .exr (.png for the preview).
 Status MergeParts(const std::vector<std::string>& parts, const std::string& out_path,
-                  MergeResult* result = nullptr);
+                  MergeResult* result = nullptr, const std::string& preview_path = "");
 
 }  // namespace vox
 

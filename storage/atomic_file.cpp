@@ -6,6 +6,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <mutex>
 #include <optional>
 #include <utility>
 
@@ -61,13 +62,16 @@ StatusOr<AtomicFile> AtomicFile::Create(const std::string& path) {
 }
 
 AtomicFile::AtomicFile(AtomicFile&& o) noexcept
-    : path_(std::move(o.path_)), temp_(std::exchange(o.temp_, std::string())) {}
+    : path_(std::move(o.path_)),
+      temp_(std::exchange(o.temp_, std::string())),
+      synced_(o.synced_) {}
 
 AtomicFile& AtomicFile::operator=(AtomicFile&& o) noexcept {
   if (this != &o) {
     Abandon();
     path_ = std::move(o.path_);
     temp_ = std::exchange(o.temp_, std::string());
+    synced_ = o.synced_;
   }
   return *this;
 }
@@ -79,8 +83,9 @@ void AtomicFile::Abandon() {
   temp_.clear();
 }
 
-Status AtomicFile::Commit() {
+Status AtomicFile::Sync() {
   if (temp_.empty()) return InternalError(path_ + ": output already committed or abandoned");
+  if (synced_) return OkStatus();
   int fd = open(temp_.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) {
     Status s = IoError(path_ + ": cannot reopen the temporary " + temp_ + ": " + ErrnoText());
@@ -93,7 +98,13 @@ Status AtomicFile::Commit() {
     Abandon();
     return s;
   }
-  s = PublishAtomically(temp_, path_, "output");
+  synced_ = true;
+  return OkStatus();
+}
+
+Status AtomicFile::Commit() {
+  VOX_RETURN_IF_ERROR(Sync());
+  Status s = PublishAtomically(temp_, path_, "output");
   if (!s.ok()) {
     s = IoError(path_ + ": cannot put the finished output into place: " + s.message());
     Abandon();
@@ -103,30 +114,74 @@ Status AtomicFile::Commit() {
   return OkStatus();
 }
 
-Status WriteFileAtomically(const std::string& path, const std::string& bytes) {
+namespace {
+
+bool IsSpecial(const std::string& path) {
   struct stat st;
-  const bool special =
-      stat(path.c_str(), &st) == 0 && (S_ISCHR(st.st_mode) || S_ISFIFO(st.st_mode));
-  std::optional<AtomicFile> f;
-  if (!special) {  // a device or pipe (/dev/stdout) is written in place
-    VOX_ASSIGN_OR_RETURN(AtomicFile created, AtomicFile::Create(path));
-    f.emplace(std::move(created));
-  }
-  int fd = open(special ? path.c_str() : f->temp_path().c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
-  if (fd < 0) return IoError(path + ": cannot open the temporary file: " + ErrnoText());
+  return stat(path.c_str(), &st) == 0 && (S_ISCHR(st.st_mode) || S_ISFIFO(st.st_mode));
+}
+
+// Writes `bytes` to the file at `path` (a temporary, or a device or pipe
+// named `target`).
+Status WriteBytes(const std::string& path, const std::string& target, const std::string& bytes) {
+  int fd = open(path.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+  if (fd < 0) return IoError(target + ": cannot open for writing: " + ErrnoText());
   size_t done = 0;
   while (done < bytes.size()) {
     ssize_t n = write(fd, bytes.data() + done, bytes.size() - done);
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) {
-      Status s = IoError(path + ": write failed: " + ErrnoText());
+      Status s = IoError(target + ": write failed: " + ErrnoText());
       close(fd);
       return s;
     }
     done += size_t(n);
   }
-  if (close(fd) != 0) return IoError(path + ": write failed: " + ErrnoText());
-  return special ? OkStatus() : f->Commit();
+  if (close(fd) != 0) return IoError(target + ": write failed: " + ErrnoText());
+  return OkStatus();
+}
+
+}  // namespace
+
+Status WriteFileAtomically(const std::string& path, const std::string& bytes) {
+  OutputGroup group;
+  VOX_RETURN_IF_ERROR(group.AddBytes(path, bytes));
+  return group.Commit();
+}
+
+Status OutputGroup::AddBytes(const std::string& path, std::string bytes) {
+  if (IsSpecial(path)) {  // a device or pipe (/dev/stdout) is written in place
+    special_.push_back({path, std::move(bytes)});
+    return OkStatus();
+  }
+  VOX_ASSIGN_OR_RETURN(AtomicFile f, AtomicFile::Create(path));
+  VOX_RETURN_IF_ERROR(WriteBytes(f.temp_path(), path, bytes));
+  files_.push_back(std::move(f));
+  return OkStatus();
+}
+
+Status OutputGroup::Commit() {
+  for (const auto& [path, bytes] : special_) {
+    Status s = WriteBytes(path, path, bytes);
+    if (!s.ok()) {
+      files_.clear();  // removes the temporaries: nothing is published
+      return s;
+    }
+  }
+  special_.clear();
+  // Sync every temporary before the first rename, so a failure here also
+  // publishes nothing.
+  for (AtomicFile& f : files_) {
+    Status s = f.Sync();
+    if (!s.ok()) {
+      files_.clear();
+      return s;
+    }
+  }
+  std::lock_guard<std::mutex> publishing(TemporaryMutex());  // never half a group
+  for (AtomicFile& f : files_) VOX_RETURN_IF_ERROR(f.Commit());
+  files_.clear();
+  return OkStatus();
 }
 
 }  // namespace vox

@@ -12,6 +12,8 @@
 #define VOX_STORAGE_ATOMIC_FILE_H_
 
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/status.h"
 
@@ -41,7 +43,9 @@ class AtomicFile {
   const std::string& path() const { return path_; }
   // Where to write the content (closed: the writer opens it by name).
   const std::string& temp_path() const { return temp_; }
-  // fsyncs the temporary, renames it over path() and fsyncs the directory.
+  // fsyncs the temporary (once; a failure removes it).
+  Status Sync();
+  // Sync, then renames the temporary over path() and fsyncs the directory.
   Status Commit();
   // Removes the temporary now.
   void Abandon();
@@ -49,10 +53,38 @@ class AtomicFile {
  private:
   AtomicFile() = default;
   std::string path_, temp_;
+  bool synced_ = false;
 };
 
 // Writes `bytes` to `path` atomically.
 Status WriteFileAtomically(const std::string& path, const std::string& bytes);
+
+// The outputs of one run (an EXR, its preview, the --stats JSON), published
+// as a group: each is finished in its temporary first, and Commit puts them
+// in place only when all were written. A device or pipe (/dev/stdout) takes
+// its bytes in place at Commit, before any rename, so a failed write there
+// leaves every earlier output as it was. Destroyed uncommitted, it removes
+// the temporaries.
+class OutputGroup {
+ public:
+  // A finished temporary, to be renamed into place by Commit.
+  void AddFile(AtomicFile file) { files_.push_back(std::move(file)); }
+  // The temporary holding the added output for `path` (empty: none).
+  std::string TempOf(const std::string& path) const {
+    for (const AtomicFile& f : files_)
+      if (f.path() == path) return f.temp_path();
+    return "";
+  }
+  // `bytes` for `path`: written to its temporary now (a device or pipe: kept
+  // for Commit).
+  Status AddBytes(const std::string& path, std::string bytes);
+  // Writes the devices' bytes, then fsyncs and renames every temporary.
+  Status Commit();
+
+ private:
+  std::vector<AtomicFile> files_;
+  std::vector<std::pair<std::string, std::string>> special_;  // path, bytes
+};
 
 }  // namespace vox
 

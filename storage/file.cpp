@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <random>
 #include <sstream>
 #include <string>
@@ -215,9 +216,11 @@ Status ErrnoError(const std::string& what, const std::string& path, int err) {
 }
 
 namespace {
-// Opens a regular file read-only; its fd and stat.
+// Opens a regular file read-only; its fd and stat. Opened with O_NONBLOCK
+// (cleared once it is known to be a regular file), so a FIFO put in place
+// of a store file is refused at once instead of blocking open() for a writer.
 Status OpenRegular(const std::string& path, int* fd_out, struct stat* st) {
-  int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) return ErrnoError("cannot open", path, errno);
   if (fstat(fd, st) != 0) {
     int err = errno;
@@ -226,8 +229,14 @@ Status OpenRegular(const std::string& path, int* fd_out, struct stat* st) {
   }
   if (!S_ISREG(st->st_mode)) {
     close(fd);
-    return IoError("'" + path + "' is not a regular file");
+    return IoError("'" + path + "' is not a regular file (" +
+                   (S_ISFIFO(st->st_mode)  ? "a FIFO"
+                    : S_ISCHR(st->st_mode) ? "a character device"
+                    : S_ISDIR(st->st_mode) ? "a directory"
+                                           : "a special file") +
+                   ")");
   }
+  fcntl(fd, F_SETFL, fcntl(fd, F_GETFL) & ~O_NONBLOCK);
   *fd_out = fd;
   return OkStatus();
 }
@@ -363,13 +372,38 @@ void SplitPath(const std::string& path, std::string* dir, std::string* name) {
   }
 }
 
-StatusOr<std::string> ReadTextFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return NotFoundError(path + ": cannot open for reading");
-  std::ostringstream s;
-  s << in.rdbuf();
-  if (in.bad()) return IoError(path + ": read failed");
-  return s.str();
+StatusOr<std::string> ReadTextFile(const std::string& path, uint64_t max_bytes) {
+  const int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    if (errno == ENOENT) return NotFoundError(path + ": cannot open for reading");
+    return ErrnoError("cannot open", path, errno);
+  }
+  const std::string too_large = path + ": larger than " + std::to_string(max_bytes >> 20) +
+                                " MiB, the most a camera or scene file may hold";
+  struct stat st;
+  if (fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && uint64_t(st.st_size) > max_bytes) {
+    close(fd);
+    return InvalidArgumentError(too_large);  // before reading a byte
+  }
+  std::string text;
+  char buf[1 << 16];
+  for (;;) {  // a pipe (--cam <(...)) has no size: read at most max_bytes + 1
+    const ssize_t n = read(fd, buf, sizeof buf);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const int err = errno;
+      close(fd);
+      return ErrnoError("cannot read", path, err);
+    }
+    if (n == 0) break;
+    text.append(buf, size_t(n));
+    if (text.size() > max_bytes) {
+      close(fd);
+      return InvalidArgumentError(too_large);
+    }
+  }
+  close(fd);
+  return text;
 }
 
 namespace {
@@ -430,7 +464,13 @@ void RemoveStaleTemporaries(const std::string& dir, const std::string& name) {
   closedir(d);
 }
 
+std::mutex& TemporaryMutex() {
+  static std::mutex mu;
+  return mu;
+}
+
 StatusOr<std::string> CreateTemporary(const std::string& target, bool directory) {
+  std::lock_guard<std::mutex> creating(TemporaryMutex());
   std::string dir, name;
   SplitPath(target, &dir, &name);
   RemoveStaleTemporaries(dir, name);

@@ -135,9 +135,15 @@ bool ProcessGone(long pid);
 // for a name in the root.
 void SplitPath(const std::string& path, std::string* dir, std::string* name);
 
+// The most bytes a camera or scene file may hold (16 MiB; a camera is a few
+// hundred bytes): a larger one is refused before it is read.
+inline constexpr uint64_t kMaxTextFileBytes = uint64_t(16) << 20;
+
 // The bytes of a whole (small) text file, such as cam.json; NotFound and
-// IoError name the file.
-StatusOr<std::string> ReadTextFile(const std::string& path);
+// IoError name the file; InvalidArgument when it holds more than
+// `max_bytes` (a regular file's size is checked before reading).
+StatusOr<std::string> ReadTextFile(const std::string& path,
+                                   uint64_t max_bytes = kMaxTextFileBytes);
 
 // Temporaries and atomic publication. An output DIR/NAME (a file or a store
 // directory) is built as a temporary beside it, synced, and published by a
@@ -155,9 +161,16 @@ StatusOr<std::string> ReadTextFile(const std::string& path);
 // writing the same output), this process's and anything else stay.
 void RemoveStaleTemporaries(const std::string& dir, const std::string& name);
 
+// Held while CreateTemporary makes a temporary and while an OutputGroup
+// publishes (storage/atomic_file.h). A tool's signal thread takes it for
+// good before removing the process's temporaries, so that none is created,
+// and no group half-published, after that.
+std::mutex& TemporaryMutex();
+
 // Creates an empty temporary file (`directory` false, mode 0644 less the
 // umask) or directory beside `target`, named as above, after removing the
-// stale temporaries of `target`. Returns its path.
+// stale temporaries of `target`. Returns its path. Writers open the file
+// without O_CREAT, so a temporary removed under them is not made again.
 StatusOr<std::string> CreateTemporary(const std::string& target, bool directory);
 
 // Puts the finished temporary `temp` (a synced file or directory, beside

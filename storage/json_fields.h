@@ -10,6 +10,7 @@
 #include <glm/vec3.hpp>
 #include <initializer_list>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -43,8 +44,9 @@ inline std::string Join(const std::string& prefix, std::string_view key) {
 // that appears twice in one object is an error naming the key (JSON parsers
 // disagree on which one wins, so the file's meaning would be ambiguous).
 inline StatusOr<json> Parse(std::string_view text, std::string_view file) {
-  // One key set per open object; the first duplicate seen is reported.
-  std::vector<std::vector<std::string>> open_objects;
+  // One key set per open object (O(log n) a key); the first duplicate seen
+  // is reported.
+  std::vector<std::set<std::string, std::less<>>> open_objects;
   std::string duplicate;
   auto watch = [&](int /*depth*/, json::parse_event_t event, json& parsed) {
     if (event == json::parse_event_t::object_start) {
@@ -54,9 +56,7 @@ inline StatusOr<json> Parse(std::string_view text, std::string_view file) {
     } else if (event == json::parse_event_t::key && !open_objects.empty() && parsed.is_string()) {
       auto& keys = open_objects.back();
       const std::string& k = parsed.get_ref<const std::string&>();
-      if (duplicate.empty() && std::find(keys.begin(), keys.end(), k) != keys.end())
-        duplicate = k;
-      keys.push_back(k);
+      if (!keys.insert(k).second && duplicate.empty()) duplicate = k;
     }
     return true;
   };

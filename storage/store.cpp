@@ -16,6 +16,7 @@
 #include "storage/internal/store_impl.h"
 #include "storage/internal/store_reader.h"
 #include "storage/memory_budget.h"
+#include "storage/meta_check.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"
 
@@ -221,6 +222,7 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   auto compact = LevelOrderPool(top_cells, meta_.brick_level, !top_only);
   if (!compact.ok()) return compact.status().WithContext("'" + ipath + "': top");
   top_ = std::move(*compact);
+  VOX_RETURN_IF_ERROR(CheckMetaAgainstTop(meta_, top_, ipath));  // bbox vs occupied bricks
 
   // The bricks file: header, size, same store.
   const std::string& bpath = bricks->path();

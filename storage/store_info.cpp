@@ -55,6 +55,18 @@ StatusOr<StoreInfo> InspectStore(const std::string& dir, bool verify_bricks, siz
       auto b = store->FetchBrick(id);
       if (!b.ok()) return b.status();
     }
+    if (HasLod(dir)) {  // every level of the pyramid, each brick checked too
+      VOX_ASSIGN_OR_RETURN(auto pyramid, LodPyramid::Open(dir, *store, oo));
+      for (int l = 1; l <= pyramid->max_level(); ++l) {
+        Store* level = pyramid->level(l);
+        const uint32_t n = uint32_t(BrickTable(*level).size());
+        for (uint32_t id = 0; id < n; ++id) {
+          auto b = level->FetchBrick(id);
+          if (!b.ok()) return b.status().WithContext("level of detail " + std::to_string(l));
+        }
+        info.lod_levels_verified = l;
+      }
+    }
     info.verified = true;
   }
   return info;
@@ -149,7 +161,12 @@ std::string FormatStoreInfo(const StoreInfo& i) {
       add("    [%9s, %9s) %8" PRIu64 " %s\n", lo.c_str(), hi.c_str(), c, std::string(bar, '#').c_str());
     }
   }
-  if (i.verified) o += "  verified:        every brick decompressed and checked\n";
+  if (i.verified)
+    o += "  verified:        every brick decompressed and checked" +
+         (i.lod_levels_verified > 0
+              ? ", pyramid levels 1.." + std::to_string(i.lod_levels_verified) + " too"
+              : std::string()) +
+         "\n";
   return o;
 }
 

@@ -28,10 +28,14 @@ struct StoreInfo {
   // histogram[k]: bricks whose stored size is in [2^k, 2^(k+1)) bytes.
   std::vector<uint64_t> stored_size_histogram;
   bool verified = false;  // every brick decompressed and checked
+  // With verify_bricks and a pyramid (lod/): its levels, every one opened
+  // (a missing or foreign level fails) and every brick checked.
+  int lod_levels_verified = 0;
 };
 
 // Opens the store at `dir` and gathers its statistics; with verify_bricks,
-// decompresses and checks every brick (through a cache of cache_bytes).
+// decompresses and checks every brick (through a cache of cache_bytes), the
+// pyramid's levels' (lod/N/) included.
 StatusOr<StoreInfo> InspectStore(const std::string& dir, bool verify_bricks,
                                  size_t cache_bytes = size_t(64) << 20);
 

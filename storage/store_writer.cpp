@@ -83,6 +83,9 @@ bool ReadBytes(const fs::path& path, bool from_end, size_t n, uint8_t* out) {
 // it is one: exactly index.vxi and bricks.vxb, regular files (beside a lod/ pyramid), with valid
 // headers (and index footer) carrying one store_id (FORMAT.md).
 std::string NotAStoreReason(const fs::path& dir) {
+  // A pyramid temporary (.lod.tmp-PID-*) of a process that is gone (an
+  // interrupted or killed --add-lod) is stale, not foreign data.
+  RemoveStaleTemporaries(dir.string(), kLodDirName);
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();

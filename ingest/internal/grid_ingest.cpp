@@ -161,6 +161,8 @@ class GridIngest {
     }
     cx_.stats->seconds_bricks = t0.Seconds();
     t0.Restart();
+    if (cx_.progress && cx_.progress->Cancelled())
+      return UnavailableError(cx_.options.input + ": ingest cancelled");
     VOX_RETURN_IF_ERROR(writer->Finish());
     cx_.stats->seconds_finish = t0.Seconds();
     return OkStatus();
@@ -487,6 +489,8 @@ class GridIngest {
                   voxels_done += it.voxels;
                   if (it.voxels) ++written;
                   if (cx_.progress) cx_.progress->Progress(it.index + 1, total, voxels_done);
+                  if (cx_.progress && cx_.progress->Cancelled())
+                    fail(UnavailableError(cx_.options.input + ": ingest cancelled"));
                 }));
     if (!first_error.ok()) return first_error;
     cx_.stats->occupied_voxels = voxels_done;

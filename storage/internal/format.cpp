@@ -14,6 +14,7 @@
 
 #include "storage/crc32c.h"
 #include "storage/internal/coding.h"
+#include "storage/meta_check.h"
 
 namespace vox::storage_internal {
 namespace {
@@ -228,6 +229,7 @@ StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& pa
   if (m.top_cells == 0 || m.top_cells >= kBrickBit)
     return bad("top cell count " + std::to_string(m.top_cells));
   if (m.brick_count >= kBrickBit) return bad("brick count " + std::to_string(m.brick_count));
+  VOX_RETURN_IF_ERROR(CheckMetaFields(m, path));
   return m;
 }
 

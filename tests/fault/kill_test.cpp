@@ -8,7 +8,9 @@
 // the other parts), or absent when there was none:
 // never a partial file. The temporaries kills leave (`.NAME.tmp-PID-XXXXXX`)
 // are removed by the next run of the tool for the same output, and only
-// those: a live process's temporary and other files stay.
+// those: a live process's temporary and other files stay. SIGTERM and SIGINT
+// at random points of a render and a merge end them with 128 + the signal,
+// their temporaries removed and the output the earlier one or a whole new one.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -16,6 +18,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -175,6 +178,56 @@ class Kill : public ::testing::Test {
     EXPECT_EQ(last->pixels, ref->pixels);
   }
 
+  // Sends `sig` (SIGTERM, SIGINT) at points_ / 4 random moments within 1.1
+  // run times: the tool ends with 128 + sig (or 0 when it finished first, or
+  // by the signal itself when it came before the handler, when no temporary
+  // exists yet), removes its temporaries every time, and the output is the
+  // earlier file or a complete new one.
+  void SignalAtRandomPoints(const std::vector<std::string>& args, const std::string& out,
+                            int sig, uint64_t seed) {
+    const double run_us = RunToEnd(args);
+    ASSERT_GT(run_us, 0) << "the tool failed on its own";
+    auto ref = ReadExr(out);
+    ASSERT_TRUE(ref.ok()) << ref.status().ToString();
+    std::string previous = Slurp(out);
+    std::mt19937_64 rng(seed);
+    int handled = 0, finished = 0, early = 0;
+    const int points = std::max(4, points_ / 4);
+    for (int i = 0; i < points; ++i) {
+      const auto delay = std::chrono::microseconds(
+          int64_t(std::uniform_real_distribution<double>(0.0, 1.1 * run_us)(rng)));
+      const pid_t pid = testing::SpawnInGroup(args);
+      ASSERT_GT(pid, 0);
+      std::this_thread::sleep_for(delay);
+      kill(pid, sig);
+      int status = 0;
+      ASSERT_EQ(waitpid(pid, &status, 0), pid);
+      if (WIFEXITED(status) && WEXITSTATUS(status) == 0) {
+        ++finished;
+      } else if (WIFEXITED(status)) {
+        ASSERT_EQ(WEXITSTATUS(status), 128 + sig) << "signal point " << i;
+        ++handled;
+      } else {
+        ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == sig) << "signal point " << i;
+        ++early;
+      }
+      ASSERT_EQ(testing::TempEntries(dir_), std::vector<std::string>{})
+          << "signal point " << i << " (" << delay.count() << " us) left a temporary";
+      ASSERT_TRUE(fs::exists(out)) << "signal point " << i << ": the earlier output vanished";
+      const std::string now = Slurp(out);
+      if (now == previous) continue;
+      auto img = ReadExr(out);
+      ASSERT_TRUE(img.ok()) << "signal point " << i << ": a broken output";
+      ASSERT_TRUE(img->info.complete);
+      ASSERT_EQ(img->pixels, ref->pixels);
+      previous = now;
+    }
+    std::printf("%s: signal %d at %d points over %.0f us runs: %d handled (exit %d), %d finished "
+                "first, %d before the handler\n",
+                out.c_str(), sig, points, run_us, handled, 128 + sig, finished, early);
+    EXPECT_GT(handled, 0) << "no signal landed while the tool ran";
+  }
+
   std::string dir_, store_;
   int points_ = 100;
 };
@@ -210,6 +263,24 @@ TEST_F(Kill, MergeOverAnEarlierMerge) {
   KillAtRandomPoints(args, out, 13);
   for (size_t i = 0; i < parts.size(); ++i)
     EXPECT_EQ(Slurp(parts[i]), before[i]) << parts[i] << " changed";
+}
+
+TEST_F(Kill, RenderStoppedBySigtermAndSigint) {
+  SignalAtRandomPoints(Render(dir_ + "/out.exr"), dir_ + "/out.exr", SIGTERM, 21);
+  SignalAtRandomPoints(Render(dir_ + "/out.exr"), dir_ + "/out.exr", SIGINT, 22);
+}
+
+TEST_F(Kill, MergeStoppedBySigtermAndSigint) {
+  std::vector<std::string> parts;
+  for (int i = 1; i <= 3; ++i) {
+    parts.push_back(dir_ + "/p" + std::to_string(i) + ".exr");
+    ASSERT_GT(RunToEnd(Render(parts.back(), std::to_string(i) + "/3")), 0);
+  }
+  std::vector<std::string> args = {VOX_MERGE_BIN};
+  args.insert(args.end(), parts.begin(), parts.end());
+  args.insert(args.end(), {"-o", dir_ + "/merged.exr", "--quiet"});
+  SignalAtRandomPoints(args, dir_ + "/merged.exr", SIGTERM, 23);
+  SignalAtRandomPoints(args, dir_ + "/merged.exr", SIGINT, 24);
 }
 
 }  // namespace

@@ -2,7 +2,9 @@
 // exits 128 + the signal and leaves no temporary store directory; a later
 // run removes the temporary directory of a writer that was SIGKILLed.
 // The ingest is held mid-way (after the writer created its temporary
-// directory) by the tool's VOX_INGEST_TEST_STALL hook.
+// directory) by the tool's VOX_INGEST_TEST_STALL hook. Also (issue 26): a dead
+// --add-lod's pyramid temporary is stale, and an output holding its input is
+// refused.
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -99,6 +101,43 @@ TEST_F(IngestSignalTest, ALaterRunRemovesTheTemporaryOfAKilledOne) {
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   EXPECT_TRUE(Temporaries(dir_.path(), "store").empty());
   EXPECT_TRUE(Store::Open(out, {}).ok());
+}
+
+// Issue 26: a pyramid temporary left in a store by a --add-lod that died
+// (STORE/.lod.tmp-PID-*) is stale, not foreign data: --force replaces the
+// store. A live process's one still stops it.
+TEST_F(IngestSignalTest, AStalePyramidTemporaryDoesNotMakeTheStoreForeign) {
+  const std::string out = dir_.File("store");
+  const std::string cmd = std::string(VOX_INGEST_BINARY) + " " + vdb_ + " " + out + " --quiet";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const pid_t dead = fork();
+  if (dead == 0) _exit(0);
+  waitpid(dead, nullptr, 0);
+  const std::string stale = out + "/.lod.tmp-" + std::to_string(dead) + "-0badf00d";
+  fs::create_directories(stale + "/1");
+  ASSERT_EQ(std::system((cmd + " --force").c_str()), 0) << "the store was taken as foreign";
+  EXPECT_FALSE(fs::exists(stale));
+  const std::string live = out + "/.lod.tmp-" + std::to_string(getpid()) + "-0badf00d";
+  fs::create_directories(live);
+  EXPECT_NE(std::system((cmd + " --force 2>/dev/null").c_str()), 0);
+  EXPECT_TRUE(fs::exists(live));
+}
+
+// The output store must be neither the input nor a directory holding it.
+TEST_F(IngestSignalTest, AnOutputHoldingTheInputIsRefused) {
+  const std::string held = dir_.File("holder");
+  fs::create_directories(held);
+  fs::copy_file(vdb_, held + "/in.vdb");
+  const std::string cmd = std::string(VOX_INGEST_BINARY) + " " + held + "/in.vdb " + held +
+                          " --force --quiet 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string output;
+  char buf[512];
+  while (fgets(buf, sizeof buf, p)) output += buf;
+  EXPECT_NE(pclose(p), 0);
+  EXPECT_NE(output.find("holds the input"), std::string::npos) << output;
+  EXPECT_TRUE(fs::exists(held + "/in.vdb"));
 }
 
 }  // namespace

@@ -6,6 +6,7 @@ import json
 import math
 import os
 import re
+import shutil
 import threading
 
 import pytest
@@ -292,3 +293,103 @@ def test_render_in_a_thread_does_not_block_python(store, files, workdir):
     assert not failure, failure
     camera = files["camera"]
     assert result["rgba"].shape == (camera["height"], camera["width"], 4)
+
+
+# Issue 26: every keyword does what its flag does; Ctrl-C and a raising
+# progress callback stop a long call, keep the old outputs and raise.
+
+@pytest.fixture(scope="session")
+def fog_vdb(workdir):
+    """A fog volume whose interior is active tiles (vdb_tool -ls2fog)."""
+    vdb_tool = shutil.which("vdb_tool")
+    if not vdb_tool:
+        pytest.skip("vdb_tool (libopenvdb-tools) not found")
+    path = workdir / "fog.vdb"
+    code, _, err = run([vdb_tool, "-sphere", "r=0.5", "v=0.01", "w=3", "-ls2fog", "-write", path])
+    assert code == 0, err
+    return str(path)
+
+
+def test_ingest_max_voxels_is_the_cli_flag(fog_vdb, workdir):
+    for limit in ("1000", None):
+        args = ["--max-voxels", limit] if limit else []
+        code, _, err = run([tool("ingest"), fog_vdb, workdir / "mv-cli.store", "--force",
+                            "--quiet"] + args)
+        kwargs = {"max_voxels": int(limit)} if limit else {}
+        if code == 0:
+            vox.ingest(fog_vdb, workdir / "mv-py.store", force=True, **kwargs)
+            continue
+        assert limit, err
+        with pytest.raises((ValueError, OSError, RuntimeError)) as info:
+            vox.ingest(fog_vdb, workdir / "mv-py.store", force=True, **kwargs)
+        assert str(info.value) == cli_message(err, "vox-ingest")
+        assert "--max-voxels" in str(info.value)
+
+
+def store_bytes(path):
+    out = {}
+    for root, _, names in os.walk(path):
+        for n in names:
+            with open(os.path.join(root, n), "rb") as f:
+                out[os.path.relpath(os.path.join(root, n), path)] = f.read()
+    return out
+
+
+def temporaries(path):
+    return [n for n in os.listdir(path) if ".tmp-" in n]
+
+
+def test_a_raising_progress_callback_keeps_the_old_store(vdb, workdir):
+    target = workdir / "kept.store"
+    vox.ingest(vdb, target, force=True)
+    before = store_bytes(target)
+    calls = []
+
+    def progress(done, total, voxels):
+        calls.append(done)
+        raise KeyError("stop")
+    with pytest.raises(KeyError):
+        vox.ingest(vdb, target, progress=progress, force=True)
+    assert len(calls) == 1  # stopped at the first progress point
+    assert store_bytes(target) == before
+    assert temporaries(workdir) == []
+
+
+INTERRUPT = r"""
+import os, signal, sys, threading, time
+import vox
+what, store, target = sys.argv[1:4]
+t0 = time.monotonic()
+threading.Timer(0.4, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+try:
+    if what == "ingest":
+        vox.ingest(store, target, force=True, threads=1,
+                   progress=lambda *a: time.sleep(0.25))
+    else:
+        vox.render(store, size=(2000, 2000), threads=1, o=target, lod=0)
+    print("finished")
+except KeyboardInterrupt:
+    print("interrupted %.3f" % (time.monotonic() - t0))
+"""
+
+
+@pytest.mark.parametrize("what", ["ingest", "render"])
+def test_ctrl_c_stops_long_calls_and_keeps_old_outputs(what, vdb, store, workdir):
+    target = workdir / ("ctrl-c.store" if what == "ingest" else "ctrl-c.exr")
+    if what == "ingest":
+        vox.ingest(vdb, target, force=True)
+    else:
+        vox.render(store, size=(32, 32), o=target)
+    before = store_bytes(target) if what == "ingest" else target.read_bytes()
+    source = vdb if what == "ingest" else store
+    import subprocess
+    import sys
+    p = subprocess.run([sys.executable, "-c", INTERRUPT, what, source, str(target)],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    words = p.stdout.split()
+    assert words and words[0] == "interrupted", p.stdout + p.stderr
+    assert float(words[1]) < 0.4 + 1.5  # stopped within about a second
+    after = store_bytes(target) if what == "ingest" else target.read_bytes()
+    assert after == before
+    assert temporaries(workdir) == []

@@ -3,6 +3,7 @@
 // file is ambiguous); a perspective pixel must span at least 1e-12 radians.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <string>
 
 #include "render/camera.h"
@@ -35,6 +36,22 @@ TEST(HostileParse, DuplicateKeysAreRefused) {
   EXPECT_TRUE(l.ok()) << "the same keys in two array elements are not duplicates: "
                       << l.status().ToString();
   EXPECT_TRUE(ParseCamera(Cam("40"), "cam.json").ok());
+}
+
+// Issue 26: 150,000 keys took minutes with the old linear search per key;
+// a set per object finds the duplicate at the end at once.
+TEST(HostileParse, ManyKeysAreCheckedInNLogN) {
+  std::string extra;
+  for (int i = 0; i < 150000; ++i) extra += ",\"k" + std::to_string(i) + "\":0";
+  extra += ",\"k7\":1";
+  const auto t0 = std::chrono::steady_clock::now();
+  auto c = ParseCamera(Cam("40", extra), "cam.json");
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_FALSE(c.ok());
+  EXPECT_NE(c.status().message().find("key 'k7' appears twice"), std::string::npos)
+      << c.status().ToString();
+  EXPECT_LT(seconds, 10.0);
 }
 
 TEST(HostileParse, MinimumAngularPixelSize) {

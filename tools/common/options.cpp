@@ -85,7 +85,7 @@ Status CheckIngestCommand(const IngestCommand& c) {
 
 FlagArity RenderFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch", "--float",
-                   "--read-windows", "--no-read-windows", "--beam", "--no-beam"}))
+                   "--allow-huge", "--read-windows", "--no-read-windows", "--beam", "--no-beam"}))
     return FlagArity::kSwitch;
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
@@ -95,6 +95,8 @@ FlagArity RenderFlagArity(std::string_view flag) {
 }
 
 Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::string& v) {
+  if (v.empty() && OneOf(a, {"--cam", "--scene", "-o", "--preview", "--stats"}))
+    return InvalidArgumentError(a + " '': an empty path names no file");
   if (a == "--single-step") {
     o->single_step = true;
   } else if (a == "--quiet") {
@@ -116,6 +118,8 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
                                   std::to_string(kMaxSilhouetteGrid));
   } else if (a == "--float") {
     o->layers.float_color = true;
+  } else if (a == "--allow-huge") {
+    o->allow_huge = true;
   } else if (a == "--compression") {
     VOX_ASSIGN_OR_RETURN(o->compression, ParseExrCompression(v));
   } else if (a == "--io-threads") {

@@ -14,31 +14,10 @@
 #include <filesystem>
 #include <thread>
 
+#include "tools/common/signals.h"
+
 namespace vox {
 namespace {
-
-// Removes the temporary store directories `.NAME.tmp-PID-*` of process `pid`
-// beside `output` (storage/FORMAT.md, "Writing").
-void RemoveOwnTemporaries(const std::string& output, pid_t pid) {
-  namespace fs = std::filesystem;
-  std::string target = output;
-  while (target.size() > 1 && target.back() == '/') target.pop_back();
-  fs::path tp(target), parent = tp.parent_path();
-  if (parent.empty()) parent = ".";
-  const std::string prefix =
-      "." + tp.filename().string() + ".tmp-" + std::to_string(pid) + "-";
-  for (int attempt = 0; attempt < 3; ++attempt) {  // writers may still be adding files
-    std::error_code ec;
-    bool left = false;
-    for (const auto& e : fs::directory_iterator(parent, ec)) {
-      if (e.path().filename().string().compare(0, prefix.size(), prefix) != 0) continue;
-      std::error_code rec;
-      fs::remove_all(e.path(), rec);
-      left = left || fs::exists(e.path(), rec);
-    }
-    if (!left) return;
-  }
-}
 
 // "SIGSEGV (Segmentation fault)".
 std::string SignalName(int sig) {

@@ -40,6 +40,7 @@ int RunSupervised(const std::string& input, const std::string& output,
 // starts the thread that takes them (see above).
 void StartSignalThread(const std::string& output);
 
+
 // Test hooks of the child, read from the environment:
 // VOX_INGEST_TEST_STALL stalls the first progress report (the temporary
 // store exists), so tests can signal a real ingest mid-way;

@@ -24,6 +24,7 @@
 #include "storage/memory_budget.h"
 #include "tools/common/flags.h"
 #include "tools/common/options.h"
+#include "tools/common/signals.h"
 #include "tools/common/supervisor.h"
 #include "tools/common/tool_main.h"
 
@@ -99,10 +100,13 @@ static int RunTool(int argc, char** argv) {
     lo.zstd_level = o.zstd_level;
     lo.normal_bits = o.normal_bits;
     lo.force = o.force;
+    // Interrupted: the pyramid's temporary (STORE/.lod.tmp-PID-*) goes.
+    vox::StartOutputSignalThread("vox-ingest", {add_lod + "/lod"});
     auto st = vox::BuildLod(add_lod, lo);
     if (!st.ok()) {
+      const int code = vox::ToolExitCode(1);  // an interrupt exits with 128 + N instead
       std::fprintf(stderr, "vox-ingest: --add-lod: %s\n", st.status().ToString().c_str());
-      return 1;
+      return code;
     }
     if (!quiet) {
       uint64_t bricks = 0;

@@ -9,6 +9,7 @@
 #include "render/merge.h"
 #include "storage/atomic_file.h"
 #include "tools/common/flags.h"
+#include "tools/common/signals.h"
 #include "tools/common/tool_main.h"
 
 namespace {
@@ -16,7 +17,9 @@ namespace {
 const char kUsage[] =
     "usage: vox-merge PART.exr... -o out.exr [--preview out.png] [--quiet]\n"
     "  Checks that the parts belong together (same image, tiles, camera, scene, split,\n"
-    "  store), that every part 1..N is present once and complete, and writes the image.\n";
+    "  store), that every part 1..N is present once and complete, and writes the image.\n"
+    "  The outputs must not be parts or each other; -o ends in .exr, --preview in .png.\n"
+    "  SIGINT, SIGTERM and SIGHUP remove the unfinished outputs and exit 128 + the signal.\n";
 
 int Usage(const std::string& error) {
   if (!error.empty()) fprintf(stderr, "vox-merge: %s\n", error.c_str());
@@ -51,12 +54,12 @@ static int RunTool(int argc, char** argv) {
   if (out.empty()) return Usage("no output given (-o out.exr)");
   if (parts.empty()) return Usage("no part files given");
   vox::MergeResult result;
-  vox::Status s = preview.empty() ? vox::OkStatus() : vox::CheckOutputPath(preview);
-  if (s.ok()) s = vox::MergeParts(parts, out, &result);
-  if (s.ok() && !preview.empty()) s = vox::WritePngPreview(out, preview);
+  vox::StartOutputSignalThread("vox-merge", {out, preview});
+  vox::Status s = vox::MergeParts(parts, out, &result, preview);
   if (!s.ok()) {
+    const int code = vox::ToolExitCode(1);  // an interrupt exits with 128 + N instead
     fprintf(stderr, "vox-merge: %s\n", s.ToString().c_str());
-    return 1;
+    return code;
   }
   if (!quiet)
     fprintf(stderr,

@@ -18,15 +18,22 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <exception>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "ingest/limits.h"
 #include "render/exr.h"
 #include "render/job.h"
 #include "storage/store_info.h"
@@ -151,6 +158,78 @@ py::object JsonToPython(const std::string& text) {
 // Calls a Python progress(bricks_done, bricks_total, voxels_done) from the
 // ingest's thread; after it raises, it is not called again and the exception
 // is raised when the ingest returns.
+// Runs `work` on its own thread, the GIL released, while this thread checks
+// for signals (PyErr_CheckSignals, which acts only on Python's main thread)
+// every 50 ms. A signal handler's exception (KeyboardInterrupt) sets
+// *cancel, which the work polls (between tiles, at each brick) to stop and
+// remove its temporaries; once the work has returned, the exception is
+// raised. Ctrl-C thus stops vox.render and vox.ingest within a moment, and
+// no output is published after it.
+void RunPolled(std::atomic<bool>* cancel, const std::function<void()>& work) {
+  std::mutex mu;
+  std::condition_variable cv;
+  bool done = false;
+  std::unique_ptr<py::error_already_set> interrupt;
+  std::exception_ptr thrown;  // bad_alloc from the work: raised as MemoryError
+  std::thread worker;
+  {
+    py::gil_scoped_release release;
+    worker = std::thread([&] {
+      try {
+        work();
+      } catch (...) {
+        thrown = std::current_exception();
+      }
+      std::lock_guard<std::mutex> lock(mu);
+      done = true;
+      cv.notify_all();
+    });
+  }
+  for (;;) {
+    {
+      py::gil_scoped_release release;
+      std::unique_lock<std::mutex> lock(mu);
+      cv.wait_for(lock, std::chrono::milliseconds(50), [&] { return done; });
+      if (done) break;
+    }
+    if (!interrupt && PyErr_CheckSignals() != 0) {
+      interrupt = std::make_unique<py::error_already_set>();  // fetched: the error is kept
+      cancel->store(true);
+    }
+  }
+  {
+    py::gil_scoped_release release;
+    worker.join();
+  }
+  if (interrupt) {
+    interrupt->restore();
+    throw py::error_already_set();
+  }
+  if (thrown) std::rethrow_exception(thrown);
+}
+
+// Forwards to `inner` (may be null) and answers Cancelled from `cancel` or
+// the inner sink.
+class CancelSink : public vox::ProgressSink {
+ public:
+  CancelSink(vox::ProgressSink* inner, const std::atomic<bool>* cancel)
+      : inner_(inner), cancel_(cancel) {}
+  void Message(std::string_view line) override {
+    if (inner_) inner_->Message(line);
+  }
+  void Progress(uint64_t done, uint64_t total, uint64_t voxels) override {
+    if (inner_) inner_->Progress(done, total, voxels);
+  }
+  void Done() override {
+    if (inner_) inner_->Done();
+  }
+  bool Cancelled() override { return cancel_->load() || (inner_ && inner_->Cancelled()); }
+
+ private:
+  vox::ProgressSink* inner_;
+  const std::atomic<bool>* cancel_;
+};
+
 class PythonProgress : public vox::ProgressSink {
  public:
   explicit PythonProgress(py::object fn) : fn_(std::move(fn)) {}
@@ -167,9 +246,12 @@ class PythonProgress : public vox::ProgressSink {
       fn_(done, total, voxels);
     } catch (py::error_already_set& e) {
       error_ = std::make_unique<py::error_already_set>(std::move(e));
+      failed_ = true;
     }
   }
   void Done() override {}
+  // A callback that raised stops the ingest; its exception is raised.
+  bool Cancelled() override { return failed_.load(); }
   void Rethrow() {
     if (error_) {
       error_->restore();
@@ -182,6 +264,7 @@ class PythonProgress : public vox::ProgressSink {
   std::mutex mu_;
   py::object fn_;
   std::unique_ptr<py::error_already_set> error_;
+  std::atomic<bool> failed_{false};
 };
 
 py::dict Ingest(const py::object& vdb, const py::object& store, const py::object& progress,
@@ -216,11 +299,11 @@ py::dict Ingest(const py::object& vdb, const py::object& store, const py::object
     stderr_progress = vox::MakeStderrProgress(false);
     sink = stderr_progress.get();
   }
+  std::atomic<bool> cancel{false};
+  CancelSink cancel_sink(sink, &cancel);
   std::optional<vox::StatusOr<vox::IngestStats>> result;
-  {
-    py::gil_scoped_release release;
-    result.emplace(vox::Ingest(c.options, sink));
-  }
+  // The limits too (max_voxels): every keyword does what its flag does.
+  RunPolled(&cancel, [&] { result.emplace(vox::Ingest(c.options, c.limits, &cancel_sink)); });
   if (py_progress) py_progress->Rethrow();
   CheckRun(result->status());
   const vox::IngestStats& s = **result;
@@ -352,12 +435,13 @@ py::dict Render(const py::object& store, const py::object& camera, const py::obj
   }
   ApplyKwargs(rest, "render", vox::RenderFlagArity,
               [&](const std::string& f, const std::string& v) { return vox::ApplyRenderFlag(&o, f, v); });
+  std::atomic<bool> cancel{false};
+  o.interrupted = [&cancel]() -> vox::Status {
+    return cancel.load() ? vox::UnavailableError("render cancelled") : vox::OkStatus();
+  };
   vox::RenderJobOutput out;
   vox::Status s;
-  {
-    py::gil_scoped_release release;
-    s = vox::RunRenderJob(o, &out);
-  }
+  RunPolled(&cancel, [&] { s = vox::RunRenderJob(o, &out); });
   CheckRun(s);
   const py::ssize_t h = out.height, w = out.width;
   py::dict d;

@@ -8,6 +8,7 @@
 #include "render/job.h"
 #include "tools/common/flags.h"
 #include "tools/common/options.h"
+#include "tools/common/signals.h"
 #include "tools/common/tool_main.h"
 
 namespace {
@@ -18,6 +19,7 @@ const char kUsage[] =
     "                  [--cache-mb M] [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
     "                  [--layers normal,voxel] [--size WxH] [--lod F] [--silhouette-aa G] [--float]\n"
     "                  [--compression C] [--prefetch [--io-threads N]] [--no-read-windows] [--no-beam]\n"
+    "                  [--allow-huge]\n"
     "  --cam        camera JSON (world space of the source VDB); without it a default\n"
     "               camera frames the whole volume (--size sets its image size, default "
     "1024x1024)\n"
@@ -59,7 +61,12 @@ const char kUsage[] =
     "               from GxG sub-pixel rays with cones G times narrower, so its alpha is the\n"
     "               covered fraction (default 4; 0: coarse silhouettes stay whole cells)\n"
     "  --stats      write counters and timings as JSON\n"
-    "  --quiet      no progress output\n";
+    "  --quiet      no progress output\n"
+    "  --allow-huge render a frame of more than 2^28 pixels (16384x16384); the estimated\n"
+    "               EXR size must still fit the output's disk\n"
+    "  Outputs never replace inputs (store files, camera, scene) or each other; -o must\n"
+    "  end in .exr, --preview in .png. All outputs are published together at the end;\n"
+    "  SIGINT, SIGTERM and SIGHUP remove the unfinished ones and exit 128 + the signal.\n";
 
 int Usage(const std::string& error) {
   if (!error.empty()) fprintf(stderr, "vox-render: %s\n", error.c_str());
@@ -97,10 +104,14 @@ static int RunTool(int argc, char** argv) {
   if (io_threads_given && !o.prefetch)
     return Usage("--io-threads sets the background readers of --prefetch; without --prefetch "
                  "the render threads read bricks themselves");
+  // SIGINT, SIGTERM, SIGHUP (Slurm's time limit): stop, remove the
+  // temporaries, keep earlier outputs, exit 128 + the signal.
+  vox::StartOutputSignalThread("vox-render", {o.exr_path, o.preview_path, o.stats_path});
   vox::Status s = vox::RunRenderJob(o);
   if (!s.ok()) {
+    const int code = vox::ToolExitCode(1);  // an interrupt exits with 128 + N instead
     fprintf(stderr, "vox-render: %s\n", s.ToString().c_str());
-    return 1;
+    return code;
   }
   return 0;
 }

@@ -1,0 +1,69 @@
+#include "tools/common/signals.h"
+
+#include <pthread.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <mutex>
+#include <thread>
+
+#include "storage/file.h"
+
+namespace vox {
+
+void RemoveOwnTemporaries(const std::string& output, pid_t pid) {
+  namespace fs = std::filesystem;
+  std::string target = output;
+  while (target.size() > 1 && target.back() == '/') target.pop_back();
+  fs::path tp(target), parent = tp.parent_path();
+  if (parent.empty()) parent = ".";
+  const std::string prefix =
+      "." + tp.filename().string() + ".tmp-" + std::to_string(pid) + "-";
+  for (int attempt = 0; attempt < 3; ++attempt) {  // writers may still be adding files
+    std::error_code ec;
+    bool left = false;
+    for (const auto& e : fs::directory_iterator(parent, ec)) {
+      if (e.path().filename().string().compare(0, prefix.size(), prefix) != 0) continue;
+      std::error_code rec;
+      fs::remove_all(e.path(), rec);
+      left = left || fs::exists(e.path(), rec);
+    }
+    if (!left) return;
+  }
+}
+
+namespace {
+std::atomic<bool> g_signal_taken{false};
+}  // namespace
+
+int ToolExitCode(int code) {
+  if (!g_signal_taken.load()) return code;
+  for (;;) pause();  // the signal thread ends the process
+}
+
+void StartOutputSignalThread(const std::string& tool, const std::vector<std::string>& outputs) {
+  sigset_t set;
+  sigemptyset(&set);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&set, sig);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);  // inherited by every thread created later
+  std::thread([set, tool, outputs] {
+    int sig = 0;
+    if (sigwait(&set, &sig) != 0) return;
+    g_signal_taken = true;
+    // Held until _Exit: no temporary is created, no group half-published, after
+    // the removal below.
+    std::unique_lock<std::mutex> hold(TemporaryMutex());
+    std::fprintf(stderr, "\n%s: %s: removing the unfinished outputs and exiting\n", tool.c_str(),
+                 sig == SIGINT ? "interrupted (SIGINT)"
+                 : sig == SIGHUP ? "hung up (SIGHUP)" : "terminated (SIGTERM)");
+    for (const std::string& output : outputs)
+      if (!output.empty()) RemoveOwnTemporaries(output, getpid());
+    std::_Exit(128 + sig);
+  }).detach();
+}
+
+}  // namespace vox
