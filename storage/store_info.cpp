@@ -59,7 +59,10 @@ StatusOr<StoreInfo> InspectStore(const std::string& dir, bool verify_bricks, siz
       VOX_ASSIGN_OR_RETURN(auto pyramid, LodPyramid::Open(dir, *store, oo));
       for (int l = 1; l <= pyramid->max_level(); ++l) {
         Store* level = pyramid->level(l);
-        const uint32_t n = uint32_t(BrickTable(*level).size());
+        // Its table read whole: every page, the block's CRC, the voxel sum.
+        auto rows = BrickTable(*level);
+        if (!rows.ok()) return rows.status().WithContext("level of detail " + std::to_string(l));
+        const uint32_t n = uint32_t(rows->size());
         for (uint32_t id = 0; id < n; ++id) {
           auto b = level->FetchBrick(id);
           if (!b.ok()) return b.status().WithContext("level of detail " + std::to_string(l));
