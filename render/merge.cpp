@@ -157,8 +157,10 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
   ImageLayers layers;
   layers.float_color = ref.float_color;
   for (const std::string& c : ref.channels) {
-    if (c == "N.x") layers.normal = true;
-    if (c == "voxel.i") layers.voxel = true;
+    if (c == ChannelName(kChNx)) layers.normal = true;
+    if (c == ChannelName(kChVi)) layers.voxel = true;
+    if (c == ChannelName(kChPx)) layers.position = true;
+    if (c == ChannelName(kChDist)) layers.distance = true;
   }
   // The parts' vox:camera comes along, and with it the standard camera
   // attributes (render/exr.h), computed again from it.
