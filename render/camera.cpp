@@ -10,6 +10,7 @@
 #include <glm/geometric.hpp>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <vector>
 
 #include "storage/file.h"
 #include "storage/json_fields.h"
@@ -24,22 +25,65 @@ bool Finite(const glm::dvec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+// cam.json's camera_to_world: 16 numbers, or 4 rows of 4, row-major.
+StatusOr<std::array<double, 16>> ReadMatrix(const nlohmann::json& v, std::string_view file) {
+  namespace jf = json_fields;
+  const char* what = "must be 16 numbers or 4 rows of 4 numbers (row-major)";
+  std::vector<const nlohmann::json*> items;
+  if (v.is_array() && v.size() == 16) {
+    for (const auto& x : v) items.push_back(&x);
+  } else if (v.is_array() && v.size() == 4) {
+    for (const auto& row : v) {
+      if (!row.is_array() || row.size() != 4) return jf::FieldError(file, "camera_to_world", what);
+      for (const auto& x : row) items.push_back(&x);
+    }
+  } else {
+    return jf::FieldError(file, "camera_to_world", what);
+  }
+  std::array<double, 16> m{};
+  for (size_t i = 0; i < 16; ++i)
+    VOX_RETURN_IF_ERROR(jf::ReadNumber(*items[i], file, "camera_to_world", &m[i]));
+  return m;
+}
+
 }  // namespace
 
-Status Camera::Finalize(std::string_view source) {
-  finalized_ = false;
+Status Camera::ComputeFrame(std::string_view source) {
   auto err = [&](const std::string& field, const std::string& what) {
     return json_fields::FieldError(source, field, what);
   };
+  if (camera_to_world) {
+    const std::array<double, 16>& m = *camera_to_world;
+    for (double v : m)
+      if (!std::isfinite(v)) return err("camera_to_world", "must be finite");
+    if (m[12] != 0 || m[13] != 0 || m[14] != 0 || m[15] != 1)
+      return err("camera_to_world", "must have the last row 0 0 0 1");
+    glm::dvec3 axis[3];
+    for (int c = 0; c < 3; ++c) {
+      axis[c] = glm::dvec3(m[c], m[4 + c], m[8 + c]);
+      const double len = glm::length(axis[c]);
+      if (!(len > 1e-12)) return err("camera_to_world", "has a zero axis");
+      // Unit columns are taken as they are (bit for bit the look_at frame
+      // they were written from); scaled ones are normalised.
+      if (std::abs(len - 1.0) > 1e-12) axis[c] /= len;
+    }
+    const double tol = 1e-6;
+    if (std::abs(glm::dot(axis[0], axis[1])) > tol || std::abs(glm::dot(axis[0], axis[2])) > tol ||
+        std::abs(glm::dot(axis[1], axis[2])) > tol)
+      return err("camera_to_world", "is not a rotation: its axes are not orthogonal (shear)");
+    if (!(glm::dot(glm::cross(axis[0], axis[1]), axis[2]) > 0))
+      return err("camera_to_world", "is not a rotation: it mirrors (negative determinant)");
+    right_ = axis[0];
+    true_up_ = axis[1];
+    forward_ = -axis[2];  // the camera looks along its local -Z
+    position = glm::dvec3(m[3], m[7], m[11]);
+    look_at = position + forward_;
+    up = true_up_;
+    return OkStatus();
+  }
   if (!Finite(position)) return err("position", "must be finite");
   if (!Finite(look_at)) return err("look_at", "must be finite");
   if (!Finite(up)) return err("up", "must be finite");
-  if (width < 1 || width > kMaxImageSide)
-    return err("width", "is " + std::to_string(width) + "; it must be in 1.." +
-                            std::to_string(kMaxImageSide));
-  if (height < 1 || height > kMaxImageSide)
-    return err("height", "is " + std::to_string(height) + "; it must be in 1.." +
-                             std::to_string(kMaxImageSide));
   const glm::dvec3 d = look_at - position;
   if (!Finite(d)) return err("look_at", "is too far from position (their difference overflows)");
   glm::dvec3 f, u;
@@ -53,10 +97,33 @@ Status Camera::Finalize(std::string_view source) {
   forward_ = f;
   right_ = r;
   true_up_ = glm::cross(r, f);
+  return OkStatus();
+}
+
+Status Camera::Finalize(std::string_view source) {
+  finalized_ = false;
+  auto err = [&](const std::string& field, const std::string& what) {
+    return json_fields::FieldError(source, field, what);
+  };
+  VOX_RETURN_IF_ERROR(ComputeFrame(source));
+  if (width < 1 || width > kMaxImageSide)
+    return err("width", "is " + std::to_string(width) + "; it must be in 1.." +
+                            std::to_string(kMaxImageSide));
+  if (height < 1 || height > kMaxImageSide)
+    return err("height", "is " + std::to_string(height) + "; it must be in 1.." +
+                             std::to_string(kMaxImageSide));
+  const double aspect = double(height) / double(width);
+  // fov_deg spans y: the vertical axis, or the smaller side of a landscape image.
+  const bool fov_y = projection == Projection::kPerspective &&
+                     (fov_axis == FovAxis::kY || (fov_axis == FovAxis::kSmaller && height < width));
   if (projection == Projection::kPerspective) {
     if (!std::isfinite(fov_deg) || !(fov_deg > 0) || !(fov_deg < 180))
       return err("fov_deg", "must be in (0, 180) degrees");
     scale_x_ = std::tan(fov_deg * M_PI / 360.0);
+    if (fov_y) {
+      scale_y_ = scale_x_;
+      scale_x_ = scale_y_ * (double(width) / double(height));
+    }
     // A pixel must subtend a distinguishable angle: below this, neighbouring
     // pixels' unit directions differ by a few ulps (double resolves about
     // 2.2e-16 of a unit vector) and the image is one ray repeated.
@@ -73,10 +140,11 @@ Status Camera::Finalize(std::string_view source) {
       return err("ortho_width", "must be positive");
     scale_x_ = 0.5 * ortho_width;
   }
-  scale_y_ = scale_x_ * (double(height) / double(width));  // no overflow before the division
+  if (!fov_y) scale_y_ = scale_x_ * aspect;  // no overflow before the division
   const char* field = projection == Projection::kPerspective ? "fov_deg" : "ortho_width";
   const double tiny = std::numeric_limits<double>::min();
-  if (!(scale_x_ / double(width) >= tiny) || !(scale_y_ / double(height) >= tiny))
+  if (!std::isfinite(scale_x_) || !(scale_x_ / double(width) >= tiny) ||
+      !(scale_y_ / double(height) >= tiny))
     return err(field, "is too small: neighbouring pixels would see the same ray");
   for (double x : {0.0, double(width)})
     for (double y : {0.0, double(height)}) {
@@ -86,6 +154,14 @@ Status Camera::Finalize(std::string_view source) {
     }
   finalized_ = true;
   return OkStatus();
+}
+
+double Camera::HorizontalFovDeg() const {
+  if (projection != Projection::kPerspective || fov_axis == FovAxis::kX ||
+      (fov_axis == FovAxis::kSmaller && width <= height))
+    return fov_deg;
+  return std::atan(std::tan(fov_deg * M_PI / 360.0) * double(width) / double(height)) * 360.0 /
+         M_PI;
 }
 
 WorldRay Camera::ScreenRay(double sx, double sy) const {
@@ -125,14 +201,19 @@ void Camera::ScreenRays(const double* sx, double sy, int n, WorldRay* out) const
 
 std::string Camera::ToJson() const {
   nlohmann::json j;
-  j["position"] = {position.x, position.y, position.z};
-  j["look_at"] = {look_at.x, look_at.y, look_at.z};
-  j["up"] = {up.x, up.y, up.z};
+  if (camera_to_world) {
+    j["camera_to_world"] = *camera_to_world;
+  } else {
+    j["position"] = {position.x, position.y, position.z};
+    j["look_at"] = {look_at.x, look_at.y, look_at.z};
+    j["up"] = {up.x, up.y, up.z};
+  }
   j["width"] = width;
   j["height"] = height;
   if (projection == Projection::kPerspective) {
     j["projection"] = "perspective";
     j["fov_deg"] = fov_deg;
+    if (fov_axis != FovAxis::kX) j["fov_axis"] = fov_axis == FovAxis::kY ? "y" : "smaller";
   } else {
     j["projection"] = "orthographic";
     j["ortho_width"] = ortho_width;
@@ -150,8 +231,7 @@ ExrCameraAttributes StandardCameraAttributes(const Camera& cam) {
   // Screen half-extents as Camera::PixelRay uses them: pixel x maps to screen
   // (2x/W - 1) sx, pixel y to (1 - 2y/H) sy.
   const bool perspective = cam.projection == Projection::kPerspective;
-  const double sx = perspective ? std::tan(cam.fov_deg * M_PI / 360.0) : 0.5 * cam.ortho_width;
-  const double sy = sx * (double(cam.height) / double(cam.width));
+  const double sx = cam.scale_x(), sy = cam.scale_y();
   // Camera -> NDC ((0,0) top-left, (1,1) bottom-right of the display window).
   // Perspective: X = x/(2 sx) + z/2, Y = -y/(2 sy) + z/2, W = z (Z = 1, so
   // the matrix is invertible and z/w is 1/depth); orthographic: W = 1 and
@@ -184,9 +264,11 @@ ExrCameraAttributes StandardCameraAttributes(const Camera& cam) {
 StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) {
   namespace jf = json_fields;
   VOX_ASSIGN_OR_RETURN(nlohmann::json j, jf::Parse(json_text, file));
-  VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(
-      j, {"position", "look_at", "up", "fov_deg", "width", "height", "projection", "ortho_width"},
-      file, ""));
+  VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(j,
+                                         {"position", "look_at", "up", "camera_to_world", "fov_deg",
+                                          "fov_axis", "width", "height", "projection",
+                                          "ortho_width"},
+                                         file, ""));
   Camera cam;
   std::string projection = "perspective";
   VOX_RETURN_IF_ERROR(jf::GetString(j, "projection", file, "", false, &projection));
@@ -198,9 +280,25 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) 
     return jf::FieldError(file, "projection",
                           "is '" + projection + "'; it must be 'perspective' or 'orthographic'");
   }
-  VOX_RETURN_IF_ERROR(jf::GetVec3(j, "position", file, "", true, &cam.position));
-  VOX_RETURN_IF_ERROR(jf::GetVec3(j, "look_at", file, "", true, &cam.look_at));
-  VOX_RETURN_IF_ERROR(jf::GetVec3(j, "up", file, "", false, &cam.up));
+  if (auto it = j.find("camera_to_world"); it != j.end()) {
+    for (const char* k : {"position", "look_at", "up"})
+      if (j.contains(k))
+        return jf::FieldError(file, k, "and camera_to_world both place the camera; give one");
+    VOX_ASSIGN_OR_RETURN(cam.camera_to_world, ReadMatrix(*it, file));
+  } else {
+    VOX_RETURN_IF_ERROR(jf::GetVec3(j, "position", file, "", true, &cam.position));
+    VOX_RETURN_IF_ERROR(jf::GetVec3(j, "look_at", file, "", true, &cam.look_at));
+    VOX_RETURN_IF_ERROR(jf::GetVec3(j, "up", file, "", false, &cam.up));
+  }
+  std::string axis = "x";
+  VOX_RETURN_IF_ERROR(jf::GetString(j, "fov_axis", file, "", false, &axis));
+  if (axis == "y") {
+    cam.fov_axis = FovAxis::kY;
+  } else if (axis == "smaller") {
+    cam.fov_axis = FovAxis::kSmaller;
+  } else if (axis != "x") {
+    return jf::FieldError(file, "fov_axis", "is '" + axis + "'; it must be 'x', 'y' or 'smaller'");
+  }
   VOX_RETURN_IF_ERROR(jf::GetInt(j, "width", file, "", true, 1, kMaxImageSide, &cam.width));
   VOX_RETURN_IF_ERROR(jf::GetInt(j, "height", file, "", true, 1, kMaxImageSide, &cam.height));
   if (cam.projection == Projection::kPerspective) {
@@ -209,8 +307,9 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) 
       return jf::FieldError(file, "ortho_width", "only applies to an orthographic projection");
   } else {
     VOX_RETURN_IF_ERROR(jf::GetNumber(j, "ortho_width", file, "", true, &cam.ortho_width));
-    if (j.contains("fov_deg"))
-      return jf::FieldError(file, "fov_deg", "only applies to a perspective projection");
+    for (const char* k : {"fov_deg", "fov_axis"})
+      if (j.contains(k))
+        return jf::FieldError(file, k, "only applies to a perspective projection");
   }
   VOX_RETURN_IF_ERROR(cam.Finalize(file));
   return cam;
@@ -242,6 +341,66 @@ Camera DefaultCamera(const glm::dvec3& lo, const glm::dvec3& hi, int width, int 
   Status s = cam.Finalize("default camera");
   (void)s;  // cannot fail: finite box, up not parallel to view_dir
   return cam;
+}
+
+StatusOr<Camera> OrbitCamera(const Camera& base, const glm::dvec3& lo, const glm::dvec3& hi,
+                             double azimuth_deg, double elevation_deg) {
+  if (!std::isfinite(azimuth_deg))
+    return InvalidArgumentError("--view: the azimuth must be a finite number of degrees");
+  if (!(std::abs(elevation_deg) < 90))
+    return InvalidArgumentError("--view: the elevation must be within (-90, 90) degrees");
+  if (!Finite(lo) || !Finite(hi))
+    return InvalidArgumentError("--view: the volume's world box is not finite");
+  Camera c = base;
+  c.camera_to_world.reset();
+  // The axis to turn about: `up`; for a camera_to_world camera, the world
+  // axis nearest its own up (its y axis may be tilted).
+  glm::dvec3 u;
+  if (!json_fields::UnitVector(base.up, &u)) u = {0, 1, 0};
+  if (base.camera_to_world) {
+    int best = 0;
+    for (int a = 1; a < 3; ++a)
+      if (std::abs(u[a]) > std::abs(u[best])) best = a;
+    glm::dvec3 axis(0.0);
+    axis[best] = u[best] < 0 ? -1.0 : 1.0;
+    u = axis;
+  }
+  // The front: +Z, or -Y when up is (nearly) Z, made perpendicular to up.
+  const glm::dvec3 front0 = std::abs(u.z) < 0.9 ? glm::dvec3(0, 0, 1) : glm::dvec3(0, -1, 0);
+  const glm::dvec3 front = glm::normalize(front0 - glm::dot(front0, u) * u);
+  const glm::dvec3 side = glm::cross(u, front);
+  const double az = azimuth_deg * M_PI / 180.0, el = elevation_deg * M_PI / 180.0;
+  // w: from the box's centre towards the camera.
+  const glm::dvec3 w = glm::normalize(std::cos(el) * (std::cos(az) * front + std::sin(az) * side) +
+                                      std::sin(el) * u);
+  const glm::dvec3 centre = 0.5 * (lo + hi);
+  c.up = u;
+  c.look_at = centre;
+  c.position = centre + w;
+  VOX_RETURN_IF_ERROR(c.Finalize("--view"));  // the frame and screen extents at this direction
+  const glm::dvec3 r = c.right(), v = c.true_up();
+  const double margin = 0.98;  // the box's extreme corner 2% inside the frame
+  double size = 0;
+  for (int a = 0; a < 3; ++a) size = std::max(size, hi[a] - lo[a]);
+  if (!(size > 0)) size = 1.0;
+  double dist = 0, ahead = -std::numeric_limits<double>::infinity(), width = 0;
+  for (int k = 0; k < 8; ++k) {
+    const glm::dvec3 q =
+        glm::dvec3(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z) - centre;
+    const double x = std::abs(glm::dot(q, r)), y = std::abs(glm::dot(q, v)), z = glm::dot(q, w);
+    // Perspective: the corner fits where depth (dist - z) >= x / sx and y / sy.
+    dist = std::max(dist, std::max(x / (c.scale_x() * margin), y / (c.scale_y() * margin)) + z);
+    ahead = std::max(ahead, z);
+    width = std::max({width, 2 * x / margin, 2 * y * double(c.width) / double(c.height) / margin});
+  }
+  if (c.projection == Projection::kOrthographic) {
+    c.ortho_width = width > 0 ? width : size;
+    dist = ahead + size;  // in front of every corner
+  }
+  dist = std::max(dist, ahead + 1e-3 * size);
+  c.position = centre + dist * w;
+  VOX_RETURN_IF_ERROR(c.Finalize("--view"));
+  return c;
 }
 
 Status CheckCameraDistance(const Camera& cam, const glm::dvec3& lo, const glm::dvec3& hi) {

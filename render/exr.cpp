@@ -36,7 +36,8 @@ namespace {
 constexpr size_t kTimingsSlot = 1000;
 
 const char* const kChannelNames[kNumChannels] = {
-    "R", "G", "B", "A", "Z", "N.x", "N.y", "N.z", "voxel.i", "voxel.j", "voxel.k"};
+    "R",       "G",       "B",   "A",   "Z",   "N.X",     "N.Y",     "N.Z",
+    "voxel.i", "voxel.j", "voxel.k", "P.X", "P.Y", "P.Z", "distance"};
 
 Imf::Slice TileSlice(float* base, int stride) {
   return Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(base), sizeof(float),
@@ -460,7 +461,8 @@ struct PngFile {
 }  // namespace
 
 Status WritePngPreview(const std::string& exr_path, const std::string& png_path,
-                       OutputGroup* group, const std::string& exr_read_path) {
+                       const PreviewBackground& background, OutputGroup* group,
+                       const std::string& exr_read_path) {
   const std::string& read_path = exr_read_path.empty() ? exr_path : exr_read_path;
   VOX_RETURN_IF_ERROR(CheckExrHeaders(read_path));
   try {
@@ -471,7 +473,7 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path,
                                   ": a partial EXR has no preview; merge the parts first");
     const auto& dw = in.header().dataWindow();
     const int w = info.width, tile = int(in.tileYSize());
-    std::vector<float> band[3];
+    std::vector<float> band[4];  // R G B, and A to compose over `background`
     for (auto& b : band) b.assign(size_t(w) * tile, 0.0f);
     std::vector<uint8_t> row(size_t(w) * 3);
 
@@ -489,12 +491,13 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path,
     if (!out.info) return ResourceExhaustedError(png_path + ": libpng init failed");
     const Status png_failed = IoError(png_path + ": libpng write failed");
     if (!PngStart(out, w, info.height)) return png_failed;
-    const char* names[3] = {"R", "G", "B"};
+    const char* names[4] = {"R", "G", "B", "A"};
+    const int read_channels = background ? 4 : 3;
     for (int ty = 0; ty < in.numYTiles(); ++ty) {
       const int y0 = ty * tile;
       const int rows = std::min(tile, info.height - y0);
       Imf::FrameBuffer fb;
-      for (int c = 0; c < 3; ++c) {
+      for (int c = 0; c < read_channels; ++c) {
         char* base = reinterpret_cast<char*>(band[c].data()) -
                      (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y + y0) * ptrdiff_t(w)) *
                          ptrdiff_t(sizeof(float));
@@ -503,8 +506,14 @@ Status WritePngPreview(const std::string& exr_path, const std::string& png_path,
       in.setFrameBuffer(fb);
       in.readTiles(0, in.numXTiles() - 1, ty, ty);
       for (int y = 0; y < rows; ++y) {
-        for (int x = 0; x < w; ++x)
-          for (int c = 0; c < 3; ++c) row[size_t(x) * 3 + c] = ToSrgb8(band[c][size_t(y) * w + x]);
+        for (int x = 0; x < w; ++x) {
+          const size_t p = size_t(y) * w + x;
+          float bg[3] = {0.0f, 0.0f, 0.0f};
+          if (background) background(x, y0 + y, bg);
+          const float behind = background ? 1.0f - band[3][p] : 0.0f;
+          for (int c = 0; c < 3; ++c)
+            row[size_t(x) * 3 + c] = ToSrgb8(band[c][p] + behind * bg[c]);
+        }
         if (!PngWriteRow(out, row.data())) return png_failed;
       }
     }

@@ -1,17 +1,33 @@
 // OpenEXR output of vox-render: the tile buffers the renderer fills, a
 // tiled-EXR writer that takes tiles in any order as they finish (so memory
 // stays bounded by the tiles in flight, whatever the image size), reading
-// back (tests, vox-merge, previews) and the PNG preview.
+// back (tests, vox-merge, previews) and the PNG preview. docs/usage.md
+// describes the layout for users.
 //
-// Channels: R, G, B, A (1 where the pixel's ray hit, 0 on the background;
-// 1 - transmittance for fog), Z (world distance from the camera along the
-// ray to the first hit, +inf on the background), and on request N.x N.y N.z
-// (world-space unit normal) and voxel.i voxel.j voxel.k (OpenVDB index
-// coordinates of the hit voxel; exact up to 2^24). R, G, B and A are HALF
+// Channels (premultiplied alpha, as compositors expect):
+//   R, G, B  the colour premultiplied by A: a miss is 0, 0, 0; a fog pixel is
+//            the light it scatters towards the camera, without background.
+//            With the scene's "background_in_exr" (render/scene.h) the
+//            background is added, (1 - A) times it, as the PNG preview shows.
+//   A        coverage: 1 where the pixel's ray hit, 0 on a miss, the covered
+//            fraction of several samples, 1 - transmittance for fog.
+//   Z        planar camera depth of the first hit: the distance from the
+//            camera along the view axis (camera-space z), +inf on a miss.
+// and on request (ImageLayers):
+//   N.X N.Y N.Z      world-space unit normal of the hit (0 on a miss and fog);
+//   voxel.i .j .k    OpenVDB index coordinates of the hit voxel (exact up to
+//                    2^24); NaN on a miss and on fog pixels;
+//   P.X P.Y P.Z      world position of the first hit (0 on a miss);
+//   distance         world distance from the camera along the pixel's ray to
+//                    the first hit (what Z was before planar depth), +inf on
+//                    a miss.
+// R, G, B and A are HALF
 // unless ImageLayers::float_color asks for FLOAT (vox-render --float); the
 // others are always FLOAT. Tiles are compressed as the writer is told
 // (ExrCompression): vox-render's frames RLE, its parts none, vox-merge's
-// output ZIP at zlib's fastest level.
+// output ZIP at zlib's fastest level. A part of `--tiles I/N` holds only its
+// own tiles (the others are missing): it is an input of vox-merge, not an
+// image for other tools.
 // Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
 // vox:part ("I/N"), vox:tileOrder, vox:storeId (the store's store_id, hex),
 // plus renderTimeSeconds (float, as pbrt) and vox:timings (JSON), which are
@@ -39,6 +55,7 @@
 
 #include <OpenEXR/ImfForward.h>
 
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -62,6 +79,10 @@ enum ChannelId {
   kChVi,
   kChVj,
   kChVk,
+  kChPx,
+  kChPy,
+  kChPz,
+  kChDist,
   kNumChannels
 };
 const char* ChannelName(int c);
@@ -69,11 +90,19 @@ const char* ChannelName(int c);
 struct ImageLayers {
   bool normal = false;
   bool voxel = false;
+  bool position = false;     // P.X P.Y P.Z
+  bool distance = false;     // distance (along the ray)
   bool float_color = false;  // R G B A written as FLOAT; else HALF
   bool Has(int c) const {
     if (c >= kChNx && c <= kChNz) return normal;
-    if (c >= kChVi) return voxel;
+    if (c >= kChVi && c <= kChVk) return voxel;
+    if (c >= kChPx && c <= kChPz) return position;
+    if (c == kChDist) return distance;
     return true;
+  }
+  // The channels of layers besides R G B A Z.
+  int ExtraChannels() const {
+    return (normal ? 3 : 0) + (voxel ? 3 : 0) + (position ? 3 : 0) + (distance ? 1 : 0);
   }
 };
 
@@ -168,11 +197,18 @@ struct ExrImage {
 };
 StatusOr<ExrImage> ReadExr(const std::string& path);
 
+// The background behind pixel (x, y) (whole pixel coordinates from the
+// top-left), linear RGB, for composing a premultiplied image over it.
+using PreviewBackground = std::function<void(int x, int y, float rgb[3])>;
+
 // Writes an 8-bit sRGB PNG of the R, G, B channels of a complete tiled EXR,
-// one row of tiles at a time (bounded memory), atomically. Given a `group`,
-// the finished PNG is added to it instead of published, and the EXR is read
-// from `exr_read_path` (its temporary, not yet published) when not empty.
+// one row of tiles at a time (bounded memory), atomically. Given a
+// `background`, each pixel is composed over it: RGB + (1 - A) background.
+// Given a `group`, the finished PNG is added to it instead of published, and
+// the EXR is read from `exr_read_path` (its temporary, not yet published)
+// when not empty.
 Status WritePngPreview(const std::string& exr_path, const std::string& png_path,
+                       const PreviewBackground& background = nullptr,
                        OutputGroup* group = nullptr, const std::string& exr_read_path = "");
 
 }  // namespace vox

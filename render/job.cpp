@@ -84,7 +84,7 @@ void LodHint(const std::string& dir, Store& base, const Camera& cam, FILE* log) 
   double pixel;
   if (cam.projection == Projection::kPerspective)
     pixel = glm::length(nearest - cam.position) * 2.0 *
-            std::tan(cam.fov_deg * (3.14159265358979323846 / 360.0)) / cam.width;
+            std::tan(cam.HorizontalFovDeg() * (3.14159265358979323846 / 360.0)) / cam.width;
   else
     pixel = cam.ortho_width / cam.width;
   const double voxels = pixel / m.voxel_size;
@@ -105,7 +105,8 @@ Status CheckJobOptions(const RenderJobOptions& options) {
         "--preview needs the whole image; with --tiles, preview the vox-merge output");
   // Output paths are checked before any work: a bad one fails in a moment,
   // not after the render. The files are written atomically at the end.
-  for (const std::string* path : {&options.exr_path, &options.preview_path, &options.stats_path})
+  for (const std::string* path : {&options.exr_path, &options.preview_path, &options.stats_path,
+                                  &options.save_camera_path})
     if (!path->empty()) VOX_RETURN_IF_ERROR(CheckOutputPath(*path));
   if (!options.exr_path.empty()) VOX_RETURN_IF_ERROR(CheckExtension("-o", options.exr_path, ".exr"));
   if (!options.preview_path.empty())
@@ -117,7 +118,8 @@ Status CheckJobOptions(const RenderJobOptions& options) {
   inputs.push_back({"scene", options.scene_path});
   VOX_RETURN_IF_ERROR(CheckDistinctPaths(inputs, {{"-o", options.exr_path},
                                                   {"--preview", options.preview_path},
-                                                  {"--stats", options.stats_path}}));
+                                                  {"--stats", options.stats_path},
+                                                  {"--save-cam", options.save_camera_path}}));
   if (options.threads < 0)
     return InvalidArgumentError("threads " + std::to_string(options.threads) +
                                 ": must not be negative (0: all cores)");
@@ -169,20 +171,46 @@ Status CheckFrameSize(const RenderJobOptions& options, const Camera& camera) {
 }
 
 // The camera: --cam's file, the camera JSON text, or the default framing of
-// the volume's world box.
+// the volume's world box; then --size and --view, which override it.
 StatusOr<Camera> JobCamera(const RenderJobOptions& options, const StoreMeta& meta) {
   glm::dvec3 lo, hi;
   WorldBounds(meta, &lo, &hi);
-  if (options.camera_path.empty() && options.camera_json.empty())
-    return DefaultCamera(lo, hi, options.default_width, options.default_height);
-  if (options.camera_path.empty()) {
-    VOX_ASSIGN_OR_RETURN(Camera camera, ParseCamera(options.camera_json, "camera"));
-    VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext("camera"));
-    return camera;
+  Camera camera = DefaultCamera(lo, hi, options.default_width, options.default_height);
+  std::string source = "camera";
+  if (!options.camera_path.empty()) {
+    VOX_ASSIGN_OR_RETURN(camera, LoadCamera(options.camera_path));
+    source = options.camera_path;
+  } else if (!options.camera_json.empty()) {
+    VOX_ASSIGN_OR_RETURN(camera, ParseCamera(options.camera_json, "camera"));
   }
-  VOX_ASSIGN_OR_RETURN(Camera camera, LoadCamera(options.camera_path));
-  VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext(options.camera_path));
+  if (options.size_given) {
+    camera.width = options.default_width;
+    camera.height = options.default_height;
+    VOX_RETURN_IF_ERROR(camera.Finalize("--size"));
+  }
+  if (options.view) {
+    VOX_ASSIGN_OR_RETURN(camera,
+                         OrbitCamera(camera, lo, hi, options.view->first, options.view->second));
+  }
+  // A given camera may be anywhere; the default one and --view's are near.
+  const bool given = !options.camera_path.empty() || !options.camera_json.empty();
+  if (given && !options.view)
+    VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext(source));
   return camera;
+}
+
+// --stats "camera": the camera used, as cam.json, and where its parts came from.
+nlohmann::json CameraStatsJson(const RenderJobOptions& options, const Camera& camera) {
+  nlohmann::json j = nlohmann::json::parse(camera.ToJson());
+  const bool given = !options.camera_path.empty() || !options.camera_json.empty();
+  j["source"] = {
+      {"camera", !options.camera_path.empty() ? options.camera_path
+                 : given                     ? std::string("camera JSON")
+                                             : std::string("default")},
+      {"size", options.size_given ? "--size" : given ? "camera" : "default"},
+      {"view", options.view ? nlohmann::json{options.view->first, options.view->second}
+                            : nlohmann::json(nullptr)}};
+  return j;
 }
 
 StatusOr<Scene> JobScene(const RenderJobOptions& options) {
@@ -212,7 +240,7 @@ StatusOr<MemoryBudget> JobBudget(const RenderJobOptions& options, const RenderSt
   inputs.image_height = camera.height;
   inputs.tile_size = std::clamp(options.tile_size, kMinTileSize, kMaxTileSize);
   inputs.threads = threads;
-  inputs.channels = 5 + (options.layers.normal ? 3 : 0) + (options.layers.voxel ? 3 : 0);
+  inputs.channels = 5 + options.layers.ExtraChannels();
   inputs.cache_override = uint64_t(options.cache_mb) << 20;
   inputs.io_threads = io_threads;
   inputs.read_window_bytes = options.read_windows ? kMaxReadWindowBytes : 0;
@@ -311,6 +339,8 @@ void KeepImage(const Camera& camera, const ImageLayers& layers, RenderJobOutput*
   out->z.assign(pixels, std::numeric_limits<float>::infinity());
   out->normal.assign(layers.normal ? pixels * 3 : 0, 0.0f);
   out->voxel.assign(layers.voxel ? pixels * 3 : 0, 0.0f);
+  out->position.assign(layers.position ? pixels * 3 : 0, 0.0f);
+  out->distance.assign(layers.distance ? pixels : 0, std::numeric_limits<float>::infinity());
   // Tiles do not overlap: the render threads write disjoint pixels.
   frame->on_tile = [out, layers](const TileRect& r, const TileBuffer& b) -> Status {
     auto at = [&b](int c, int x, int y) { return b.ch[c][size_t(y) * size_t(b.size) + x]; };
@@ -321,6 +351,9 @@ void KeepImage(const Camera& camera, const ImageLayers& layers, RenderJobOutput*
         out->z[p] = at(kChZ, x, y);
         for (int c = 0; layers.normal && c < 3; ++c) out->normal[p * 3 + c] = at(kChNx + c, x, y);
         for (int c = 0; layers.voxel && c < 3; ++c) out->voxel[p * 3 + c] = at(kChVi + c, x, y);
+        for (int c = 0; layers.position && c < 3; ++c)
+          out->position[p * 3 + c] = at(kChPx + c, x, y);
+        if (layers.distance) out->distance[p] = at(kChDist, x, y);
       }
     return OkStatus();
   };
@@ -328,7 +361,8 @@ void KeepImage(const Camera& camera, const ImageLayers& layers, RenderJobOutput*
 
 // The --stats document: the frame's (StatsJson), the memory budget and the
 // level of detail in effect.
-std::string JobStatsJson(const Renderer& renderer, const FrameStats& stats,
+std::string JobStatsJson(const RenderJobOptions& options, const Renderer& renderer,
+                         const FrameStats& stats,
                          const RenderStores& stores, const std::vector<CacheStats>& lod_start,
                          const ProcessBudget& process, const MemoryBudget& budget,
                          int slot_bits, int io_threads,
@@ -344,7 +378,18 @@ std::string JobStatsJson(const Renderer& renderer, const FrameStats& stats,
                         {"setting", LodSetting(stores, renderer)}};
   if (renderer.lod() != nullptr) lod.update(LodStatsJson(renderer, stats, stores.levels, lod_start));
   json["lod"] = lod;
+  json["camera"] = CameraStatsJson(options, renderer.camera());
   return json.dump(2);
+}
+
+// The PNG preview's background: the scene's, behind a premultiplied EXR;
+// none when the EXR has it already (Scene::background_in_exr).
+PreviewBackground PreviewBackgroundOf(const Renderer& renderer) {
+  if (renderer.scene().background_in_exr) return nullptr;
+  return [&renderer](int x, int y, float rgb[3]) {
+    const glm::dvec3 bg = renderer.Background(renderer.camera().PixelRay(x + 0.5, y + 0.5).dir);
+    for (int c = 0; c < 3; ++c) rgb[c] = float(bg[c]);
+  };
 }
 
 void PrintSummary(const RenderJobOptions& options, const Renderer& renderer,
@@ -441,14 +486,15 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   const double frame_seconds = phase.Lap();
   if (!options.preview_path.empty()) {
     SetExrThreads(threads);  // the preview reads a row of tiles per call: decoded in parallel
-    VOX_RETURN_IF_ERROR(WritePngPreview(options.exr_path, options.preview_path, &outputs,
+    VOX_RETURN_IF_ERROR(WritePngPreview(options.exr_path, options.preview_path,
+                                        PreviewBackgroundOf(*renderer), &outputs,
                                         outputs.TempOf(options.exr_path)));
   }
   const double preview_seconds = phase.Lap();
   if (!options.stats_path.empty() || out != nullptr) {
     const std::string json = JobStatsJson(
-        *renderer, stats, stores, lod_start, process, budget, render_options.table_slot_bits,
-        io_threads,
+        options, *renderer, stats, stores, lod_start, process, budget,
+        render_options.table_slot_bits, io_threads,
         {{"open_seconds", open_seconds},
          {"setup_seconds", setup_seconds},
          {"frame_seconds", frame_seconds},
@@ -458,6 +504,8 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
     if (!options.stats_path.empty())
       VOX_RETURN_IF_ERROR(outputs.AddBytes(options.stats_path, json + "\n"));
   }
+  if (!options.save_camera_path.empty())
+    VOX_RETURN_IF_ERROR(outputs.AddBytes(options.save_camera_path, camera.ToJson() + "\n"));
   if (options.interrupted) VOX_RETURN_IF_ERROR(options.interrupted());
   VOX_RETURN_IF_ERROR(outputs.Commit());
   if (!options.quiet) PrintSummary(options, *renderer, stats);

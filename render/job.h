@@ -16,6 +16,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/status.h"
@@ -71,6 +72,14 @@ struct RenderJobOptions {
   std::optional<ExrCompression> compression;  // --compression; default: FrameOptions'
   bool quiet = false;
   int default_width = 1024, default_height = 1024;  // for the default camera
+  // --size WxH was given: default_width x default_height is the image size
+  // whatever the camera says (flags override the camera JSON).
+  bool size_given = false;
+  // --view AZIMUTH,ELEVATION in degrees: the camera (the default one, or
+  // --cam's projection, field of view, size and up) turned to look at the
+  // volume's world-box centre from there, framing the box (OrbitCamera).
+  std::optional<std::pair<double, double>> view;
+  std::string save_camera_path;  // --save-cam: the camera used, as cam.json; empty: none
   FILE* log = stderr;
   // Keep the image in RenderJobOutput; its bytes are charged to the memory
   // budget before the brick cache is sized.
@@ -86,11 +95,11 @@ struct RenderJobOptions {
 struct RenderJobOutput {
   std::string stats_json;  // the --stats document, written or not
   // With keep_image: the pixels, row-major from the top row, channels
-  // interleaved per layer (R G B A; Z; N.x N.y N.z; voxel.i voxel.j voxel.k),
-  // bit for bit the EXR's. Pixels of other parts (--tiles) stay
-  // 0 (Z: +inf).
+  // interleaved per layer (R G B A; Z; N.X N.Y N.Z; voxel.i voxel.j voxel.k;
+  // P.X P.Y P.Z; distance), bit for bit the EXR's. Pixels of other parts
+  // (--tiles) stay 0 (Z and distance: +inf).
   int width = 0, height = 0;
-  std::vector<float> rgba, z, normal, voxel;
+  std::vector<float> rgba, z, normal, voxel, position, distance;
 };
 
 // The stores a render reads: the base and, when level of detail is in

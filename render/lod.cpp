@@ -66,7 +66,8 @@ Cone PrimaryConeOf(const Camera& cam, double voxel_size) {
   const double vs = std::max(voxel_size, 1e-300);
   Cone c;
   if (cam.projection == Projection::kPerspective)
-    c.spread = 2.0 * std::tan(cam.fov_deg * (3.14159265358979323846 / 360.0)) / cam.width / vs;
+    c.spread =
+        2.0 * std::tan(cam.HorizontalFovDeg() * (3.14159265358979323846 / 360.0)) / cam.width / vs;
   else
     c.w0 = cam.ortho_width / cam.width / vs;
   return c;

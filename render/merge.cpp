@@ -167,8 +167,10 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
   ImageLayers layers;
   layers.float_color = ref.float_color;
   for (const std::string& c : ref.channels) {
-    if (c == "N.x") layers.normal = true;
-    if (c == "voxel.i") layers.voxel = true;
+    if (c == ChannelName(kChNx)) layers.normal = true;
+    if (c == ChannelName(kChVi)) layers.voxel = true;
+    if (c == ChannelName(kChPx)) layers.position = true;
+    if (c == ChannelName(kChDist)) layers.distance = true;
   }
   // The parts' vox:camera comes along, and with it the standard camera
   // attributes (render/exr.h), computed again from it.
@@ -207,7 +209,7 @@ Status MergeParts(const std::vector<std::string>& parts, const std::string& out_
   VOX_RETURN_IF_ERROR(writer->Finish(res.max_render_seconds, timings.dump(), &outputs));
   if (!preview_path.empty())
     VOX_RETURN_IF_ERROR(
-        WritePngPreview(out_path, preview_path, &outputs, outputs.TempOf(out_path)));
+        WritePngPreview(out_path, preview_path, nullptr, &outputs, outputs.TempOf(out_path)));
   VOX_RETURN_IF_ERROR(outputs.Commit());
   if (result) *result = res;
   return OkStatus();

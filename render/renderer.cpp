@@ -179,12 +179,14 @@ void Renderer::ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* out,
   if (fog_) {
     double T = 1.0, first_t = kInf;
     glm::dvec3 l = Fog(gr, cx, &T, &first_t, lod ? cone : nullptr);
-    out->color = l + T * Background(wr.dir);
+    // Premultiplied: the background only when the scene puts it in the EXR.
+    out->color = scene_.background_in_exr ? l + T * Background(wr.dir) : l;
     out->alpha = 1.0 - T;
     out->z = first_t;
     out->hit = first_t < kInf;
     out->normal = glm::dvec3(0.0);
     out->voxel = glm::i64vec3(0);
+    if (out->hit) SetHitGeometry(wr, out);
     return;
   }
   Hit h;
@@ -192,17 +194,24 @@ void Renderer::ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* out,
   int level = 0;
   if (!(lod ? FindHitLod(gr, *cone, /*skip_start_run=*/false, cx, &h, &level, SurfaceAttrs(&a))
             : FindHit(gr, /*skip_start_run=*/false, cx, &h, SurfaceAttrs(&a), start))) {
-    if (!cx.failed()) out->color = Background(wr.dir);
+    if (!cx.failed() && scene_.background_in_exr) out->color = Background(wr.dir);
     return;
   }
   out->hit = true;
   out->level = level;
   out->alpha = 1.0;
   out->z = h.t;
+  SetHitGeometry(wr, out);
   // A coarse cell's voxel layer names its first base voxel.
   out->voxel = (h.voxel << int64_t(level)) + volume_->meta().origin;
   const LodRay lr{*cone, level};
   out->color = ShadeSurface(gr, wr.dir, h, a, 0, cx, &out->normal, lod ? &lr : nullptr);
+}
+
+void Renderer::SetHitGeometry(const WorldRay& wr, Sample* s) const {
+  // The ray parameter is the world distance along the unit direction.
+  s->depth = s->z * glm::dot(wr.dir, camera_.forward());
+  s->position = wr.origin + s->z * wr.dir;
 }
 
 int Renderer::PrimaryStopLevel(const WorldRay& wr, const Cone& cone, TraceContext& cx,

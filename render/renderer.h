@@ -188,6 +188,13 @@ class Renderer {
   bool antialias() const { return lod_.has_value() && options_.silhouette_grid > 0 && !fog_; }
   int silhouette_grid() const { return antialias() ? options_.silhouette_grid : 0; }
   Cone PrimaryCone() const { return primary_cone_; }
+  // The scene's background seen along world direction `dir`: the sky's
+  // gradient along the camera's up vector (inline: every pixel of a block
+  // its beam shows empty costs just this).
+  glm::dvec3 Background(const glm::dvec3& dir) const {
+    const double u = 0.5 * (glm::dot(dir, camera_.true_up()) + 1.0);
+    return glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
+  }
   int n2() const { return tracer_.n2(); }
   std::string SplitString() const;
 
@@ -207,18 +214,14 @@ class Renderer {
       : volume_(volume), camera_(camera), scene_(scene), options_(o), tracer_(tracer), xf_(xf) {}
 
   // renderer.cpp: primary rays and the pixel loop.
-  // The sky's gradient along the camera's up vector (inline: every pixel of
-  // a block its beam shows empty costs just this).
-  glm::dvec3 Background(const glm::dvec3& dir) const {
-    const double u = 0.5 * (glm::dot(dir, camera_.true_up()) + 1.0);
-    return glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
-  }
   // Shades the primary ray `wr` (Camera::PixelRay of the sample's position).
   // `start`: the pixel's block's beam StartPlane (null: none); a block whose
   // beam meets nothing (s_min == +inf) is written by RenderTile without it.
   // `cone`: with LOD, the ray's cone (null: primary_cone_).
   void ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* s,
                   const StartPlane* start = nullptr, const Cone* cone = nullptr) const;
+  // The planar depth and world position of `s`'s hit (s->z) along `wr`.
+  void SetHitGeometry(const WorldRay& wr, Sample* s) const;
   // The LOD level of the first stop of the primary ray `wr` with `cone`
   // (-1: a miss), without shading; *t (optional) its ray parameter.
   int PrimaryStopLevel(const WorldRay& wr, const Cone& cone, TraceContext& cx,

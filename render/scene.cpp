@@ -94,8 +94,9 @@ Status ParseLight(const json& l, std::string_view file, const std::string& prefi
 StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
   VOX_ASSIGN_OR_RETURN(json j, jf::Parse(json_text, file));
   VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(j,
-                                         {"background", "ambient", "lights", "material",
-                                          "materials", "volume", "max_depth", "samples_per_pixel"},
+                                         {"background", "background_in_exr", "ambient", "lights",
+                                          "material", "materials", "volume", "max_depth",
+                                          "samples_per_pixel"},
                                          file, ""));
   Scene s;
   if (auto it = j.find("background"); it != j.end()) {
@@ -115,6 +116,8 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
       if (s.background_top[a] < 0 || s.background_bottom[a] < 0)
         return jf::FieldError(file, "background", "must not have negative components");
   }
+  VOX_RETURN_IF_ERROR(
+      jf::GetBool(j, "background_in_exr", file, "", &s.background_in_exr));
   VOX_RETURN_IF_ERROR(ReadColor(j, "ambient", file, "", &s.ambient));
   if (auto it = j.find("lights"); it != j.end()) {
     if (!it->is_array()) return jf::FieldError(file, "lights", "must be an array");
@@ -189,6 +192,7 @@ std::string Scene::ToJson() const {
   };
   json j;
   j["background"] = {{"top", v(background_top)}, {"bottom", v(background_bottom)}};
+  j["background_in_exr"] = background_in_exr;
   j["ambient"] = v(ambient);
   json lights_json = json::array();
   for (const Light& l : lights) {

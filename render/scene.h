@@ -4,6 +4,9 @@
 //   {
 //     "background": [r,g,b]  or  {"top":[r,g,b], "bottom":[r,g,b]},
 //                               (a gradient along the camera's up vector)
+//     "background_in_exr": false, true: the EXR's R G B include the background
+//                               ((1 - A) times it, as the PNG preview shows);
+//                               false (default): premultiplied, a miss is 0
 //     "ambient": [r,g,b],
 //     "lights": [ {"type":"directional", "direction":[x,y,z], ...},
 //                 {"type":"point", "position":[x,y,z], ...} ],
@@ -74,6 +77,9 @@ struct VolumeMedium {
 struct Scene {
   glm::dvec3 background_top{0.32, 0.38, 0.48};
   glm::dvec3 background_bottom{0.12, 0.12, 0.14};
+  // The EXR's colour includes the background (else premultiplied, without:
+  // render/exr.h); the PNG preview shows it either way.
+  bool background_in_exr = false;
   glm::dvec3 ambient{0.12};
   bool default_lights = true;  // no "lights" key: a key light set from the camera
   std::vector<Light> lights;

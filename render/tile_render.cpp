@@ -43,8 +43,8 @@ constexpr int8_t kUnknownLevel = -2, kNoPixel = -3;
 
 // A pixel's samples, summed; written divided by their count.
 struct Renderer::PixelValue {
-  glm::dvec3 color{0.0}, normal{0.0};
-  double alpha = 0.0, z = kInf;
+  glm::dvec3 color{0.0}, normal{0.0}, position{0.0};
+  double alpha = 0.0, z = kInf, depth = kInf;  // z: along the ray; depth: planar
   glm::i64vec3 voxel{0};
   bool any_hit = false;
   int level = kMissLevel;  // the largest LOD level of the samples' stops
@@ -55,6 +55,8 @@ struct Renderer::PixelValue {
     alpha += s.alpha;
     if (s.hit && s.z < z) {
       z = s.z;
+      depth = s.depth;
+      position = s.position;
       normal = s.normal;
       voxel = s.voxel;
     }
@@ -143,17 +145,28 @@ void Renderer::WritePixel(const PixelValue& v, int px, int py, TileBuffer* buf) 
   *buf->at(kChG, px, py) = float(v.color.g * v.weight);
   *buf->at(kChB, px, py) = float(v.color.b * v.weight);
   *buf->at(kChA, px, py) = float(v.alpha * v.weight);
-  *buf->at(kChZ, px, py) = v.z < kInf ? float(v.z) : inf;
+  const bool hit = v.z < kInf;
+  *buf->at(kChZ, px, py) = hit ? float(v.depth) : inf;
   if (options_.layers.normal) {
     *buf->at(kChNx, px, py) = float(v.normal.x);
     *buf->at(kChNy, px, py) = float(v.normal.y);
     *buf->at(kChNz, px, py) = float(v.normal.z);
   }
   if (options_.layers.voxel) {
-    *buf->at(kChVi, px, py) = v.any_hit ? float(v.voxel.x) : 0.0f;
-    *buf->at(kChVj, px, py) = v.any_hit ? float(v.voxel.y) : 0.0f;
-    *buf->at(kChVk, px, py) = v.any_hit ? float(v.voxel.z) : 0.0f;
+    // NaN where no voxel was hit (misses; fog names no single voxel), so a
+    // miss cannot be read as voxel (0, 0, 0).
+    const bool voxel = v.any_hit && !fog_;
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    *buf->at(kChVi, px, py) = voxel ? float(v.voxel.x) : nan;
+    *buf->at(kChVj, px, py) = voxel ? float(v.voxel.y) : nan;
+    *buf->at(kChVk, px, py) = voxel ? float(v.voxel.z) : nan;
   }
+  if (options_.layers.position) {
+    *buf->at(kChPx, px, py) = hit ? float(v.position.x) : 0.0f;
+    *buf->at(kChPy, px, py) = hit ? float(v.position.y) : 0.0f;
+    *buf->at(kChPz, px, py) = hit ? float(v.position.z) : 0.0f;
+  }
+  if (options_.layers.distance) *buf->at(kChDist, px, py) = hit ? float(v.z) : inf;
 }
 
 Status Renderer::ShadeTilePixel(int px, int py, TileRays& rays, TraceContext& cx,
@@ -165,7 +178,8 @@ Status Renderer::ShadeTilePixel(int px, int py, TileRays& rays, TraceContext& cx
     // The block's beam meets nothing (its corner rays are finite and near:
     // BeamStartPlane), so each sample is a miss, as its walk would find:
     // no walk, no per-sample set-up (ShadePixel is not called).
-    for (int k = 0; k < spp; ++k) value->color += Background(rays.At(px, py, k).dir);
+    if (scene_.background_in_exr)
+      for (int k = 0; k < spp; ++k) value->color += Background(rays.At(px, py, k).dir);
     cx.c->rays[kRayPrimary] += uint64_t(spp);
     cx.c->trace.rays += uint64_t(spp);
     return OkStatus();

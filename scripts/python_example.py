@@ -77,10 +77,10 @@ def main():
     srgb = np.where(rgba[..., :3] <= 0.0031308, 12.92 * rgba[..., :3],
                     1.055 * np.clip(rgba[..., :3], 0, None) ** (1 / 2.4) - 0.055)
     ax[0].imshow(np.clip(srgb, 0, 1))
-    ax[0].set_title("vox.render: RGB")
+    ax[0].set_title("vox.render: RGB (premultiplied, over black)")
     depth = np.where(np.isfinite(z), z, np.nan)
     im = ax[1].imshow(depth, cmap="viridis")
-    ax[1].set_title("Z (world distance)")
+    ax[1].set_title("Z (planar camera depth)")
     fig.colorbar(im, ax=ax[1])
     for a in ax:
         a.axis("off")

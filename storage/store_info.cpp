@@ -6,6 +6,8 @@
 #include <bit>
 #include <cinttypes>
 #include <cstdio>
+#include <glm/common.hpp>
+#include <limits>
 
 #include "storage/file.h"
 #include "storage/lod.h"
@@ -128,11 +130,26 @@ std::string FormatStoreInfo(const StoreInfo& i) {
   if (m.voxel_count) add("  bbox dimensions: %s\n", Vec(dim).c_str());
   add("  origin:          %s (VDB index of grid voxel 0,0,0)\n", Vec(m.origin).c_str());
   add("  voxel size:      %g\n", m.voxel_size);
-  add("  index to world:  [%g %g %g %g; %g %g %g %g; %g %g %g %g]\n", m.index_to_world[0][0],
-      m.index_to_world[1][0], m.index_to_world[2][0], m.index_to_world[3][0],
-      m.index_to_world[0][1], m.index_to_world[1][1], m.index_to_world[2][1],
-      m.index_to_world[3][1], m.index_to_world[0][2], m.index_to_world[1][2],
-      m.index_to_world[2][2], m.index_to_world[3][2]);
+  const glm::dmat4& x = m.index_to_world;
+  // As vdb_print (OpenVDB's Transform::print): the matrix acting on row
+  // vectors, a row a line, the translation in the last row.
+  add("  index to world:\n");
+  for (int r = 0; r < 4; ++r)
+    add("     [%.3g, %.3g, %.3g, %.3g]\n", x[r][0], x[r][1], x[r][2], x[r][3]);
+  if (m.voxel_count) {
+    // The occupied voxels' extent (each voxel index +-0.5) in world space.
+    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+    for (int c = 0; c < 8; ++c) {
+      const glm::dvec4 p((c & 1) ? m.bbox_max.x + 0.5 : m.bbox_min.x - 0.5,
+                         (c & 2) ? m.bbox_max.y + 0.5 : m.bbox_min.y - 0.5,
+                         (c & 4) ? m.bbox_max.z + 0.5 : m.bbox_min.z - 0.5, 1.0);
+      const glm::dvec3 w(x * p);
+      lo = glm::min(lo, w);
+      hi = glm::max(hi, w);
+    }
+    add("  world bbox:      (%.9g, %.9g, %.9g) -> (%.9g, %.9g, %.9g)\n", lo.x, lo.y, lo.z, hi.x,
+        hi.y, hi.z);
+  }
   add("  levels:          %d (grid 2^%d per axis), brick level %d: top %d + bricks %d\n",
       m.levels, m.levels, m.brick_level, m.brick_level, m.levels - m.brick_level);
   add("  voxels:          %" PRIu64 " occupied\n", m.voxel_count);

@@ -51,6 +51,8 @@ struct Renderer::Sample {
   // sample per ray cost 3% of a frame).
   glm::dvec3 normal;
   glm::i64vec3 voxel;
+  double depth;         // planar camera depth of the hit (z * the view axis' cosine)
+  glm::dvec3 position;  // world position of the hit
 };
 
 namespace render_internal {

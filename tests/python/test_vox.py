@@ -16,8 +16,9 @@ from conftest import cli_message, run, tool
 np = pytest.importorskip("numpy", reason="numpy (python3-numpy) is not installed")
 vox = pytest.importorskip("vox", reason="the vox module is not built (PYTHONPATH=build/python)")
 
-LAYERS = {"rgba": ["R", "G", "B", "A"], "z": ["Z"], "normal": ["N.x", "N.y", "N.z"],
-          "voxel": ["voxel.i", "voxel.j", "voxel.k"]}
+LAYERS = {"rgba": ["R", "G", "B", "A"], "z": ["Z"], "normal": ["N.X", "N.Y", "N.Z"],
+          "voxel": ["voxel.i", "voxel.j", "voxel.k"], "position": ["P.X", "P.Y", "P.Z"],
+          "distance": ["distance"]}
 
 
 def assert_same_bits(result, exr):
@@ -35,15 +36,15 @@ def assert_same_bits(result, exr):
 def test_render_equals_vox_render(store, files, workdir, camera):
     exr_path = workdir / ("cli_%s.exr" % camera)
     code, _, err = run([tool("render"), store, "--cam", files[camera + "_path"], "--scene",
-                        files["scene_path"], "-o", exr_path, "--layers", "normal,voxel",
+                        files["scene_path"], "-o", exr_path, "--layers", "normal,voxel,position,distance",
                         "--threads", "2", "--tile-size", "16", "--float", "--quiet"])
     assert code == 0, err
     exr = vox.read_exr(exr_path)
     # Paths, and the same camera and scene as dicts.
     by_path = vox.render(store, files[camera + "_path"], files["scene_path"],
-                         layers="normal,voxel", threads=2, tile_size=16)
+                         layers="normal,voxel,position,distance", threads=2, tile_size=16)
     by_dict = vox.render(vox.Store(store), files[camera], files["scene"],
-                         layers=["normal", "voxel"], threads=1)
+                         layers=["normal", "voxel", "position", "distance"], threads=1)
     assert by_path["rgba"].shape == (exr["height"], exr["width"], 4)
     assert by_path["rgba"].dtype == np.float32
     assert_same_bits(by_path, exr)
@@ -70,6 +71,12 @@ def test_render_stats_and_options(store, files, workdir):
     # Without a camera, the default camera at --size.
     d = vox.render(store, size=(40, 30))
     assert d["rgba"].shape == (30, 40, 4)
+    # size= overrides the camera's, as --size does, and the stats say so.
+    e = vox.render(store, files["camera"], size=(40, 30), view=(30, 20))
+    assert e["rgba"].shape == (30, 40, 4)
+    assert e["stats"]["camera"]["width"] == 40
+    assert e["stats"]["camera"]["source"]["size"] == "--size"
+    assert e["stats"]["camera"]["source"]["view"] == [30.0, 20.0]
 
 
 def test_store_info_is_vox_info(store):

@@ -229,8 +229,10 @@ TEST_F(CliTest, FogStoreTransmittanceIsExponential) {
       }
       double len = t1 > t0 ? t1 - t0 : 0;
       inside += len > 0;
-      ASSERT_NEAR(img->pixels["R"][size_t(j) * 40 + i], std::exp(-0.4 * 0.6 * len), 1e-3)
+      // Premultiplied, without the background: no scattering, so no colour.
+      ASSERT_NEAR(img->pixels["A"][size_t(j) * 40 + i], 1 - std::exp(-0.4 * 0.6 * len), 1e-3)
           << i << "," << j;
+      ASSERT_EQ(img->pixels["R"][size_t(j) * 40 + i], 0.0f) << i << "," << j;
     }
   EXPECT_GT(inside, 200);
   std::ifstream in(Path("fog.json"));

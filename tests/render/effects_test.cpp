@@ -100,9 +100,10 @@ TEST(EffectsTest, PrimaryVisibilityMatchesTheBoxExactly) {
         EXPECT_NEAR(r.img.at("Z", i, j), 6.0, 1e-9);  // camera plane z=30, box top z=24
       } else {
         EXPECT_TRUE(std::isinf(r.img.at("Z", i, j)));
-        EXPECT_EQ(r.img.at("R", i, j), 0.2f);
-        EXPECT_EQ(r.img.at("G", i, j), 0.3f);
-        EXPECT_EQ(r.img.at("B", i, j), 0.4f);
+        // Premultiplied: a miss is 0, 0, 0, 0 (the background is the preview's).
+        EXPECT_EQ(r.img.at("R", i, j), 0.0f);
+        EXPECT_EQ(r.img.at("G", i, j), 0.0f);
+        EXPECT_EQ(r.img.at("B", i, j), 0.0f);
       }
     }
   EXPECT_EQ(r.counters.hit_pixels, 256u);
@@ -290,7 +291,7 @@ TEST(EffectsTest, GlassSphereInvertsTheBackground) {
   Camera cam = Persp({16, 16, 120}, {16, 16, 16}, 16, 64, 64);
   Rendered r = Render(vol.get(), cam,
                       ParseOrDie(R"({"lights":[], "background":{"top":[1,0,0],"bottom":[0,0,1]},
-                                     "material":{"transmit":1,"diffuse":0,"specular":0,"ior":1.5}})"));
+                                     "background_in_exr":true, "material":{"transmit":1,"diffuse":0,"specular":0,"ior":1.5}})"));
   EXPECT_TRUE(r.passes.refraction);
   EXPECT_FALSE(r.passes.reflection);
   EXPECT_GT(r.counters.rays[kRayRefraction], 0u);
@@ -336,7 +337,8 @@ TEST(EffectsTest, FogCubeTransmittanceIsExponential) {
   Rendered r = Render(
       vol.get(), cam,
       ParseOrDie(
-          R"({"lights":[], "background":[1,1,1], "volume":{"absorption":0.3,"scattering":0}})"));
+          R"({"lights":[], "background":[1,1,1], "background_in_exr":true,
+              "volume":{"absorption":0.3,"scattering":0}})"));
   EXPECT_TRUE(r.passes.volume);
   EXPECT_FALSE(r.passes.shading);
   EXPECT_FALSE(r.passes.scattering);
@@ -407,8 +409,10 @@ TEST(EffectsTest, NormalAndVoxelLayers) {
   EXPECT_EQ(r.img.at("voxel.i", 10, 12), 10.0f);
   EXPECT_EQ(r.img.at("voxel.j", 10, 12), 19.0f);
   EXPECT_EQ(r.img.at("voxel.k", 10, 12), 23.0f);
-  EXPECT_NEAR(r.img.at("N.z", 12, 12), 1.0f, 1e-6);
-  EXPECT_EQ(r.img.at("N.x", 0, 0), 0.0f);
+  EXPECT_NEAR(r.img.at("N.Z", 12, 12), 1.0f, 1e-6);
+  EXPECT_EQ(r.img.at("N.X", 0, 0), 0.0f);
+  // A miss names no voxel.
+  EXPECT_TRUE(std::isnan(r.img.at("voxel.i", 0, 0)));
 }
 
 TEST(EffectsTest, SamplesPerPixelGiveFractionalCoverage) {

@@ -135,7 +135,8 @@ class ExrCameraTest : public ::testing::Test {
         if (!(e.a[size_t(j) * e.width + i] > 0) || !std::isfinite(z)) continue;
         glm::dvec3 o, d;
         cam.Ray(i + 0.5, j + 0.5, &o, &d);
-        const glm::dvec3 p = o + double(z) * d;
+        // Z is planar depth: the ray reaches it at z / cos(angle to the view axis).
+        const glm::dvec3 p = o + double(z) / glm::dot(d, glm::normalize(cam.look - cam.pos)) * d;
         const Imath::M44f& m = e.world_to_ndc;
         double v[4];
         for (int c = 0; c < 4; ++c) v[c] = p.x * m[0][c] + p.y * m[1][c] + p.z * m[2][c] + m[3][c];

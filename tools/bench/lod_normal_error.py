@@ -29,8 +29,8 @@ def main():
     a = ap.parse_args()
     img = vox.read_exr(a.exr)
     ch, w, h = img["channels"], img["width"], img["height"]
-    if not all(k in ch for k in ("N.x", "N.y", "N.z", "A")):
-        sys.exit(f"{a.exr}: needs channels A and N.x, N.y, N.z (vox-render --layers normal --float)")
+    if not all(k in ch for k in ("N.X", "N.Y", "N.Z", "A")):
+        sys.exit(f"{a.exr}: needs channels A and N.X, N.Y, N.Z (vox-render --layers normal --float)")
     cam = json.load(open(a.cam))
     if cam.get("projection", "perspective") != "perspective":
         sys.exit(f"{a.cam}: only perspective cameras")
@@ -55,7 +55,7 @@ def main():
     disc = b * b - (oc @ oc - r * r)
     t = -b - np.sqrt(np.maximum(disc, 0))
     exact = (pos + t[..., None] * d - centre) / r
-    n = np.stack([np.asarray(ch[k]).reshape(h, w) for k in ("N.x", "N.y", "N.z")], -1)
+    n = np.stack([np.asarray(ch[k]).reshape(h, w) for k in ("N.X", "N.Y", "N.Z")], -1)
     alpha = np.asarray(ch["A"]).reshape(h, w)
     mask = (disc > 0) & (alpha > 0) & (np.linalg.norm(n, axis=-1) > 0.5)
     ang = np.degrees(np.arccos(np.clip((n * exact).sum(-1), -1, 1)))

@@ -89,7 +89,8 @@ FlagArity RenderFlagArity(std::string_view flag) {
     return FlagArity::kSwitch;
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
-                   "--io-threads", "--lod", "--silhouette-aa", "--compression"}))
+                   "--io-threads", "--lod", "--silhouette-aa", "--compression", "--view",
+                   "--save-cam"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -158,14 +159,30 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
         o->layers.normal = true;
       else if (item == "voxel")
         o->layers.voxel = true;
+      else if (item == "position")
+        o->layers.position = true;
+      else if (item == "distance")
+        o->layers.distance = true;
       else
-        return InvalidArgumentError("--layers: unknown layer '" + item + "' (normal, voxel)");
+        return InvalidArgumentError("--layers: unknown layer '" + item +
+                                    "' (normal, voxel, position, distance)");
     }
   } else if (a == "--size") {
     const size_t x = v.find('x');
     if (x == std::string::npos || !ParseInt(v.substr(0, x), 1, kMaxImageSide, &o->default_width) ||
         !ParseInt(v.substr(x + 1), 1, kMaxImageSide, &o->default_height))
       return InvalidArgumentError("--size '" + v + "': expected WxH");
+    o->size_given = true;
+  } else if (a == "--view") {
+    const size_t comma = v.find(',');
+    double az = 0, el = 0;
+    if (comma == std::string::npos || !ParseDouble(v.substr(0, comma), &az) ||
+        !ParseDouble(v.substr(comma + 1), &el) || !(std::abs(el) < 90))
+      return InvalidArgumentError("--view '" + v +
+                                  "': expected AZIMUTH,ELEVATION in degrees, elevation in (-90, 90)");
+    o->view = std::make_pair(az, el);
+  } else if (a == "--save-cam") {
+    o->save_camera_path = v;
   } else {
     return InvalidArgumentError("unknown flag " + a);
   }

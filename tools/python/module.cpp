@@ -106,10 +106,11 @@ KwFlag ToFlag(const std::string& key, const py::handle& v) {
     std::string s;
     for (const py::handle& item : v) s += (s.empty() ? "" : ",") + py::str(item).cast<std::string>();
     f.value = s;
-  } else if ((key == "size" || key == "tiles") && py::isinstance<py::tuple>(v) && py::len(v) == 2) {
+  } else if ((key == "size" || key == "tiles" || key == "view") && py::isinstance<py::tuple>(v) &&
+             py::len(v) == 2) {
     const py::tuple t = v.cast<py::tuple>();
-    f.value = py::str(t[0]).cast<std::string>() + (key == "size" ? "x" : "/") +
-              py::str(t[1]).cast<std::string>();
+    f.value = py::str(t[0]).cast<std::string>() +
+              (key == "size" ? "x" : key == "view" ? "," : "/") + py::str(t[1]).cast<std::string>();
   } else if (py::hasattr(v, "__fspath__")) {
     f.value = PathOf(v);
   } else {
@@ -449,6 +450,8 @@ py::dict Render(const py::object& store, const py::object& camera, const py::obj
   d["z"] = Owned(std::move(out.z), {h, w});
   if (o.layers.normal) d["normal"] = Owned(std::move(out.normal), {h, w, 3});
   if (o.layers.voxel) d["voxel"] = Owned(std::move(out.voxel), {h, w, 3});
+  if (o.layers.position) d["position"] = Owned(std::move(out.position), {h, w, 3});
+  if (o.layers.distance) d["distance"] = Owned(std::move(out.distance), {h, w});
   d["stats"] = JsonToPython(out.stats_json);
   return d;
 }
@@ -550,9 +553,10 @@ PYBIND11_MODULE(vox, m) {
         py::arg("scene") = py::none(),
         "Renders a store as vox-render. camera and scene are dicts in the cam.json and "
         "scene.json schema, or paths; options are vox-render's flags (split, single_step, "
-        "memory_mb, cache_mb, threads, tile_size, tiles, layers, size, prefetch, o, preview, "
-        "stats, quiet). Returns {'rgba': (H, W, 4) float32, 'z': (H, W), 'normal' and 'voxel': "
-        "(H, W, 3) when layers asks for them, 'stats': the --stats document}.");
+        "memory_mb, cache_mb, threads, tile_size, tiles, layers, size, view, save_cam, prefetch, "
+        "o, preview, stats, quiet); size=(W, H) overrides the camera's. Returns {'rgba': (H, W, 4) float32 (premultiplied), 'z': (H, W) planar "
+        "depth, 'normal', 'voxel' and 'position': (H, W, 3) and 'distance': (H, W) when layers "
+        "asks for them, 'stats': the --stats document}; docs/usage.md has the layout.");
   m.def("probe", &Probe, py::arg("store"), py::arg("rays"),
         "First hits of index-space rays, as vox-probe: rays is (N, 6) (ox oy oz dx dy dz). "
         "store is a store path, or None with generate='sphere:64'; options are vox-probe's "
