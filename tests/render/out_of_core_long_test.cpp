@@ -110,7 +110,7 @@ class OutOfCoreLong : public ::testing::Test {
     std::ofstream(dir_ + "/cam.json")
         << R"({"position":[0,0,3],"look_at":[0,0,0],"up":[0,1,0],"fov_deg":40,)"
            R"("width":1024,"height":1024,"projection":"perspective"})";
-    std::ofstream(dir_ + "/closeup.json")
+    std::ofstream(dir_ + "/cam_closeup.json")
         << R"({"position":[0,0,1.05],"look_at":[0,0,0.9],"up":[0,1,0],"fov_deg":20,)"
            R"("width":1024,"height":1024,"projection":"perspective"})";
     std::ofstream(dir_ + "/scene.json")
@@ -245,7 +245,7 @@ TEST_F(OutOfCoreLong, StoreLargerThanRamRendersIn1GiB) {
   // The close-up: covered, and bit for bit the exact frame (--lod 0).
   for (const char* mode : {"closeup", "closeup_exact"}) {
     double secs = 0;
-    auto run = Render(store, mode, limit, &secs, "closeup.json",
+    auto run = Render(store, mode, limit, &secs, "cam_closeup.json",
                       std::string(mode) == "closeup" ? std::vector<std::string>{}
                                                      : std::vector<std::string>{"--lod", "0"});
     ASSERT_TRUE(run.ok()) << run.status().ToString();
