@@ -1,6 +1,7 @@
 #include "render/internal/exr_header.h"
 
 #include <OpenEXR/OpenEXRConfig.h>
+#include <sys/stat.h>
 
 #include <cerrno>
 #include <cstdint>
@@ -242,6 +243,14 @@ Status CheckHeader(Reader& r, const std::string& path, const std::string& part,
 }  // namespace
 
 Status CheckExrHeaders(const std::string& path) {
+  // Opening a FIFO would wait for a writer: only regular files are read.
+  struct stat st;
+  if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+    return InvalidArgumentError(path + ": not a regular file (" +
+                                (S_ISFIFO(st.st_mode)  ? "a FIFO"
+                                 : S_ISDIR(st.st_mode) ? "a directory"
+                                                       : "a device or socket") +
+                                "): EXRs are read from regular files");
   std::ifstream f(path, std::ios::binary);
   if (!f) return IoError(path + ": cannot open: " + std::strerror(errno));
   f.seekg(0, std::ios::end);

@@ -197,6 +197,19 @@ TEST_F(UserPathsTest, AFifoInPlaceOfAStoreFileIsRefusedNotWaitedOn) {
   }
 }
 
+TEST_F(UserPathsTest, AFifoGivenAsAMergePartIsRefusedNotWaitedOn) {
+  ASSERT_EQ(RunCommand(Render("-o " + Path("q1.exr") + " --tiles 1/2")).code, 0);
+  ASSERT_EQ(mkfifo(Path("q2.exr").c_str(), 0644), 0);
+  const auto t0 = std::chrono::steady_clock::now();
+  const testing::CommandResult r = RunCommand("timeout 30 " + std::string(VOX_MERGE_BIN) + " " +
+                                              Path("q1.exr") + " " + Path("q2.exr") + " -o " +
+                                              Path("q.exr"));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_TRUE(Has(r.output, "a FIFO") && Has(r.output, "q2.exr")) << r.output;
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(20));
+  EXPECT_FALSE(fs::exists(Path("q.exr")));
+}
+
 TEST_F(UserPathsTest, HugeFramesNeedAllowHugeAndOversizedCamerasAreRefused) {
   testing::CommandResult r = RunCommand(
       std::string(VOX_RENDER_BIN) + " " + Path("store") + " --size 100000x100000 -o " +
