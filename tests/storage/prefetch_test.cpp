@@ -29,14 +29,7 @@ bool Contains(const std::string& s, const std::string& part) {
   return s.find(part) != std::string::npos;
 }
 
-// The decoded contents of a brick as bytes: cells, then attribute planes.
-std::string BrickBytes(const BrickView& v) {
-  const auto* b = static_cast<const DecodedBrick*>(v.data);
-  std::string out(reinterpret_cast<const char*>(v.cells), v.num_cells * sizeof(CompactCell));
-  out.append(reinterpret_cast<const char*>(b->attr_planes.data()), b->attr_planes.size());
-  out.append(reinterpret_cast<const char*>(&b->voxel_count), sizeof(b->voxel_count));
-  return out;
-}
+using storage_test::BrickBytes;
 
 // Waits until the prefetcher has settled `n` requests (cached, failed or dropped).
 void WaitForPrefetch(const Store& s, uint64_t n) {

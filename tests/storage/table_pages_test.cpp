@@ -26,12 +26,7 @@ bool Contains(const std::string& s, const std::string& part) {
   return s.find(part) != std::string::npos;
 }
 
-std::string BrickBytes(const BrickView& v) {
-  const auto* b = static_cast<const DecodedBrick*>(v.data);
-  std::string out(reinterpret_cast<const char*>(v.cells), v.num_cells * sizeof(CompactCell));
-  out.append(reinterpret_cast<const char*>(b->attr_planes.data()), b->attr_planes.size());
-  return out;
-}
+using storage_test::BrickBytes;
 
 OpenOptions Paged() {
   OpenOptions o;

@@ -17,6 +17,7 @@
 #include <string>
 
 #include "core/shapes.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/store.h"
 #include "storage/store_writer.h"
 
@@ -74,6 +75,15 @@ inline StoreMeta MetaFor(int levels, int brick_level, GridClass gc, bool color) 
   m.threshold = 0.01;
   m.build_options = "--test";
   return m;
+}
+
+// The decoded contents of a brick as bytes: cells, attribute planes, voxel count.
+inline std::string BrickBytes(const BrickView& v) {
+  const auto* b = static_cast<const storage_internal::DecodedBrick*>(v.data);
+  std::string out(reinterpret_cast<const char*>(v.cells), v.num_cells * sizeof(CompactCell));
+  out.append(reinterpret_cast<const char*>(b->attr_planes.data()), b->attr_planes.size());
+  out.append(reinterpret_cast<const char*>(&b->voxel_count), sizeof(b->voxel_count));
+  return out;
 }
 
 // Interleaves the bits of a brick coordinate (z highest): brick id order.
