@@ -15,6 +15,8 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <thread>
 #include <vector>
@@ -86,6 +88,40 @@ TEST_F(IngestSignalTest, TermAndIntRemoveTheTemporaryStore) {
     EXPECT_TRUE(Temporaries(dir_.path(), "store").empty());
     EXPECT_FALSE(fs::exists(out));
   }
+}
+
+// The ingest runs in vox-ingest re-executed, not in a bare fork of it: the
+// parent has library threads (log4cplus starts a pool when OpenVDB loads it),
+// and a forked copy inherited a lock one of them held and hung, in CI under
+// ASan. An exec'd worker has the tool's binary and VOX_INGEST_WORKER_FD in its
+// own environment (/proc/PID/environ is the environment given to exec; a
+// forked copy shows its parent's).
+TEST_F(IngestSignalTest, TheIngestRunsInAReExecutedWorker) {
+  const std::string out = dir_.File("store");
+  pid_t pid = StartStalled(out);
+  ASSERT_GT(pid, 0);
+  const std::vector<std::string> tmp = Temporaries(dir_.path(), "store");
+  ASSERT_EQ(tmp.size(), 1u) << "the ingest never started";
+  // .store.tmp-PID-SUFFIX: the worker's pid.
+  const std::string rest = tmp[0].substr(std::string(".store.tmp-").size());
+  const pid_t worker = pid_t(std::stol(rest.substr(0, rest.find('-'))));
+  EXPECT_NE(worker, pid);
+  const std::string proc = "/proc/" + std::to_string(worker);
+  EXPECT_EQ(fs::canonical(proc + "/exe"), fs::canonical(VOX_INGEST_BINARY));
+  std::ifstream env_file(proc + "/environ", std::ios::binary);
+  const std::string env((std::istreambuf_iterator<char>(env_file)),
+                        std::istreambuf_iterator<char>());
+  EXPECT_NE(env.find("VOX_INGEST_WORKER_FD="), std::string::npos);
+  std::ifstream parent_file("/proc/" + std::to_string(pid) + "/environ", std::ios::binary);
+  const std::string parent_env((std::istreambuf_iterator<char>(parent_file)),
+                               std::istreambuf_iterator<char>());
+  EXPECT_EQ(parent_env.find("VOX_INGEST_WORKER_FD="), std::string::npos);
+  ASSERT_EQ(kill(pid, SIGTERM), 0);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status)) << "killed by signal " << WTERMSIG(status);
+  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGTERM);
+  EXPECT_TRUE(Temporaries(dir_.path(), "store").empty());
 }
 
 TEST_F(IngestSignalTest, ALaterRunRemovesTheTemporaryOfAKilledOne) {

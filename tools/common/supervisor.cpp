@@ -12,7 +12,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include "tools/common/signals.h"
 
@@ -60,11 +62,11 @@ extern "C" void ForwardToChild(int sig) {
   if (g_child > 0) kill(pid_t(g_child), sig);
 }
 
-// Runs `work` in the child; tells the parent it returned (one byte on
-// `done_fd`) before exiting with its code.
-[[noreturn]] void RunChild(pid_t parent, int done_fd, const std::function<int()>& work) {
-  prctl(PR_SET_PDEATHSIG, SIGKILL);
-  if (getppid() != parent) _exit(128 + SIGKILL);  // the parent died before prctl
+constexpr char kWorkerEnv[] = "VOX_INGEST_WORKER_FD";
+
+// The worker (the re-executed tool): runs `work` and tells the parent it
+// returned (one byte on `done_fd`) before exiting with its code.
+[[noreturn]] void RunWorker(int done_fd, const std::function<int()>& work) {
   const int code = work();
   std::fflush(nullptr);
   const char done = 1;
@@ -72,6 +74,22 @@ extern "C" void ForwardToChild(int sig) {
   }
   _exit(code);
 }
+
+// The environment of the worker: this process's, with kWorkerEnv=done_fd.
+// Built before fork: between fork and exec only async-signal-safe calls are
+// made (the parent has threads: OpenVDB's logging library starts a pool when
+// it is loaded, and a plain fork could inherit a lock one of them held).
+struct WorkerEnv {
+  std::vector<std::string> strings;
+  std::vector<char*> pointers;
+  explicit WorkerEnv(int done_fd) {
+    for (char** e = environ; *e; ++e)
+      if (std::strncmp(*e, kWorkerEnv, sizeof kWorkerEnv - 1) != 0) strings.emplace_back(*e);
+    strings.push_back(std::string(kWorkerEnv) + "=" + std::to_string(done_fd));
+    for (std::string& s : strings) pointers.push_back(s.data());
+    pointers.push_back(nullptr);
+  }
+};
 
 // How the child ended, as the parent reports it and the tool's exit code.
 int ReportChild(const std::string& input, const std::string& output, pid_t child, int status,
@@ -105,29 +123,53 @@ int ReportChild(const std::string& input, const std::string& output, pid_t child
 
 }  // namespace
 
-int RunSupervised(const std::string& input, const std::string& output,
+int RunSupervised(char** argv, const std::string& input, const std::string& output,
                   const std::function<int()>& work) {
+  if (const char* fd = std::getenv(kWorkerEnv)) {  // this is the worker
+    const int done_fd = std::atoi(fd);
+    unsetenv(kWorkerEnv);
+    RunWorker(done_fd, work);
+  }
   std::fflush(nullptr);
-  int done[2];
+  // done: the worker's "work returned" byte. exec_failed: closed by a
+  // successful exec (O_CLOEXEC), else carries the exec's errno.
+  int done[2], exec_failed[2];
   if (pipe2(done, O_CLOEXEC) != 0) return work();  // cannot watch a child: run unprotected
-  const pid_t parent = getpid();
-  const pid_t child = fork();
-  if (child < 0) {  // cannot fork: run unprotected
+  if (pipe2(exec_failed, O_CLOEXEC) != 0) {
     close(done[0]);
     close(done[1]);
     return work();
   }
-  if (child == 0) {
-    close(done[0]);
-    RunChild(parent, done[1], work);
+  WorkerEnv env(done[1]);
+  const pid_t parent = getpid();
+  const pid_t child = fork();
+  if (child < 0) {  // cannot fork: run unprotected
+    for (int fd : {done[0], done[1], exec_failed[0], exec_failed[1]}) close(fd);
+    return work();
+  }
+  if (child == 0) {  // async-signal-safe calls only, up to the exec
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(128 + SIGKILL);  // the parent died before prctl
+    fcntl(done[1], F_SETFD, 0);                     // the worker inherits it
+    execve("/proc/self/exe", argv, env.pointers.data());
+    const int err = errno;
+    while (write(exec_failed[1], &err, sizeof err) < 0 && errno == EINTR) {
+    }
+    _exit(127);
   }
   close(done[1]);
+  close(exec_failed[1]);
   g_child = child;
   struct sigaction sa;
   std::memset(&sa, 0, sizeof sa);
   sa.sa_handler = ForwardToChild;
   sigemptyset(&sa.sa_mask);
   for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
+  int exec_errno = 0;
+  ssize_t n;
+  while ((n = read(exec_failed[0], &exec_errno, sizeof exec_errno)) < 0 && errno == EINTR) {
+  }
+  close(exec_failed[0]);
   int status = 0;
   while (waitpid(child, &status, 0) < 0) {
     if (errno != EINTR) {
@@ -136,8 +178,16 @@ int RunSupervised(const std::string& input, const std::string& output,
       return 1;
     }
   }
+  if (n == sizeof exec_errno) {  // the worker never started: nothing of it to clean
+    close(done[0]);
+    std::fprintf(stderr,
+                 "vox-ingest: cannot start the ingest child process (/proc/self/exe): %s; "
+                 "running the ingest unprotected\n",
+                 std::strerror(exec_errno));
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, SIG_DFL);
+    return work();
+  }
   char byte = 0;
-  ssize_t n;
   while ((n = read(done[0], &byte, 1)) < 0 && errno == EINTR) {
   }
   close(done[0]);

@@ -1,4 +1,7 @@
-// The fork supervisor of vox-ingest: the ingest runs in a forked child, so
+// The supervisor of vox-ingest: the ingest runs in a child process (the tool
+// re-executed with the same arguments, not a bare fork: the parent already
+// has library threads, and a forked copy could inherit a lock one of them
+// held and hang; it did, under ASan), so
 // that a crash while reading a .vdb (OpenVDB's reader can crash on a corrupt
 // file; a file truncated while it is read raises SIGBUS) or a sanitizer's
 // exit ends with a message and a clean directory, not a dead tool and a
@@ -22,7 +25,11 @@
 
 namespace vox {
 
-// Runs `work` in a forked child and returns its exit code. A child that
+// Runs `work` in a child process and returns its exit code: re-executes
+// this program (/proc/self/exe) with `argv` and the environment variable
+// VOX_INGEST_WORKER_FD, and the call in that child (the worker) runs `work`
+// and exits. So everything before the call must do the same in both
+// processes: parse `argv`, no output. A child that
 // ends otherwise than by returning from `work` has its temporary store
 // (`.NAME.tmp-PID-*` beside `output`, storage/file.h) removed and is
 // reported as a crash of the child process, naming `input`:
@@ -32,8 +39,9 @@ namespace vox {
 //   - exited without finishing `work` (a sanitizer report, an exit() in a
 //     library): a crash with its exit code, exit 1.
 // Errors `work` reports itself (OpenVDB's exceptions on a corrupt file
-// become a Status) are its own messages. Without fork, `work` runs here.
-int RunSupervised(const std::string& input, const std::string& output,
+// become a Status) are its own messages. Without fork or exec, `work` runs
+// here.
+int RunSupervised(char** argv, const std::string& input, const std::string& output,
                   const std::function<int()>& work);
 
 // In the child: blocks SIGINT and SIGTERM in every thread created later and

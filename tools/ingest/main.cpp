@@ -7,7 +7,7 @@
 // 2 bad command line, 128+N killed by signal N (SIGINT, SIGTERM, SIGKILL: the
 // temporary store directory is removed).
 //
-// The ingest runs in a forked child under tools/common/supervisor.h, which
+// The ingest runs in a child process (vox-ingest re-executed) under tools/common/supervisor.h, which
 // reports a crash of the child (a signal, a sanitizer's exit) as a crash,
 // naming the file and the signal, and removes the child's temporary store.
 #include <unistd.h>
@@ -125,7 +125,7 @@ static int RunTool(int argc, char** argv) {
   o.output = positional[1];
   if (vox::Status s = vox::CheckIngestCommand(command); !s.ok()) return UsageError(s.message());
 
-  return vox::RunSupervised(o.input, o.output,
+  return vox::RunSupervised(argv, o.input, o.output,
                             [&] { return IngestAndReport(o, command.limits, quiet); });
 }
 
