@@ -7,6 +7,7 @@ import math
 import os
 import re
 import shutil
+import signal
 import threading
 
 import pytest
@@ -360,6 +361,31 @@ def test_a_raising_progress_callback_keeps_the_old_store(vdb, workdir):
     assert len(calls) == 1  # stopped at the first progress point
     assert store_bytes(target) == before
     assert temporaries(workdir) == []
+
+
+@pytest.mark.parametrize("hook,value,words", [
+    ("VOX_INGEST_TEST_CRASH", str(int(signal.SIGSEGV)), "crashed with SIGSEGV"),
+    ("VOX_INGEST_TEST_EXIT", "1", "exited with code 1 before finishing"),
+])
+def test_a_crashing_ingest_raises_and_keeps_the_old_store(hook, value, words, vdb, workdir,
+                                                          monkeypatch):
+    # The ingest runs in a child process, as vox-ingest's does: a crash while
+    # reading (the tool's test hook raises the signal, or exits as a
+    # sanitizer report does, at the first progress point) raises here, Python
+    # goes on, the old store stays and the child's temporaries are removed.
+    target = workdir / "crash.store"
+    vox.ingest(vdb, target, force=True)
+    before = store_bytes(target)
+    monkeypatch.setenv(hook, value)
+    with pytest.raises(RuntimeError) as info:
+        vox.ingest(vdb, target, force=True)
+    message = str(info.value)
+    assert str(vdb) + ": the ingest child process (pid " in message, message
+    assert words in message and "its unfinished store is removed" in message, message
+    assert store_bytes(target) == before
+    assert temporaries(workdir) == []
+    monkeypatch.delenv(hook)
+    assert vox.ingest(vdb, target, force=True)["bricks"] > 0  # and the next call works
 
 
 INTERRUPT = r"""

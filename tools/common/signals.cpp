@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <mutex>
 #include <thread>
@@ -14,6 +15,13 @@
 #include "storage/file.h"
 
 namespace vox {
+
+std::string SignalName(int sig) {
+  const char* abbrev = sigabbrev_np(sig);
+  const char* text = strsignal(sig);
+  return (abbrev ? "SIG" + std::string(abbrev) : "signal " + std::to_string(sig)) + " (" +
+         (text ? text : "unknown") + ")";
+}
 
 void RemoveOwnTemporaries(const std::string& output, pid_t pid) {
   namespace fs = std::filesystem;

@@ -15,6 +15,9 @@
 
 namespace vox {
 
+// A signal's name and description: "SIGSEGV (Segmentation fault)".
+std::string SignalName(int sig);
+
 // Removes the temporaries `.NAME.tmp-PID-*` (files or directories) of
 // process `pid` beside `output` (storage/file.h).
 void RemoveOwnTemporaries(const std::string& output, pid_t pid);

@@ -10,6 +10,9 @@
 //   vox.probe(store, rays, **options) -> (voxels, t, hit)
 //   vox.read_exr(path) -> dict (channels as numpy arrays, string attributes)
 //
+// vox.ingest runs the ingest in a child interpreter (ingest_process.h): a
+// .vdb that crashes OpenVDB raises RuntimeError instead of ending Python.
+//
 // A Status becomes ValueError (InvalidArgument, Unsupported), OSError
 // (NotFound, IoError, Corruption) or RuntimeError (ResourceExhausted,
 // Internal), with the text the tool prints after its name; an allocation
@@ -17,11 +20,13 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <cstring>
 #include <exception>
 #include <functional>
 #include <limits>
@@ -39,6 +44,7 @@
 #include "storage/store_info.h"
 #include "tools/common/options.h"
 #include "tools/common/prober.h"
+#include "tools/python/ingest_process.h"
 
 namespace py = pybind11;
 
@@ -155,6 +161,8 @@ py::object JsonToPython(const std::string& text) {
 }
 
 // --- ingest -----------------------------------------------------------------
+
+std::string g_module_name = "vox";  // set on import: the child imports it by name
 
 // Calls a Python progress(bricks_done, bricks_total, voxels_done) from the
 // ingest's thread; after it raises, it is not called again and the exception
@@ -281,9 +289,14 @@ py::dict Ingest(const py::object& vdb, const py::object& store, const py::object
   c.options.output = PathOf(store);
   // Recorded in the store's build_options, as the tool records its command line.
   std::string line = "vox.ingest " + c.options.input + " " + c.options.output;
+  std::vector<std::string> flags;  // for the child process: the same flags
   ApplyKwargs(rest, "ingest", vox::IngestFlagArity, [&](const std::string& f, const std::string& v) {
     line += " " + f;
-    if (vox::IngestFlagArity(f) == vox::FlagArity::kValue) line += " " + v;
+    flags.push_back(f);
+    if (vox::IngestFlagArity(f) == vox::FlagArity::kValue) {
+      line += " " + v;
+      flags.push_back(v);
+    }
     return vox::ApplyIngestFlag(&c, f, v);
   });
   c.options.command_line = line;
@@ -302,31 +315,41 @@ py::dict Ingest(const py::object& vdb, const py::object& store, const py::object
   }
   std::atomic<bool> cancel{false};
   CancelSink cancel_sink(sink, &cancel);
-  std::optional<vox::StatusOr<vox::IngestStats>> result;
-  // The limits too (max_voxels): every keyword does what its flag does.
-  RunPolled(&cancel, [&] { result.emplace(vox::Ingest(c.options, c.limits, &cancel_sink)); });
+  // The ingest runs in a child interpreter (tools/python/ingest_process.h),
+  // as vox-ingest's runs in a child: a crash there raises here.
+  const py::module_ sys = py::module_::import("sys");
+  const std::string python = py::str(sys.attr("executable"));
+  if (python.empty())
+    throw std::runtime_error("ingest(): sys.executable is empty: no interpreter to run the "
+                             "ingest's child process in");
+  const std::vector<std::string> argv = {
+      python, "-c",
+      "import importlib, sys; sys.exit(importlib.import_module(sys.argv[1])._ingest_child("
+      "sys.argv[2:]))",
+      g_module_name};
+  std::string path;  // the child imports the module from where this one came
+  for (const py::handle& entry : sys.attr("path")) {
+    const std::string e = py::str(entry);
+    if (!e.empty()) path += (path.empty() ? "" : ":") + e;
+  }
+  std::vector<std::string> env;
+  for (char** e = environ; *e; ++e)
+    if (std::strncmp(*e, "PYTHONPATH=", 11) != 0) env.emplace_back(*e);
+  env.push_back("PYTHONPATH=" + path);
+  const vox::IngestChildRequest request{c.options.input, c.options.output, line, flags};
+  std::optional<vox::StatusOr<std::string>> result;
+  RunPolled(&cancel, [&] {
+    result.emplace(vox::RunIngestChildProcess(argv, env, request, &cancel_sink, &cancel));
+  });
   if (py_progress) py_progress->Rethrow();
   CheckRun(result->status());
-  const vox::IngestStats& s = **result;
-  py::dict d;
-  d["store"] = c.options.output;
-  d["levels"] = s.meta.levels;
-  d["brick_level"] = s.meta.brick_level;
-  d["input_bytes"] = s.input_bytes;
-  d["active_voxels"] = s.active_voxels;
-  d["leaf_nodes"] = s.leaf_nodes;
-  d["active_tiles"] = s.active_tiles;
-  d["occupied_voxels"] = s.occupied_voxels;
-  d["occupied_tile_voxels"] = s.occupied_tile_voxels;
-  d["bricks"] = s.bricks;
-  d["bbox_leaves_read"] = s.bbox_leaves_read;
-  d["topology_bytes"] = s.topology_bytes;
-  d["memory_budget"] = s.memory_budget;
-  d["threads"] = s.threads;
-  d["seconds"] = py::dict(py::arg("open") = s.seconds_open, py::arg("bbox") = s.seconds_bbox,
-                          py::arg("bricks") = s.seconds_bricks,
-                          py::arg("finish") = s.seconds_finish, py::arg("total") = s.seconds_total);
-  return d;
+  return JsonToPython(**result);
+}
+
+// The child process of vox.ingest: the module's private entry point.
+int IngestChild(const std::vector<std::string>& args) {
+  py::gil_scoped_release release;
+  return vox::RunIngestChild(args);
 }
 
 // --- Store ------------------------------------------------------------------
@@ -534,9 +557,12 @@ py::dict ReadExr(const py::object& path) {
 }  // namespace
 
 PYBIND11_MODULE(vox, m) {
+  g_module_name = py::str(m.attr("__name__"));
   m.doc() =
       "vox: out-of-core discrete ray tracing of huge sparse voxel volumes (ingest OpenVDB, "
       "render, probe). Options are the command-line tools' flags as keyword arguments.";
+  m.def("_ingest_child", &IngestChild, py::arg("args"),
+        "vox.ingest's child process (tools/python/ingest_process.h); not for direct use.");
   m.def("ingest", &Ingest, py::arg("vdb_path"), py::arg("store_path"),
         py::arg("progress") = py::none(),
         "Ingests an OpenVDB grid into a vox store, as vox-ingest; options are its flags "
