@@ -93,7 +93,8 @@ def test_render_one_frame_of_a_sequence(store, files, workdir):
     with pytest.raises(ValueError, match="one frame"):
         vox.render(store, cams, threads=2)
     code, _, err = run([tool("render"), store, "--cam", files["camera_path"], "--turntable", "4",
-                        "--frames", "3", "-o", workdir / "tt.%d.exr", "--threads", "2", "--quiet"])
+                        "--frames", "3", "-o", workdir / "tt.%d.exr", "--threads", "2", "--float",
+                        "--quiet"])
     assert code == 0, err
     exr = vox.read_exr(workdir / "tt.3.exr")
     third = vox.render(store, files["camera_path"], turntable=4, frames=3, threads=2)
