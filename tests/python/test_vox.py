@@ -80,6 +80,31 @@ def test_render_stats_and_options(store, files, workdir):
     assert e["stats"]["camera"]["source"]["view"] == [30.0, 20.0]
 
 
+def test_render_one_frame_of_a_sequence(store, files, workdir):
+    """A list of cameras or turntable=N is a frame sequence; frames=K renders
+    its frame K, the pixels vox-render writes for that frame."""
+    def same(a, b):
+        for key in ("rgba", "z"):
+            assert np.array_equal(np.ascontiguousarray(a[key]).view(np.uint32),
+                                  np.ascontiguousarray(b[key]).view(np.uint32)), key
+    cams = [files["camera"], files["ortho"]]
+    second = vox.render(store, cams, frames=2, threads=2)
+    same(second, vox.render(store, files["ortho"], threads=2))
+    assert second["stats"]["frame"] == {"number": 2, "count": 2, "first": 2, "last": 2}
+    with pytest.raises(ValueError, match="one frame"):
+        vox.render(store, cams, threads=2)
+    code, _, err = run([tool("render"), store, "--cam", files["camera_path"], "--turntable", "4",
+                        "--frames", "3", "-o", workdir / "tt.%d.exr", "--threads", "2", "--float",
+                        "--quiet"])
+    assert code == 0, err
+    exr = vox.read_exr(workdir / "tt.3.exr")
+    third = vox.render(store, files["camera_path"], turntable=4, frames=3, threads=2)
+    for c, name in enumerate("RGBA"):
+        assert np.array_equal(np.ascontiguousarray(third["rgba"][:, :, c]).view(np.uint32),
+                              exr["channels"][name].view(np.uint32)), name
+    assert third["stats"]["camera"]["source"]["turntable"] == {"frames": 4, "turn_deg": 180.0}
+
+
 def test_store_info_is_vox_info(store):
     code, out, err = run([tool("info"), store])
     assert code == 0, err

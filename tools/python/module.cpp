@@ -442,7 +442,7 @@ py::dict Render(const py::object& store, const py::object& camera, const py::obj
   o.quiet = true;      // no stderr output unless quiet=False
   o.keep_image = true;
   auto dumps = py::module_::import("json").attr("dumps");
-  if (py::isinstance<py::dict>(camera))
+  if (py::isinstance<py::dict>(camera) || py::isinstance<py::list>(camera))  // a list: a sequence
     o.camera_json = dumps(camera).cast<std::string>();
   else if (!camera.is_none())
     o.camera_path = PathOf(camera);
@@ -580,7 +580,9 @@ PYBIND11_MODULE(vox, m) {
         "Renders a store as vox-render. camera and scene are dicts in the cam.json and "
         "scene.json schema, or paths; options are vox-render's flags (split, single_step, "
         "memory_mb, cache_mb, threads, tile_size, tiles, layers, size, view, save_cam, prefetch, "
-        "o, preview, stats, quiet); size=(W, H) overrides the camera's. Returns {'rgba': (H, W, 4) float32 (premultiplied), 'z': (H, W) planar "
+        "o, preview, stats, quiet, turntable, frames); size=(W, H) overrides the camera's. "
+        "A list of cameras or turntable=N is a sequence, of which frames=K renders frame K (one "
+        "frame per call; vox-render renders whole sequences). Returns {'rgba': (H, W, 4) float32 (premultiplied), 'z': (H, W) planar "
         "depth, 'normal', 'voxel' and 'position': (H, W, 3) and 'distance': (H, W) when layers "
         "asks for them, 'stats': the --stats document}; docs/usage.md has the layout.");
   m.def("probe", &Probe, py::arg("store"), py::arg("rays"),
