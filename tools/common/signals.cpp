@@ -77,14 +77,23 @@ void RemoveOwnTemporaries(const std::vector<std::string>& outputs, pid_t pid) {
 
 namespace {
 std::atomic<bool> g_signal_taken{false};
-// The outputs whose temporaries the signal thread removes.
-std::mutex g_outputs_mutex;
-std::vector<std::string> g_outputs;
+// The outputs whose temporaries the signal thread removes. Never destroyed:
+// the detached signal thread may read them while the process exits (a
+// signal during exit's static destructors found a freed vector and crashed).
+struct SignalOutputs {
+  std::mutex mutex;
+  std::vector<std::string> paths;
+};
+SignalOutputs& Outputs() {
+  static SignalOutputs* outputs = new SignalOutputs;
+  return *outputs;
+}
 }  // namespace
 
 void AddSignalOutputs(const std::vector<std::string>& outputs) {
-  std::lock_guard<std::mutex> lock(g_outputs_mutex);
-  g_outputs.insert(g_outputs.end(), outputs.begin(), outputs.end());
+  SignalOutputs& o = Outputs();
+  std::lock_guard<std::mutex> lock(o.mutex);
+  o.paths.insert(o.paths.end(), outputs.begin(), outputs.end());
 }
 
 int ToolExitCode(int code) {
@@ -110,8 +119,9 @@ void StartOutputSignalThread(const std::string& tool, const std::vector<std::str
                  : sig == SIGHUP ? "hung up (SIGHUP)" : "terminated (SIGTERM)");
     std::vector<std::string> outputs;
     {
-      std::lock_guard<std::mutex> lock(g_outputs_mutex);
-      outputs = g_outputs;
+      SignalOutputs& o = Outputs();
+      std::lock_guard<std::mutex> lock(o.mutex);
+      outputs = o.paths;
     }
     RemoveOwnTemporaries(outputs, getpid());
     std::_Exit(128 + sig);
