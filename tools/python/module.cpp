@@ -1,5 +1,6 @@
-// The Python module `vox`: bindings over the libraries the command-line
-// tools use, with the tools' options as keyword arguments (applied by
+// The Python module `vox`'s compiled part, `vox._vox` (the package's
+// __init__.py, tools/python/__init__.py.in, checks the interpreter and
+// re-exports it): bindings over the libraries the command-line tools use, with the tools' options as keyword arguments (applied by
 // tools/common/options.h, so values are checked, and refused with the
 // messages, exactly as on the command line). Long calls release the GIL.
 //
@@ -9,6 +10,7 @@
 //       arrays (rgba, z, normal, voxel) and "stats" (the --stats document)
 //   vox.probe(store, rays, **options) -> (voxels, t, hit)
 //   vox.read_exr(path) -> dict (channels as numpy arrays, string attributes)
+//   vox.__version__ ("0.9.0"), vox.__git_describe__ (as `vox-* --version`)
 //
 // A Status becomes ValueError (InvalidArgument, Unsupported), OSError
 // (NotFound, IoError, Corruption) or RuntimeError (ResourceExhausted,
@@ -39,6 +41,7 @@
 #include "storage/store_info.h"
 #include "tools/common/options.h"
 #include "tools/common/prober.h"
+#include "tools/common/version.h"
 
 namespace py = pybind11;
 
@@ -533,7 +536,7 @@ py::dict ReadExr(const py::object& path) {
 
 }  // namespace
 
-PYBIND11_MODULE(vox, m) {
+PYBIND11_MODULE(_vox, m) {
   m.doc() =
       "vox: out-of-core discrete ray tracing of huge sparse voxel volumes (ingest OpenVDB, "
       "render, probe). Options are the command-line tools' flags as keyword arguments.";
@@ -567,4 +570,6 @@ PYBIND11_MODULE(vox, m) {
   m.def("read_exr", &ReadExr, py::arg("path"),
         "Reads a complete EXR written by vox: {'width', 'height', 'channels': {name: (H, W) "
         "float32}, 'attributes': the string attributes}.");
+  m.attr("__version__") = vox::kVersion;
+  m.attr("__git_describe__") = vox::kGitDescribe;
 }
