@@ -96,30 +96,14 @@ void LodHint(const std::string& dir, Store& base, const Camera& cam, FILE* log) 
           voxels, dir.c_str());
 }
 
-// The options that need no file: refused before anything is opened.
+// The options that need no file: refused before anything is opened. The
+// output paths are CheckJobOutputs'.
 Status CheckJobOptions(const RenderJobOptions& options) {
   if (!options.preview_path.empty() && options.exr_path.empty())
     return InvalidArgumentError("--preview needs an EXR output (-o)");
   if (!options.preview_path.empty() && !options.part.whole())
     return InvalidArgumentError(
         "--preview needs the whole image; with --tiles, preview the vox-merge output");
-  // Output paths are checked before any work: a bad one fails in a moment,
-  // not after the render. The files are written atomically at the end.
-  for (const std::string* path : {&options.exr_path, &options.preview_path, &options.stats_path,
-                                  &options.save_camera_path})
-    if (!path->empty()) VOX_RETURN_IF_ERROR(CheckOutputPath(*path));
-  if (!options.exr_path.empty()) VOX_RETURN_IF_ERROR(CheckExtension("-o", options.exr_path, ".exr"));
-  if (!options.preview_path.empty())
-    VOX_RETURN_IF_ERROR(CheckExtension("--preview", options.preview_path, ".png"));
-  // No output may be an input (a store file, the camera, the scene) or
-  // another output.
-  std::vector<NamedPath> inputs = StoreInputs(options.store_dir);
-  inputs.push_back({"camera", options.camera_path});
-  inputs.push_back({"scene", options.scene_path});
-  VOX_RETURN_IF_ERROR(CheckDistinctPaths(inputs, {{"-o", options.exr_path},
-                                                  {"--preview", options.preview_path},
-                                                  {"--stats", options.stats_path},
-                                                  {"--save-cam", options.save_camera_path}}));
   if (options.threads < 0)
     return InvalidArgumentError("threads " + std::to_string(options.threads) +
                                 ": must not be negative (0: all cores)");
@@ -140,7 +124,8 @@ Status CheckJobOptions(const RenderJobOptions& options) {
 // A frame over kMaxPixelsUnlessAllowed is refused without --allow-huge;
 // the EXR's uncompressed size (an upper bound) is printed and must fit the
 // free space of its directory.
-Status CheckFrameSize(const RenderJobOptions& options, const Camera& camera) {
+Status CheckFrameSize(const RenderJobOptions& options, const std::string& exr_path,
+                      const Camera& camera, bool say) {
   // The layout's own limit first (the most tiles an image may have).
   VOX_RETURN_IF_ERROR(CheckTileCount(camera.width, camera.height,
                                      std::clamp(options.tile_size, kMinTileSize, kMaxTileSize)));
@@ -150,39 +135,145 @@ Status CheckFrameSize(const RenderJobOptions& options, const Camera& camera) {
     return InvalidArgumentError("a " + size + " frame has " + std::to_string(pixels) +
                                 " pixels, more than " + std::to_string(kMaxPixelsUnlessAllowed) +
                                 "; pass --allow-huge to render it");
-  if (options.exr_path.empty()) return OkStatus();
+  if (exr_path.empty()) return OkStatus();
   const int bytes_per_pixel = (options.layers.float_color ? 16 : 8) + 4 +
                               (options.layers.normal ? 12 : 0) + (options.layers.voxel ? 12 : 0);
   const double fraction = options.part.whole() ? 1.0 : 1.0 / options.part.count;
   const uint64_t estimate = uint64_t(double(pixels) * bytes_per_pixel * fraction);
-  if (!options.quiet)
-    fprintf(options.log, "vox-render: %s: %s, at most %.1f MiB\n", options.exr_path.c_str(),
+  if (say)
+    fprintf(options.log, "vox-render: %s: %s, at most %.1f MiB\n", exr_path.c_str(),
             size.c_str(), double(estimate) / double(kMiB));
   std::string dir, name;
-  SplitPath(options.exr_path, &dir, &name);
+  SplitPath(exr_path, &dir, &name);
   struct statvfs vfs;
   if (statvfs(dir.c_str(), &vfs) != 0) return OkStatus();
   const uint64_t free_bytes = uint64_t(vfs.f_bavail) * uint64_t(vfs.f_frsize);
   if (estimate > free_bytes)
-    return ResourceExhaustedError("-o " + options.exr_path + ": the " + size + " image may take " +
+    return ResourceExhaustedError("-o " + exr_path + ": the " + size + " image may take " +
                                   std::to_string(estimate >> 20) + " MiB and " + dir + " has " +
                                   std::to_string(free_bytes >> 20) + " MiB free");
   return OkStatus();
 }
 
-// The camera: --cam's file, the camera JSON text, or the default framing of
-// the volume's world box; then --size and --view, which override it.
-StatusOr<Camera> JobCamera(const RenderJobOptions& options, const StoreMeta& meta) {
+// The frames of a run: the cameras given, how many frames the sequence
+// has and which of them this run renders.
+struct JobSequence {
+  std::vector<Camera> given;  // --cam's or the camera JSON's; empty: the default camera
+  std::string source;         // where `given` came from, for messages
+  int count = 1;              // frames in the sequence
+  FrameRange range;           // the frames this run renders
+  int frames() const { return range.last - range.first + 1; }
+};
+
+// Reads the cameras (before the store is opened: their number decides the
+// outputs) and the frames to render. `keep`: the image is kept in memory,
+// which holds one frame.
+StatusOr<JobSequence> PlanSequence(const RenderJobOptions& options, bool keep) {
+  JobSequence seq;
+  if (!options.camera_path.empty()) {
+    VOX_ASSIGN_OR_RETURN(seq.given, LoadCameras(options.camera_path));
+    seq.source = options.camera_path;
+  } else if (!options.camera_json.empty()) {
+    VOX_ASSIGN_OR_RETURN(seq.given, ParseCameras(options.camera_json, "camera"));
+    seq.source = "camera";
+  }
+  const std::string cameras = std::to_string(seq.given.size()) + " cameras";
+  if (seq.given.size() > 1 && options.turntable > 0)
+    return InvalidArgumentError("--turntable turns one camera; " + seq.source + " holds " + cameras);
+  if (seq.given.size() > 1 && options.view)
+    return InvalidArgumentError("--view places one camera; with the " + cameras + " of " +
+                                seq.source + " every frame would show the same view");
+  if (options.turntable < 0 || options.turntable > kMaxFrames)
+    return InvalidArgumentError("--turntable " + std::to_string(options.turntable) +
+                                ": must be 1.." + std::to_string(kMaxFrames));
+  seq.count = options.turntable > 0 ? options.turntable : std::max<int>(1, int(seq.given.size()));
+  VOX_ASSIGN_OR_RETURN(seq.range,
+                       FramesToRender(seq.count, options.frames ? &*options.frames : nullptr));
+  if (keep && seq.frames() > 1)
+    return InvalidArgumentError("an image kept in memory is one frame; the sequence has " +
+                                std::to_string(seq.count) +
+                                " frames: choose one with frames=N (or render them with vox-render)");
+  return seq;
+}
+
+// One frame's output paths, the patterns expanded.
+struct FrameOutputs {
+  int number = 1;
+  std::string exr, preview, stats;
+  std::string save_camera;  // a pattern's expansion, or the plain name on the run's last frame
+};
+
+// "out.exr" -> "out.%04d.exr", for the message asking for a pattern.
+std::string SuggestPattern(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  const size_t dot = path.find_last_of('.');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash))
+    return path + ".%04d";
+  return path.substr(0, dot) + ".%04d" + path.substr(dot);
+}
+
+// Every frame's outputs: patterns where a sequence needs them, each path
+// writable, with its format's extension, and none an input or another
+// output; all refused before any work.
+StatusOr<std::vector<FrameOutputs>> CheckJobOutputs(const RenderJobOptions& options,
+                                                    const JobSequence& seq) {
+  bool save_camera_pattern = false;
+  for (const auto& [role, path] : {std::pair<std::string, std::string>{"-o", options.exr_path},
+                                   {"--preview", options.preview_path},
+                                   {"--stats", options.stats_path},
+                                   {"--save-cam", options.save_camera_path}}) {
+    if (path.empty()) continue;
+    VOX_ASSIGN_OR_RETURN(const bool pattern, IsFramePattern(role, path));
+    if (role == "--save-cam") save_camera_pattern = pattern;
+    if (!pattern && seq.count > 1 && role != "--save-cam")
+      return InvalidArgumentError(role + " " + path + ": the sequence has " +
+                                  std::to_string(seq.count) +
+                                  " frames; give a frame pattern such as " + SuggestPattern(path) +
+                                  " (frames are numbered from 1)");
+  }
+  std::vector<FrameOutputs> frames;
+  std::vector<NamedPath> named;
+  for (int n = seq.range.first; n <= seq.range.last; ++n) {
+    FrameOutputs f;
+    f.number = n;
+    f.exr = ExpandFramePattern(options.exr_path, n);
+    f.preview = ExpandFramePattern(options.preview_path, n);
+    f.stats = ExpandFramePattern(options.stats_path, n);
+    if (save_camera_pattern || n == seq.range.last)
+      f.save_camera = ExpandFramePattern(options.save_camera_path, n);
+    const std::string frame = seq.count > 1 ? "frame " + std::to_string(n) + "'s " : "";
+    for (const auto& [role, path] : {std::pair<std::string, const std::string*>{"-o", &f.exr},
+                                     {"--preview", &f.preview},
+                                     {"--stats", &f.stats},
+                                     {"--save-cam", &f.save_camera}}) {
+      if (path->empty()) continue;
+      VOX_RETURN_IF_ERROR(CheckOutputPath(*path));
+      named.push_back({frame + role, *path});
+    }
+    if (!f.exr.empty()) VOX_RETURN_IF_ERROR(CheckExtension(frame + "-o", f.exr, ".exr"));
+    if (!f.preview.empty())
+      VOX_RETURN_IF_ERROR(CheckExtension(frame + "--preview", f.preview, ".png"));
+    frames.push_back(std::move(f));
+  }
+  // No output may be an input (a store file, the camera, the scene) or
+  // another output.
+  std::vector<NamedPath> inputs = StoreInputs(options.store_dir);
+  inputs.push_back({"camera", options.camera_path});
+  inputs.push_back({"scene", options.scene_path});
+  VOX_RETURN_IF_ERROR(CheckDistinctPaths(inputs, named));
+  return frames;
+}
+
+// The one camera of a run or the base of its turntable: `given` (or the
+// default framing of the volume's world box), then --size and --view, which
+// override it.
+StatusOr<Camera> JobCamera(const RenderJobOptions& options, const Camera* given,
+                           const std::string& source, const StoreMeta& meta) {
   glm::dvec3 lo, hi;
   WorldBounds(meta, &lo, &hi);
-  Camera camera = DefaultCamera(lo, hi, options.default_width, options.default_height);
-  std::string source = "camera";
-  if (!options.camera_path.empty()) {
-    VOX_ASSIGN_OR_RETURN(camera, LoadCamera(options.camera_path));
-    source = options.camera_path;
-  } else if (!options.camera_json.empty()) {
-    VOX_ASSIGN_OR_RETURN(camera, ParseCamera(options.camera_json, "camera"));
-  }
+  Camera camera = given != nullptr
+                      ? *given
+                      : DefaultCamera(lo, hi, options.default_width, options.default_height);
   if (options.size_given) {
     camera.width = options.default_width;
     camera.height = options.default_height;
@@ -193,23 +284,53 @@ StatusOr<Camera> JobCamera(const RenderJobOptions& options, const StoreMeta& met
                          OrbitCamera(camera, lo, hi, options.view->first, options.view->second));
   }
   // A given camera may be anywhere; the default one and --view's are near.
-  const bool given = !options.camera_path.empty() || !options.camera_json.empty();
-  if (given && !options.view)
+  if (given != nullptr && !options.view)
     VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext(source));
   return camera;
 }
 
-// --stats "camera": the camera used, as cam.json, and where its parts came from.
-nlohmann::json CameraStatsJson(const RenderJobOptions& options, const Camera& camera) {
+// The cameras of the whole sequence (frame n is element n - 1): each given
+// camera, or the one camera and, with --turntable, its turns.
+StatusOr<std::vector<Camera>> SequenceCameras(const RenderJobOptions& options,
+                                              const JobSequence& seq, const StoreMeta& meta) {
+  std::vector<Camera> cameras;
+  if (seq.given.size() > 1) {
+    for (size_t i = 0; i < seq.given.size(); ++i) {
+      VOX_ASSIGN_OR_RETURN(
+          Camera camera,
+          JobCamera(options, &seq.given[i], seq.source + "[" + std::to_string(i) + "]", meta));
+      cameras.push_back(camera);
+    }
+    return cameras;
+  }
+  VOX_ASSIGN_OR_RETURN(const Camera camera,
+                       JobCamera(options, seq.given.empty() ? nullptr : &seq.given[0],
+                                 seq.source, meta));
+  if (options.turntable == 0) return std::vector<Camera>{camera};
+  glm::dvec3 lo, hi;
+  WorldBounds(meta, &lo, &hi);
+  return TurntableCameras(camera, options.turntable, 0.5 * (lo + hi));
+}
+
+// --stats "camera": the camera used, as cam.json, and where its parts came
+// from: the given camera (its index in an array) or the default one,
+// --size, --view, and the turntable's turn.
+nlohmann::json CameraStatsJson(const RenderJobOptions& options, const JobSequence& seq,
+                               int number, const Camera& camera) {
   nlohmann::json j = nlohmann::json::parse(camera.ToJson());
-  const bool given = !options.camera_path.empty() || !options.camera_json.empty();
+  const bool given = !seq.given.empty();
   j["source"] = {
       {"camera", !options.camera_path.empty() ? options.camera_path
                  : given                     ? std::string("camera JSON")
                                              : std::string("default")},
+      {"index", seq.given.size() > 1 ? nlohmann::json(number - 1) : nlohmann::json(nullptr)},
       {"size", options.size_given ? "--size" : given ? "camera" : "default"},
       {"view", options.view ? nlohmann::json{options.view->first, options.view->second}
-                            : nlohmann::json(nullptr)}};
+                            : nlohmann::json(nullptr)},
+      {"turntable", options.turntable > 0
+                        ? nlohmann::json{{"frames", options.turntable},
+                                         {"turn_deg", 360.0 * (number - 1) / options.turntable}}
+                        : nlohmann::json(nullptr)}};
   return j;
 }
 
@@ -359,26 +480,42 @@ void KeepImage(const Camera& camera, const ImageLayers& layers, RenderJobOutput*
   };
 }
 
-// The --stats document: the frame's (StatsJson), the memory budget and the
-// level of detail in effect.
-std::string JobStatsJson(const RenderJobOptions& options, const Renderer& renderer,
-                         const FrameStats& stats,
-                         const RenderStores& stores, const std::vector<CacheStats>& lod_start,
-                         const ProcessBudget& process, const MemoryBudget& budget,
-                         int slot_bits, int io_threads,
+// What every frame of a run shares: the opened stores (and so their brick
+// caches), the scene, the process budget and the threads.
+struct JobRun {
+  const RenderJobOptions& options;
+  const JobSequence& sequence;
+  const RenderStores& stores;
+  const Scene& scene;
+  const ProcessBudget& process;
+  int threads = 1, io_threads = 0;
+  bool keep = false;  // the image goes into `out` (one frame)
+  RenderJobOutput* out = nullptr;
+};
+
+// The --stats document: the frame's (StatsJson), its number in the
+// sequence, the memory budget, the level of detail in effect and the camera.
+std::string JobStatsJson(const JobRun& run, int number, const Renderer& renderer,
+                         const FrameStats& stats, const std::vector<CacheStats>& lod_start,
+                         const MemoryBudget& budget, int slot_bits,
                          const std::vector<std::pair<std::string, double>>& timings) {
+  const RenderStores& stores = run.stores;
   nlohmann::json json = nlohmann::json::parse(StatsJson(renderer, stats, timings));
+  json["frame"] = {{"number", number},
+                   {"count", run.sequence.count},
+                   {"first", run.sequence.range.first},
+                   {"last", run.sequence.range.last}};
   nlohmann::json memory = nlohmann::json::parse(budget.ToJson());
-  memory["source"] = process.source;
+  memory["source"] = run.process.source;
   memory["table_slots"] = 1 << slot_bits;
-  memory["io_threads"] = io_threads;
+  memory["io_threads"] = run.io_threads;
   memory["max_brick_bytes"] = stores.base->brick_sizes().max_decoded;
   json["memory"] = memory;
   nlohmann::json lod = {{"factor", stores.lod}, {"default", stores.lod_default},
                         {"setting", LodSetting(stores, renderer)}};
   if (renderer.lod() != nullptr) lod.update(LodStatsJson(renderer, stats, stores.levels, lod_start));
   json["lod"] = lod;
-  json["camera"] = CameraStatsJson(options, renderer.camera());
+  json["camera"] = CameraStatsJson(run.options, run.sequence, number, renderer.camera());
   return json.dump(2);
 }
 
@@ -392,18 +529,115 @@ PreviewBackground PreviewBackgroundOf(const Renderer& renderer) {
   };
 }
 
-void PrintSummary(const RenderJobOptions& options, const Renderer& renderer,
-                  const FrameStats& stats) {
+void PrintSummary(const RenderJobOptions& options, const std::string& exr_path,
+                  const Renderer& renderer, const FrameStats& stats) {
   const Camera& camera = renderer.camera();
   uint64_t rays = 0;
   for (int k = 0; k < kNumRayKinds; ++k) rays += stats.counters.rays[k];
   fprintf(options.log,
           "vox-render: %s (%dx%d, part %s, split %s, passes %s, lod %s): %.3f s, %llu rays, "
           "%.2fM rays/s\n",
-          options.exr_path.c_str(), camera.width, camera.height, options.part.ToString().c_str(),
+          exr_path.c_str(), camera.width, camera.height, options.part.ToString().c_str(),
           renderer.SplitString().c_str(), renderer.passes().ToString().c_str(),
           renderer.lod() ? "on" : "off (exact)", stats.render_seconds, (unsigned long long)rays,
           stats.render_seconds > 0 ? rays / stats.render_seconds / 1e6 : 0.0);
+}
+
+// Renders frame `files.number` of the run with `camera` and publishes its
+// outputs together; `first`: the run's first frame (it prints the budget
+// and hints, and its --stats has the store's open time `open_seconds`).
+// `save_camera`: the --save-cam text this frame publishes (empty: none).
+Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera& camera,
+                      bool first, double open_seconds, const std::string& save_camera) {
+  const RenderJobOptions& options = run.options;
+  const Stopwatch total;
+  Stopwatch phase;
+  const bool say = !options.quiet;
+  if (say && run.sequence.count > 1) {
+    fprintf(options.log, "vox-render: frame %d/%d", files.number, run.sequence.count);
+    if (run.sequence.frames() < run.sequence.count)
+      fprintf(options.log, " (%d of %d in this run)", files.number - run.sequence.range.first + 1,
+              run.sequence.frames());
+    fprintf(options.log, "\n");
+  }
+  VOX_RETURN_IF_ERROR(CheckFrameSize(options, files.exr, camera, say && first));
+
+  // The budget's split, before any output exists: a store whose resident
+  // top does not fit fails here, saying how much it needs. Each frame sets
+  // the caches' capacities again (the same for frames of one size and
+  // distance), keeping the bricks they hold.
+  RenderJobOptions budgeted = options;
+  budgeted.keep_image = run.keep;
+  VOX_ASSIGN_OR_RETURN(const MemoryBudget budget,
+                       JobBudget(budgeted, run.stores, camera, run.scene, run.process, run.threads,
+                                 run.io_threads));
+  if (say && first)
+    fprintf(options.log, "vox-render: memory %s; %s\n", run.process.ToString().c_str(),
+            budget.ToString().c_str());
+  VOX_ASSIGN_OR_RETURN(const RenderOptions render_options,
+                       JobRenderOptions(options, run.stores, budget));
+  VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(run.stores.base.get(), camera, run.scene,
+                                                       render_options));
+  if (first && run.stores.lod == 0.0 && run.stores.lod_default && say)
+    LodHint(options.store_dir, *run.stores.base, camera, options.log);
+  const double setup_seconds = phase.Lap();
+  std::vector<CacheStats> lod_start;
+  for (Store* level : run.stores.levels) lod_start.push_back(level->cache_stats());
+
+  // The frame, into the EXR's temporary (and the kept image).
+  FrameOptions frame = JobFrameOptions(options, run.stores, *renderer, budget, run.threads);
+  frame.exr_path = files.exr;
+  if (run.keep) KeepImage(camera, options.layers, run.out, &frame);
+  frame.interrupted = options.interrupted;
+  // The EXR, the preview and the stats are published together, once all
+  // are written: a failed one leaves every earlier output as it was.
+  OutputGroup outputs;
+  frame.outputs = &outputs;
+  FrameStats stats;
+  VOX_RETURN_IF_ERROR(RenderFrame(*renderer, frame, &stats));
+  const double frame_seconds = phase.Lap();
+
+  // The preview, the stats and the camera, then the publication.
+  if (!files.preview.empty()) {
+    SetExrThreads(run.threads);  // the preview reads a row of tiles per call: decoded in parallel
+    VOX_RETURN_IF_ERROR(WritePngPreview(files.exr, files.preview, PreviewBackgroundOf(*renderer),
+                                        &outputs, outputs.TempOf(files.exr)));
+  }
+  const double preview_seconds = phase.Lap();
+  if (!files.stats.empty() || run.out != nullptr) {
+    const std::string json =
+        JobStatsJson(run, files.number, *renderer, stats, lod_start, budget,
+                     render_options.table_slot_bits,
+                     {{"open_seconds", first ? open_seconds : 0.0},
+                      {"setup_seconds", setup_seconds},
+                      {"frame_seconds", frame_seconds},
+                      {"preview_seconds", preview_seconds},
+                      {"total_seconds", total.Seconds() + (first ? open_seconds : 0.0)}});
+    if (run.out) run.out->stats_json = json;
+    if (!files.stats.empty()) VOX_RETURN_IF_ERROR(outputs.AddBytes(files.stats, json + "\n"));
+  }
+  if (!files.save_camera.empty() && !save_camera.empty())
+    VOX_RETURN_IF_ERROR(outputs.AddBytes(files.save_camera, save_camera));
+  if (options.interrupted) VOX_RETURN_IF_ERROR(options.interrupted());
+  VOX_RETURN_IF_ERROR(outputs.Commit());
+  if (say) PrintSummary(options, files.exr, *renderer, stats);
+  return OkStatus();
+}
+
+// --save-cam's text for frame `number`: its camera with a pattern or a
+// single frame, else (on the run's last frame) the array of the cameras of
+// the frames rendered.
+std::string SaveCameraText(const RenderJobOptions& options, const JobSequence& seq,
+                           const std::vector<Camera>& cameras, int number) {
+  if (options.save_camera_path.empty()) return "";
+  if (seq.count == 1 || ExpandFramePattern(options.save_camera_path, 1) !=
+                            ExpandFramePattern(options.save_camera_path, 2))
+    return cameras[size_t(number - 1)].ToJson() + "\n";
+  if (number != seq.range.last) return "";
+  std::string text = "[\n";
+  for (int n = seq.range.first; n <= seq.range.last; ++n)
+    text += "  " + cameras[size_t(n - 1)].ToJson() + (n < seq.range.last ? ",\n" : "\n");
+  return text + "]\n";
 }
 
 }  // namespace
@@ -435,9 +669,21 @@ StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<do
 }
 
 Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
-  const Stopwatch total;
-  Stopwatch phase;
+  // The options, the frames and every frame's outputs, before any work.
+  const Stopwatch open_time;
   VOX_RETURN_IF_ERROR(CheckJobOptions(options));
+  const bool keep = options.keep_image && out != nullptr;
+  VOX_ASSIGN_OR_RETURN(const JobSequence sequence, PlanSequence(options, keep));
+  VOX_ASSIGN_OR_RETURN(const std::vector<FrameOutputs> frames, CheckJobOutputs(options, sequence));
+  if (options.on_outputs) {
+    std::vector<std::string> paths;
+    for (const FrameOutputs& f : frames)
+      for (const std::string* p : {&f.exr, &f.preview, &f.stats, &f.save_camera})
+        if (!p->empty()) paths.push_back(*p);
+    options.on_outputs(paths);
+  }
+
+  // The store and its pyramid, opened once for every frame.
   VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(options.memory_bytes));
   const int io_threads = IoThreadsFor(options, process);
   OpenOptions open;
@@ -448,67 +694,24 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   open.read_windows = options.read_windows;
   open.budget_bytes = process.bytes;
   VOX_ASSIGN_OR_RETURN(RenderStores stores, OpenRenderStores(options.store_dir, options.lod, open));
-  const double open_seconds = phase.Lap();
+  const double open_seconds = open_time.Seconds();
 
-  VOX_ASSIGN_OR_RETURN(const Camera camera, JobCamera(options, stores.base->meta()));
-  VOX_RETURN_IF_ERROR(CheckFrameSize(options, camera));
+  // The cameras and the scene, then the frames in order.
+  VOX_ASSIGN_OR_RETURN(const std::vector<Camera> cameras,
+                       SequenceCameras(options, sequence, stores.base->meta()));
   VOX_ASSIGN_OR_RETURN(const Scene scene, JobScene(options));
-  const int threads =
+  JobRun run{options, sequence, stores, scene, process};
+  run.threads =
       options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-  // The budget's split, before any output exists: a store whose resident
-  // top does not fit fails here, saying how much it needs.
-  const bool keep = options.keep_image && out != nullptr;
-  RenderJobOptions budgeted = options;
-  budgeted.keep_image = keep;
-  VOX_ASSIGN_OR_RETURN(const MemoryBudget budget, JobBudget(budgeted, stores, camera, scene,
-                                                           process, threads, io_threads));
-  if (!options.quiet)
-    fprintf(options.log, "vox-render: memory %s; %s\n", process.ToString().c_str(),
-            budget.ToString().c_str());
-  VOX_ASSIGN_OR_RETURN(const RenderOptions render_options, JobRenderOptions(options, stores, budget));
-  VOX_ASSIGN_OR_RETURN(auto renderer,
-                       Renderer::Create(stores.base.get(), camera, scene, render_options));
-  if (stores.lod == 0.0 && stores.lod_default && !options.quiet)
-    LodHint(options.store_dir, *stores.base, camera, options.log);
-  const double setup_seconds = phase.Lap();
-  std::vector<CacheStats> lod_start;
-  for (Store* level : stores.levels) lod_start.push_back(level->cache_stats());
-
-  FrameOptions frame = JobFrameOptions(options, stores, *renderer, budget, threads);
-  if (keep) KeepImage(camera, options.layers, out, &frame);
-  frame.interrupted = options.interrupted;
-  // The EXR, the preview and the stats are published together, once all
-  // are written: a failed one leaves every earlier output as it was.
-  OutputGroup outputs;
-  frame.outputs = &outputs;
-  FrameStats stats;
-  VOX_RETURN_IF_ERROR(RenderFrame(*renderer, frame, &stats));
-  const double frame_seconds = phase.Lap();
-  if (!options.preview_path.empty()) {
-    SetExrThreads(threads);  // the preview reads a row of tiles per call: decoded in parallel
-    VOX_RETURN_IF_ERROR(WritePngPreview(options.exr_path, options.preview_path,
-                                        PreviewBackgroundOf(*renderer), &outputs,
-                                        outputs.TempOf(options.exr_path)));
+  run.io_threads = io_threads;
+  run.keep = keep;
+  run.out = out;
+  for (const FrameOutputs& files : frames) {
+    const bool first = files.number == sequence.range.first;
+    VOX_RETURN_IF_ERROR(RenderJobFrame(run, files, cameras[size_t(files.number - 1)], first,
+                                       open_seconds,
+                                       SaveCameraText(options, sequence, cameras, files.number)));
   }
-  const double preview_seconds = phase.Lap();
-  if (!options.stats_path.empty() || out != nullptr) {
-    const std::string json = JobStatsJson(
-        options, *renderer, stats, stores, lod_start, process, budget,
-        render_options.table_slot_bits, io_threads,
-        {{"open_seconds", open_seconds},
-         {"setup_seconds", setup_seconds},
-         {"frame_seconds", frame_seconds},
-         {"preview_seconds", preview_seconds},
-         {"total_seconds", total.Seconds()}});
-    if (out) out->stats_json = json;
-    if (!options.stats_path.empty())
-      VOX_RETURN_IF_ERROR(outputs.AddBytes(options.stats_path, json + "\n"));
-  }
-  if (!options.save_camera_path.empty())
-    VOX_RETURN_IF_ERROR(outputs.AddBytes(options.save_camera_path, camera.ToJson() + "\n"));
-  if (options.interrupted) VOX_RETURN_IF_ERROR(options.interrupted());
-  VOX_RETURN_IF_ERROR(outputs.Commit());
-  if (!options.quiet) PrintSummary(options, *renderer, stats);
   return OkStatus();
 }
 

@@ -1,7 +1,10 @@
 // vox::RunRenderJob: everything `vox-render` does, from options to files:
 // chooses the memory budget, opens the store and sizes its cache from the
 // budget, reads the camera (or frames the volume) and the scene, renders the image (or one part of it) to EXR, and writes the optional PNG
-// preview and --stats JSON. The tool's main only parses flags. In-process
+// preview and --stats JSON. A frame sequence (a cam.json array,
+// --turntable N; render/frame_sequence.h) is rendered frame by frame in
+// the one process, over the one opened store and its brick cache, each
+// frame's outputs published together. The tool's main only parses flags. In-process
 // callers (the Python module) may pass the camera and scene as JSON text,
 // render without an EXR and keep the image and the stats in memory
 // (RenderJobOutput).
@@ -21,6 +24,7 @@
 
 #include "core/status.h"
 #include "render/exr.h"
+#include "render/frame_sequence.h"
 #include "render/lod.h"
 #include "render/tiles.h"
 #include "storage/lod.h"
@@ -30,11 +34,15 @@ namespace vox {
 
 struct RenderJobOptions {
   std::string store_dir;
-  std::string camera_path;  // empty: camera_json, or DefaultCamera over the store's bbox
+  // empty: camera_json, or DefaultCamera over the store's bbox. A camera
+  // object, or an array of them: a sequence, a frame per camera.
+  std::string camera_path;
   std::string scene_path;   // empty: scene_json, or the default scene
   // cam.json / scene.json text, used when the path is empty; messages name
   // them "camera" and "scene".
   std::string camera_json, scene_json;
+  // The outputs of each frame: plain names, or printf frame patterns
+  // (out.%04d.exr), which a sequence of more than one frame requires.
   std::string exr_path = "render.exr";  // empty: no EXR (then no preview)
   std::string preview_path;  // empty: none
   std::string stats_path;    // empty: none
@@ -79,10 +87,24 @@ struct RenderJobOptions {
   // --cam's projection, field of view, size and up) turned to look at the
   // volume's world-box centre from there, framing the box (OrbitCamera).
   std::optional<std::pair<double, double>> view;
-  std::string save_camera_path;  // --save-cam: the camera used, as cam.json; empty: none
+  // --save-cam: the camera used, as cam.json; empty: none. In a sequence: a
+  // pattern writes each frame's camera beside its frame, a plain name the
+  // array of the rendered frames' cameras with the last frame.
+  std::string save_camera_path;
+  // --turntable N: N frames, the camera (--cam's, --view's or the default
+  // one) turned about its up axis through its look-at point in steps of
+  // 360 / N degrees (TurntableCameras). 0: no turntable.
+  int turntable = 0;
+  // --frames A-B: the frames of the sequence this run renders; unset: all.
+  std::optional<FrameRange> frames;
+  // Called once every frame's outputs are known and checked, before any
+  // work, with their paths (vox-render's signal thread removes their
+  // temporaries).
+  std::function<void(const std::vector<std::string>&)> on_outputs;
   FILE* log = stderr;
   // Keep the image in RenderJobOutput; its bytes are charged to the memory
-  // budget before the brick cache is sized.
+  // budget before the brick cache is sized. One frame only (--frames N
+  // picks one of a sequence).
   bool keep_image = false;
   // --allow-huge: frames over kMaxPixelsUnlessAllowed (render/limits.h).
   bool allow_huge = false;

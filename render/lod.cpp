@@ -189,7 +189,7 @@ bool LodTracer::Exact(const Ray& gr, const Cone& cone) const {
 StatusOr<bool> LodTracer::FirstHit(const LodLevelTracer& base, const LodThread* thread,
                                    const Ray& gr, const Cone& cone, bool skip_start_run,
                                    double eps, LodSegment* out, VoxelAttributes* attrs,
-                                   TraceCounters* counters) const {
+                                   TraceCounters* counters, const StartPlane* start) const {
   bool run_active = skip_start_run, found = false;
   double run_end = 0.0;
   Status attr_error;
@@ -214,7 +214,7 @@ StatusOr<bool> LodTracer::FirstHit(const LodLevelTracer& base, const LodThread* 
         }
         return false;
       },
-      counters));
+      counters, start));
   VOX_RETURN_IF_ERROR(attr_error);
   if (found && counters != nullptr) ++counters->hits;
   return found;

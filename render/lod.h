@@ -153,10 +153,15 @@ class LodTracer {
   // Visits the occupied cells along the ray in order, level by level,
   // until `visit` (bool(const LodSegment&)) returns false. `base` traces
   // level 0 (the caller's tracer of the base volume, e.g. with a per-thread
-  // brick table); `thread` (optional) the coarse levels.
+  // brick table); `thread` (optional) the coarse levels. `start` (may be
+  // null): a beam StartPlane the ray satisfies in the base volume
+  // (core/tracer.h); the level-0 segment's walk starts there, which changes
+  // no answer. Coarse levels do not use it (a coarse cell is occupied where
+  // the base has nothing), so an empty beam block's rays still walk them.
   template <class Visitor>
   Status Traverse(const LodLevelTracer& base, const LodThread* thread, const Ray& gr,
-                  const Cone& cone, Visitor&& visit, TraceCounters* counters = nullptr) const;
+                  const Cone& cone, Visitor&& visit, TraceCounters* counters = nullptr,
+                  const StartPlane* start = nullptr) const;
 
   // The first occupied cell along the ray, after the run of cells it starts
   // in when `skip_start_run` (cells each entered within eps * (1 + t) of
@@ -164,7 +169,8 @@ class LodTracer {
   // False on a miss.
   StatusOr<bool> FirstHit(const LodLevelTracer& base, const LodThread* thread, const Ray& gr,
                           const Cone& cone, bool skip_start_run, double eps, LodSegment* out,
-                          VoxelAttributes* attrs, TraceCounters* counters = nullptr) const;
+                          VoxelAttributes* attrs, TraceCounters* counters = nullptr,
+                          const StartPlane* start = nullptr) const;
 
  private:
   static constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -182,7 +188,8 @@ class LodTracer {
 
 template <class Visitor>
 Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, const Ray& gr,
-                           const Cone& cone, Visitor&& visit, TraceCounters* counters) const {
+                           const Cone& cone, Visitor&& visit, TraceCounters* counters,
+                           const StartPlane* start) const {
   double t_in, t_out;
   BoxSpan(gr, &t_in, &t_out);
   if (!(t_in <= t_out)) return OkStatus();
@@ -207,7 +214,7 @@ Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, 
             if (!visit(seg)) stopped = true;
             return !stopped;
           },
-          counters));
+          counters, start));
     } else {
       const double start = std::max(t_a, t_in);
       if (start >= t_out) break;

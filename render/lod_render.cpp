@@ -7,18 +7,20 @@
 namespace vox {
 
 bool Renderer::FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, TraceContext& cx,
-                          Hit* hit, int* level, VoxelAttributes* attrs) const {
+                          Hit* hit, int* level, VoxelAttributes* attrs,
+                          const StartPlane* start) const {
   if (lod_->Exact(gr, cone)) {
     ++cx.c->lod.exact_rays;
     *level = 0;
-    const bool found = FindHit(gr, skip_start_run, cx, hit, attrs);
+    const bool found = FindHit(gr, skip_start_run, cx, hit, attrs, start);
     if (found) ++cx.c->lod.stops[0];
     return found;
   }
   LodSegment seg;
   if (attrs != nullptr) ++cx.c->attribute_lookups;
   StatusOr<bool> found =
-      lod_->FirstHit(*cx.tracer, cx.lod, gr, cone, skip_start_run, eps_t_, &seg, attrs, &cx.c->trace);
+      lod_->FirstHit(*cx.tracer, cx.lod, gr, cone, skip_start_run, eps_t_, &seg, attrs,
+                     &cx.c->trace, start);
   if (!found.ok()) {
     cx.Fail(found.status());
     return false;

@@ -192,7 +192,8 @@ void Renderer::ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* out,
   Hit h;
   VoxelAttributes a;
   int level = 0;
-  if (!(lod ? FindHitLod(gr, *cone, /*skip_start_run=*/false, cx, &h, &level, SurfaceAttrs(&a))
+  if (!(lod ? FindHitLod(gr, *cone, /*skip_start_run=*/false, cx, &h, &level, SurfaceAttrs(&a),
+                        start)
             : FindHit(gr, /*skip_start_run=*/false, cx, &h, SurfaceAttrs(&a), start))) {
     if (!cx.failed() && scene_.background_in_exr) out->color = Background(wr.dir);
     return;

@@ -125,7 +125,9 @@ struct RenderOptions {
   // of a tile, one query of the resident top gives a plane before which the
   // block's primary rays meet nothing, and they start their walks there
   // (misses without a walk when the block meets nothing). The hits are the
-  // same either way, bit for bit. Off for fog and LOD.
+  // same either way, bit for bit. Off for fog. With LOD, primary rays start
+  // their level-0 segment's walk there (LodTracer::Traverse), and a block
+  // that meets nothing in the base still walks the coarse levels.
   bool beam = true;
   int beam_block = 8;
   // With LOD: pixels at a coarse silhouette (a coarse stop next to a miss)
@@ -284,7 +286,7 @@ class Renderer {
   // lod_render.cpp: level-of-detail versions of the above (render/lod.h).
   // The first hit along gr with the cone; *level its LOD level.
   bool FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, TraceContext& cx, Hit* hit,
-                  int* level, VoxelAttributes* attrs) const;
+                  int* level, VoxelAttributes* attrs, const StartPlane* start = nullptr) const;
   bool OccludedLod(const Ray& gr, double t_max, const Cone& cone, TraceContext& cx) const;
   glm::dvec3 RadianceLod(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
                          const Cone& cone, TraceContext& cx) const;

@@ -75,7 +75,7 @@ class Renderer::TileRays {
   TileRays(const Renderer& r, const TileRect& rect)
       : camera_(r.camera_), rect_(rect), spp_(r.scene_.samples_per_pixel),
         block_(std::max(1, r.options_.beam_block)) {
-    if (r.options_.beam && !r.fog_ && !r.lod_) planes_ = r.BeamPlanes(rect);
+    if (r.options_.beam && !r.fog_) planes_ = r.BeamPlanes(rect);
     screen_x_.resize(size_t(spp_) * size_t(rect.w));
     screen_y_.resize(size_t(spp_) * size_t(rect.h));
     for (int k = 0; k < spp_; ++k) {
@@ -174,7 +174,9 @@ Status Renderer::ShadeTilePixel(int px, int py, TileRays& rays, TraceContext& cx
   const int spp = rays.spp();
   value->weight = 1.0 / spp;
   const StartPlane* start = rays.Start(px, py);
-  if (start != nullptr && start->s_min == kInf) {
+  // (With level of detail a coarse cell may be occupied where the base has
+  // nothing: such a block's rays still walk the coarse levels.)
+  if (start != nullptr && start->s_min == kInf && !lod_) {
     // The block's beam meets nothing (its corner rays are finite and near:
     // BeamStartPlane), so each sample is a miss, as its walk would find:
     // no walk, no per-sample set-up (ShadePixel is not called).

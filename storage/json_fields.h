@@ -43,7 +43,10 @@ inline std::string Join(const std::string& prefix, std::string_view key) {
 // Parses JSON text; a syntax error names the file and the byte offset. A key
 // that appears twice in one object is an error naming the key (JSON parsers
 // disagree on which one wins, so the file's meaning would be ambiguous).
-inline StatusOr<json> Parse(std::string_view text, std::string_view file) {
+// The top level must be an object, or with `allow_array` an object or an
+// array (a cam.json sequence).
+inline StatusOr<json> Parse(std::string_view text, std::string_view file,
+                            bool allow_array = false) {
   // One key set per open object (O(log n) a key); the first duplicate seen
   // is reported.
   std::vector<std::set<std::string, std::less<>>> open_objects;
@@ -74,8 +77,10 @@ inline StatusOr<json> Parse(std::string_view text, std::string_view file) {
     }
     return InvalidArgumentError(std::string(file) + ": not valid JSON");
   }
-  if (!j.is_object())
-    return InvalidArgumentError(std::string(file) + ": top level must be a JSON object");
+  if (!j.is_object() && !(allow_array && j.is_array()))
+    return InvalidArgumentError(std::string(file) + (allow_array
+                                                         ? ": top level must be a JSON object or array"
+                                                         : ": top level must be a JSON object"));
   return j;
 }
 

@@ -8,19 +8,64 @@
 # finished and exits non-zero if any part or the merge failed. Binaries come
 # from $VOX_RENDER and $VOX_MERGE (default: vox-render, vox-merge on PATH);
 # give absolute paths, the jobs may run in another directory.
+#
+# Or renders a frame sequence (a --cam array, --turntable N) across a job
+# array, each task a chunk of K frames (default 1) in one vox-render process
+# (render-frames.sbatch):
+#
+#   scripts/slurm/submit.sh --frames FRAMES [--chunk K] [--wait] STORE OUT.%04d.exr [vox-render flags...]
+#
+# FRAMES is the sequence's length (as --turntable or the --cam array says);
+# the flags give the sequence and run in the current directory, so relative
+# paths in them hold; logs go to OUT's directory, frames-I.log. With --wait,
+# blocks until every task has finished and exits non-zero if one failed.
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 wait_flag=()
 merge_flags=()
+frames='' chunk=1
 while [[ $# -gt 0 ]]; do
   case $1 in
     --wait) wait_flag=(--wait); shift ;;
     --preview) merge_flags+=(--preview "$(realpath -m "$2")"); shift 2 ;;
+    --frames) frames=$2; shift 2 ;;
+    --chunk) chunk=$2; shift 2 ;;
     *) break ;;
   esac
 done
+if [[ -n $frames ]]; then
+  # A frame sequence: an array of ceil(FRAMES / K) tasks.
+  if [[ $# -lt 2 ]]; then
+    sed -n '2,22p' "$0" >&2
+    exit 2
+  fi
+  [[ $frames =~ ^[1-9][0-9]*$ ]] || { echo "submit.sh: --frames must be a positive integer, not '$frames'" >&2; exit 2; }
+  [[ $chunk =~ ^[1-9][0-9]*$ ]] || { echo "submit.sh: --chunk must be a positive integer, not '$chunk'" >&2; exit 2; }
+  [[ ${#merge_flags[@]} -eq 0 ]] || { echo "submit.sh: with --frames, give --preview P.%04d.png after OUT (a vox-render flag)" >&2; exit 2; }
+  store=$(realpath "$1") out=$(realpath -m "$2")
+  shift 2
+  logs=$(dirname "$out")
+  mkdir -p "$logs"
+  export VOX_RENDER=${VOX_RENDER:-$(command -v vox-render || echo vox-render)}
+  tasks=$(( (frames + chunk - 1) / chunk ))
+  set +e
+  job=$(sbatch --parsable --export=ALL --array="1-$tasks" --chdir="$PWD" \
+    --output="$logs/frames-%a.log" "${wait_flag[@]}" \
+    "$here/render-frames.sbatch" "$store" "$frames" "$chunk" "$out" "$@")
+  status=$?
+  set -e
+  echo "submitted frames array ${job%%;*} ($frames frames in $tasks tasks of up to $chunk) -> $out"
+  if [[ ${#wait_flag[@]} -gt 0 ]]; then
+    if [[ $status -ne 0 ]]; then
+      echo "submit.sh: a frames task failed; logs in $logs/frames-*.log" >&2
+      exit 1
+    fi
+    echo "done: $out"
+  fi
+  exit $status
+fi
 if [[ $# -lt 4 ]]; then
-  sed -n '2,12p' "$0" >&2
+  sed -n '2,22p' "$0" >&2
   exit 2
 fi
 store=$(realpath "$1") cam=$(realpath "$2") out=$(realpath -m "$3") n=$4

@@ -7,6 +7,7 @@ import math
 import os
 import re
 import shutil
+import signal
 import threading
 
 import pytest
@@ -77,6 +78,31 @@ def test_render_stats_and_options(store, files, workdir):
     assert e["stats"]["camera"]["width"] == 40
     assert e["stats"]["camera"]["source"]["size"] == "--size"
     assert e["stats"]["camera"]["source"]["view"] == [30.0, 20.0]
+
+
+def test_render_one_frame_of_a_sequence(store, files, workdir):
+    """A list of cameras or turntable=N is a frame sequence; frames=K renders
+    its frame K, the pixels vox-render writes for that frame."""
+    def same(a, b):
+        for key in ("rgba", "z"):
+            assert np.array_equal(np.ascontiguousarray(a[key]).view(np.uint32),
+                                  np.ascontiguousarray(b[key]).view(np.uint32)), key
+    cams = [files["camera"], files["ortho"]]
+    second = vox.render(store, cams, frames=2, threads=2)
+    same(second, vox.render(store, files["ortho"], threads=2))
+    assert second["stats"]["frame"] == {"number": 2, "count": 2, "first": 2, "last": 2}
+    with pytest.raises(ValueError, match="one frame"):
+        vox.render(store, cams, threads=2)
+    code, _, err = run([tool("render"), store, "--cam", files["camera_path"], "--turntable", "4",
+                        "--frames", "3", "-o", workdir / "tt.%d.exr", "--threads", "2", "--float",
+                        "--quiet"])
+    assert code == 0, err
+    exr = vox.read_exr(workdir / "tt.3.exr")
+    third = vox.render(store, files["camera_path"], turntable=4, frames=3, threads=2)
+    for c, name in enumerate("RGBA"):
+        assert np.array_equal(np.ascontiguousarray(third["rgba"][:, :, c]).view(np.uint32),
+                              exr["channels"][name].view(np.uint32)), name
+    assert third["stats"]["camera"]["source"]["turntable"] == {"frames": 4, "turn_deg": 180.0}
 
 
 def test_store_info_is_vox_info(store):
@@ -360,6 +386,31 @@ def test_a_raising_progress_callback_keeps_the_old_store(vdb, workdir):
     assert len(calls) == 1  # stopped at the first progress point
     assert store_bytes(target) == before
     assert temporaries(workdir) == []
+
+
+@pytest.mark.parametrize("hook,value,words", [
+    ("VOX_INGEST_TEST_CRASH", str(int(signal.SIGSEGV)), "crashed with SIGSEGV"),
+    ("VOX_INGEST_TEST_EXIT", "1", "exited with code 1 before finishing"),
+])
+def test_a_crashing_ingest_raises_and_keeps_the_old_store(hook, value, words, vdb, workdir,
+                                                          monkeypatch):
+    # The ingest runs in a child process, as vox-ingest's does: a crash while
+    # reading (the tool's test hook raises the signal, or exits as a
+    # sanitizer report does, at the first progress point) raises here, Python
+    # goes on, the old store stays and the child's temporaries are removed.
+    target = workdir / "crash.store"
+    vox.ingest(vdb, target, force=True)
+    before = store_bytes(target)
+    monkeypatch.setenv(hook, value)
+    with pytest.raises(RuntimeError) as info:
+        vox.ingest(vdb, target, force=True)
+    message = str(info.value)
+    assert str(vdb) + ": the ingest child process (pid " in message, message
+    assert words in message and "its unfinished store is removed" in message, message
+    assert store_bytes(target) == before
+    assert temporaries(workdir) == []
+    monkeypatch.delenv(hook)
+    assert vox.ingest(vdb, target, force=True)["bricks"] > 0  # and the next call works
 
 
 INTERRUPT = r"""

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <random>
 #include <set>
+#include <string>
 #include <tuple>
 
 #include "render/camera.h"
@@ -172,6 +173,60 @@ TEST_F(LodRender, FarViewReadsFewerBricksWithTheSameSilhouette) {
   ASSERT_GT(uni, 0u);
   // Coarse cells are conservative: the disc grows by less than a cell (a pixel) at its rim.
   EXPECT_GE(double(inter) / double(uni), 0.9);
+}
+
+// Beam start distances with level of detail (RenderOptions::beam): primary
+// rays start their level-0 segment's walk at the beam plane, and rays of a
+// block the base meets nothing in still walk the coarse levels. Every
+// channel is bit for bit what it is without the beam, antialiased
+// silhouettes included, for less walk work.
+TEST_F(LodRender, TheBeamChangesNoPixelOfALodFrame) {
+  const std::vector<Camera> cams = {
+      Cam(glm::dvec3(64.5, 64.5, 64.5 + 400), 128),  // far: level 1 and up
+      Cam(glm::dvec3(64.5, 80, 64.5 + 75), 96),      // close: level 0
+      Cam(glm::dvec3(200, 150, 300), 80),            // oblique, mixed levels
+      Cam(glm::dvec3(64.5, 64.5, 300), 64, Projection::kOrthographic, 160.0),
+      Cam(glm::dvec3(64.5, 64.5, 64.5 + 30), 64),    // inside the shell
+      // Very far: 23 voxels a pixel, level 4 (cells wider than the base's
+      // first-step cells): blocks whose beam meets nothing in the base
+      // while a coarse cell's dilation reaches into them.
+      Cam(glm::dvec3(64.5, 64.5, 64.5 + 1500), 48)};
+  uint64_t cells_on = 0, cells_off = 0, coarse_stops = 0;
+  for (size_t k = 0; k < cams.size(); ++k)
+    for (int grid : {0, 4})
+      for (int block : {8, 1}) {
+      testing::Image img[2];
+      RenderCounters counters[2];
+      for (int beam = 0; beam < 2; ++beam) {
+        RenderOptions ro;
+        ro.lod = 1.0;
+        ro.lod_levels = levels_;
+        ro.silhouette_grid = grid;
+        ro.beam = beam == 1;
+        ro.beam_block = block;
+        ro.layers.normal = ro.layers.voxel = true;
+        auto r = Renderer::Create(base_.get(), cams[k], Scene{}, ro);
+        ASSERT_TRUE(r.ok()) << r.status().ToString();
+        ASSERT_TRUE(testing::RenderToMemory(**r, &img[beam], &counters[beam], 16).ok());
+      }
+      const std::string what = "camera " + std::to_string(k) + " grid " + std::to_string(grid) +
+                               " block " + std::to_string(block);
+      for (const auto& [name, px] : img[0].ch) {
+        const auto& other = img[1].ch.at(name);
+        ASSERT_EQ(px.size(), other.size());
+        size_t diff = 0;
+        for (size_t i = 0; i < px.size(); ++i)
+          if (std::memcmp(&px[i], &other[i], sizeof(float)) != 0) ++diff;
+        EXPECT_EQ(diff, 0u) << what << " channel " << name;
+      }
+      EXPECT_GT(counters[1].hit_pixels, 0u) << what;
+      EXPECT_EQ(counters[0].lod.refined_pixels, counters[1].lod.refined_pixels) << what;
+      cells_off += counters[0].trace.cells_visited;
+      cells_on += counters[1].trace.cells_visited;
+      for (int l = 1; l <= kMaxLevels; ++l) coarse_stops += counters[1].lod.stops[l];
+      }
+  EXPECT_GT(coarse_stops, 0u);  // the coarse levels were in play
+  EXPECT_LT(cells_on, cells_off);
 }
 
 TEST_F(LodRender, StopsNeverFinerThanTheConeNorLaterThanTheExactHit) {

@@ -5,20 +5,25 @@
 // conversion, ingest and store open are timed apart and excluded from the
 // frame times.
 //
-// Both sides trace one primary ray per pixel centre of vox::Camera (so the
-// same camera convention) over the same tiles (render/tiles.h, Morton order,
-// threads pulling tiles from one cursor in a TBB arena of --threads):
+// Both sides trace one primary ray per pixel centre of the same vox::Camera
+// over the same tiles (render/tiles.h, Morton order, threads pulling tiles
+// from one cursor in a TBB arena of --threads), each building its rays its
+// own best way:
 //   vox:  vox::RenderFrame of a Renderer with no lights (scene "lights": []),
-//         no EXR: the renderer's primary-ray path, hits shaded by the ambient
-//         term of the material, misses by the background gradient;
-//   nano: nanovdb::ZeroCrossing (HDDA over the tree's levels, then voxel by
-//         voxel through the narrow band to the first sign change) on the
-//         index-space ray, writing the same RGBAZ tile buffers. The index ray
-//         starts half a voxel up on each axis so that NanoVDB's voxel ijk, the
-//         cell [ijk, ijk + 1), is the cell OpenVDB's voxel ijk covers (centred
-//         on ijk), as vox's grid space has it (render/grid_transform.h).
+//         no EXR: the renderer's primary-ray path (its batched screen rays),
+//         hits shaded by the ambient term of the material, misses 0;
+//   nano: NanoCaster below: float rays made once per pixel from the camera's
+//         index-space frame, nanovdb::ZeroCrossing (HDDA over the tree's
+//         levels, then voxel by voxel through the narrow band to the first
+//         sign change), timed twice: as a bare loop (rays and hits) and as a
+//         frame with vox's shading and channels. The index ray starts half a
+//         voxel up on each axis so that NanoVDB's voxel ijk, the cell
+//         [ijk, ijk + 1), is the cell OpenVDB's voxel ijk covers (centred on
+//         ijk), as vox's grid space has it (render/grid_transform.h).
 // After one warm-up frame each, --rounds warm frames of each run alternately
-// (vox, nano, vox, nano, ...); the median of each gives rays/s and the ratio.
+// (vox, nano shaded, nano bare, vox, ...), each timed by a stopwatch around
+// the whole frame call; medians and best frames give rays/s and the ratios
+// vox_over_nano_frame (against the shaded frame) and vox_over_nano_bare.
 //
 // Check: a frame of each is compared pixel by pixel. Hit masks may differ only
 // on the silhouette ring (a pixel one side calls a hit and the other a miss
@@ -118,61 +123,89 @@ void ForTiles(const vox::TileLayout& layout, int threads,
   });
 }
 
-// NanoVDB's side: the grid, the camera and the frame's tile loop.
+// NanoVDB's side: the grid, the camera and the frame's tile loop, built as
+// an independent caster builds them: one float ray per pixel, made once from
+// the camera's index-space frame (direction = forward + sx right + sy up,
+// sx and sy linear in the pixel, normalised in float), then HDDA +
+// ZeroCrossing. Two frames of it:
+//   bare:   the ray and the hit only (A and Z written: what a bare loop does);
+//   shaded: the same, plus vox's shading with no lights (the ambient colour
+//           on a hit; on a miss 0, or the background gradient from the same
+//           direction when the scene puts it in the EXR), writing the
+//           channels vox's frame writes.
+// Z is the planar depth, as vox's (the world distance over |direction|).
 class NanoCaster {
  public:
   NanoCaster(const nanovdb::FloatGrid* grid, const vox::Camera& cam, const vox::Scene& scene)
-      : grid_(grid), cam_(cam), scene_(scene) {}
-
-  // Pixel (ix, iy)'s ray: hit flag, world distance to the hit voxel's entry.
-  bool Trace(nanovdb::FloatGrid::AccessorType& acc, int ix, int iy, double* t_world) const {
-    const vox::WorldRay wr = cam_.PixelRay(ix + 0.5, iy + 0.5);
-    const nanovdb::Vec3d eye =
-        grid_->worldToIndex(nanovdb::Vec3d(wr.origin.x, wr.origin.y, wr.origin.z));
-    nanovdb::Vec3d dir = grid_->worldToIndexDir(nanovdb::Vec3d(wr.dir.x, wr.dir.y, wr.dir.z));
-    const double len = dir.length();
-    dir *= 1.0 / len;
-    nanovdb::Ray<float> ray(nanovdb::Vec3f(float(eye[0] + 0.5), float(eye[1] + 0.5),
-                                           float(eye[2] + 0.5)),
-                            nanovdb::Vec3f(float(dir[0]), float(dir[1]), float(dir[2])));
-    nanovdb::Coord ijk;
-    float v = 0, t = 0;
-    if (!nanovdb::ZeroCrossing(ray, acc, ijk, v, t)) return false;
-    *t_world = double(t) / len;
-    return true;
+      : grid_(grid), scene_(scene), width_(cam.width), height_(cam.height) {
+    perspective_ = cam.projection == vox::Projection::kPerspective;
+    auto index_dir = [&](const glm::dvec3& d) {
+      return grid_->worldToIndexDir(nanovdb::Vec3d(d.x, d.y, d.z));
+    };
+    const nanovdb::Vec3d eye = grid_->worldToIndex(
+        nanovdb::Vec3d(cam.position.x, cam.position.y, cam.position.z));
+    // +0.5: NanoVDB's voxel ijk is the cell [ijk, ijk + 1); vox's and
+    // OpenVDB's voxel ijk is centred on ijk (render/grid_transform.h).
+    eye_ = nanovdb::Vec3f(float(eye[0] + 0.5), float(eye[1] + 0.5), float(eye[2] + 0.5));
+    forward_ = nanovdb::Vec3f(index_dir(cam.forward()));
+    right_ = nanovdb::Vec3f(index_dir(cam.right()));
+    up_ = nanovdb::Vec3f(index_dir(cam.true_up()));
+    // Camera::ScreenX(ix + 0.5) and ScreenY(iy + 0.5) as sx0 + ix dsx, sy0 + iy dsy.
+    sx0_ = float((1.0 / cam.width - 1.0) * cam.scale_x());
+    dsx_ = float(2.0 * cam.scale_x() / cam.width);
+    sy0_ = float((1.0 - 1.0 / cam.height) * cam.scale_y());
+    dsy_ = float(-2.0 * cam.scale_y() / cam.height);
+    voxel_ = float(grid_->voxelSize()[0]);
+    surface_ = scene_.material.color * scene_.ambient;
   }
 
-  // Renders `rect` into `buf` as vox does with no lights: R, G, B the ambient
-  // colour on a hit, the background gradient on a miss; A; Z.
+  template <bool kShaded>
   void RenderTile(const TileRect& rect, TileBuffer* buf) const {
     auto acc = grid_->getAccessor();
-    const glm::dvec3 surface = scene_.material.color * scene_.ambient;
     const float inf = std::numeric_limits<float>::infinity();
-    for (int py = 0; py < rect.h; ++py)
+    for (int py = 0; py < rect.h; ++py) {
+      const float sy = sy0_ + float(rect.y0 + py) * dsy_;
       for (int px = 0; px < rect.w; ++px) {
-        const int ix = rect.x0 + px, iy = rect.y0 + py;
-        double t = 0;
-        glm::dvec3 c;
-        const bool hit = Trace(acc, ix, iy, &t);
-        if (hit) {
-          c = surface;
+        const float sx = sx0_ + float(rect.x0 + px) * dsx_;
+        nanovdb::Vec3f origin = eye_, dir = forward_;
+        float world_len = 1.0f;  // |forward + sx right + sy up| in world units
+        if (perspective_) {
+          dir = forward_ + right_ * sx + up_ * sy;
+          world_len = std::sqrt(1.0f + sx * sx + sy * sy);
         } else {
-          const glm::dvec3 dir = cam_.PixelRay(ix + 0.5, iy + 0.5).dir;
-          const double u = 0.5 * (glm::dot(dir, cam_.true_up()) + 1.0);
-          c = glm::mix(scene_.background_bottom, scene_.background_top, std::clamp(u, 0.0, 1.0));
+          origin = eye_ + right_ * sx + up_ * sy;
         }
-        *buf->at(vox::kChR, px, py) = float(c.r);
-        *buf->at(vox::kChG, px, py) = float(c.g);
-        *buf->at(vox::kChB, px, py) = float(c.b);
+        const float len = dir.length();
+        nanovdb::Ray<float> ray(origin, dir * (1.0f / len));
+        nanovdb::Coord ijk;
+        float v = 0, t = 0;
+        const bool hit = nanovdb::ZeroCrossing(ray, acc, ijk, v, t);
         *buf->at(vox::kChA, px, py) = hit ? 1.0f : 0.0f;
-        *buf->at(vox::kChZ, px, py) = hit ? float(t) : inf;
+        *buf->at(vox::kChZ, px, py) = hit ? t * voxel_ / world_len : inf;
+        if constexpr (kShaded) {
+          glm::dvec3 c = hit ? surface_ : glm::dvec3(0.0);  // premultiplied: a miss is 0
+          if (!hit && scene_.background_in_exr) {
+            // vox's background: u = (dir . up + 1) / 2 of the unit world direction
+            const float u = perspective_ ? 0.5f * (sy / world_len + 1.0f) : 0.5f;
+            c = glm::mix(scene_.background_bottom, scene_.background_top,
+                         double(std::clamp(u, 0.0f, 1.0f)));
+          }
+          *buf->at(vox::kChR, px, py) = float(c.r);
+          *buf->at(vox::kChG, px, py) = float(c.g);
+          *buf->at(vox::kChB, px, py) = float(c.b);
+        }
       }
+    }
   }
 
  private:
   const nanovdb::FloatGrid* grid_;
-  const vox::Camera& cam_;
   const vox::Scene& scene_;
+  int width_, height_;
+  bool perspective_ = true;
+  nanovdb::Vec3f eye_, forward_, right_, up_;
+  float sx0_ = 0, dsx_ = 0, sy0_ = 0, dsy_ = 0, voxel_ = 1;
+  glm::dvec3 surface_{0.0};
 };
 
 struct Image {
@@ -406,39 +439,52 @@ int main(int argc, char** argv) {
     if (!p.ok()) return Fail(p.status().ToString());
     plain = std::move(p).value();
   }
-  auto vox_frame = [&](vox::FrameStats* st, const vox::Renderer* r = nullptr) {
+  // Every frame is timed the same way: a stopwatch around the call.
+  std::vector<double> vox_s, bare_s, shaded_s, plain_s;
+  auto vox_frame = [&](vox::FrameStats* st, const vox::Renderer* r,
+                       std::vector<double>* seconds) {
     vox::FrameOptions fo;
     fo.threads = threads;
     fo.tile_size = tile;
     *st = vox::FrameStats();  // RenderFrame adds to the counters
-    return vox::RenderFrame(r ? *r : **renderer, fo, st);
-  };
-  auto nano_frame = [&] {
     vox::Stopwatch sw;
-    ForTiles(layout, threads, workers,
-             [&](const TileRect& r, Worker& w) { caster.RenderTile(r, &w.buf); });
-    return sw.Seconds();
+    Status s = vox::RenderFrame(r ? *r : **renderer, fo, st);
+    if (seconds) seconds->push_back(sw.Seconds());
+    return s;
   };
-  std::vector<double> vox_s, nano_s, plain_s;
+  auto nano_frame = [&](bool shaded, std::vector<double>* seconds) {
+    vox::Stopwatch sw;
+    ForTiles(layout, threads, workers, [&](const TileRect& r, Worker& w) {
+      if (shaded)
+        caster.RenderTile<true>(r, &w.buf);
+      else
+        caster.RenderTile<false>(r, &w.buf);
+    });
+    const double t = sw.Seconds();
+    if (seconds) seconds->push_back(t);
+    return t;
+  };
   vox::FrameStats st;
-  if (Status s = vox_frame(&st); !s.ok()) return Fail(s.ToString());
+  std::vector<double> first;
+  if (Status s = vox_frame(&st, nullptr, &first); !s.ok()) return Fail(s.ToString());
   if (plain) {
-    if (Status s = vox_frame(&st, plain.get()); !s.ok()) return Fail(s.ToString());
+    if (Status s = vox_frame(&st, plain.get(), nullptr); !s.ok()) return Fail(s.ToString());
   }
-  out["vox_cold_seconds"] = st.render_seconds;
-  out["nano_first_seconds"] = nano_frame();
+  out["vox_first_seconds"] = first[0];
+  out["nano_first_seconds"] = nano_frame(true, nullptr);
+  nano_frame(false, nullptr);
   vox::RenderCounters vox_counters;
   for (int r = 0; r < rounds; ++r) {
-    if (Status s = vox_frame(&st); !s.ok()) return Fail(s.ToString());
-    vox_s.push_back(st.render_seconds);
+    if (Status s = vox_frame(&st, nullptr, &vox_s); !s.ok()) return Fail(s.ToString());
     vox_counters = st.counters;
-    nano_s.push_back(nano_frame());
+    nano_frame(true, &shaded_s);
+    nano_frame(false, &bare_s);
     if (plain) {
-      if (Status s = vox_frame(&st, plain.get()); !s.ok()) return Fail(s.ToString());
-      plain_s.push_back(st.render_seconds);
+      if (Status s = vox_frame(&st, plain.get(), &plain_s); !s.ok()) return Fail(s.ToString());
     }
   }
-  const double vm = Median(vox_s), nm = Median(nano_s);
+  auto best = [](const std::vector<double>& v) { return *std::min_element(v.begin(), v.end()); };
+  const double vm = Median(vox_s), nm = Median(shaded_s), bm = Median(bare_s);
   out["threads"] = threads;
   out["tile_size"] = tile;
   out["split"] = (*renderer)->SplitString();
@@ -447,18 +493,27 @@ int main(int argc, char** argv) {
   out["beam_block"] = beam_block;
   if (ab_beam_block > 0) out["other_beam_block"] = ab_beam_block;
   out["vox_seconds"] = vox_s;
-  out["nano_seconds"] = nano_s;
+  out["nano_shaded_seconds"] = shaded_s;
+  out["nano_bare_seconds"] = bare_s;
   out["vox_median_seconds"] = vm;
-  out["nano_median_seconds"] = nm;
+  out["nano_shaded_median_seconds"] = nm;
+  out["nano_bare_median_seconds"] = bm;
   out["vox_rays_per_second"] = pixels / vm;
-  out["nano_rays_per_second"] = pixels / nm;
-  out["vox_over_nano"] = nm / vm;
+  out["nano_shaded_rays_per_second"] = pixels / nm;
+  out["nano_bare_rays_per_second"] = pixels / bm;
+  // vox's frame against NanoVDB's shaded frame (the same rays' work and
+  // output) and against its bare loop (rays and hits only), as medians of the
+  // alternated rounds and as best frames.
+  out["vox_over_nano_frame"] = nm / vm;
+  out["vox_over_nano_bare"] = bm / vm;
+  out["vox_over_nano_frame_best"] = best(shaded_s) / best(vox_s);
+  out["vox_over_nano_bare_best"] = best(bare_s) / best(vox_s);
   out["vox_dda_moves_per_ray"] = double(vox_counters.trace.total_moves()) / pixels;
   if (plain && ab_beam) {
     const double pm = Median(plain_s);
     out["vox_other_beam_seconds"] = plain_s;
     out["vox_other_beam_rays_per_second"] = pixels / pm;
-    out["vox_other_beam_over_nano"] = nm / pm;
+    out["vox_other_beam_over_nano_frame"] = nm / pm;
     out["beam_speedup"] = beam ? pm / vm : vm / pm;
     if (ab_beam_block > 0)
       fprintf(stderr, "vox with beam blocks of %d: %.2fx the rays/s with blocks of %d\n",
@@ -470,7 +525,7 @@ int main(int argc, char** argv) {
     const double pm = Median(plain_s);
     out["vox_other_clip_seconds"] = plain_s;
     out["vox_other_clip_rays_per_second"] = pixels / pm;
-    out["vox_other_clip_over_nano"] = nm / pm;
+    out["vox_other_clip_over_nano_frame"] = nm / pm;
     out["clip_speedup"] = clip ? pm / vm : vm / pm;
     fprintf(stderr, "vox with the occupied-box clip: %.2fx the rays/s without it\n",
             clip ? pm / vm : vm / pm);
@@ -484,7 +539,7 @@ int main(int argc, char** argv) {
   ForTiles(layout, threads, workers, [&](const TileRect& r, Worker& w) {
     if (!(*renderer)->RenderTile(r, &w.buf, &w.counters, w.state.get()).ok()) failed = true;
     vi.Put(r, w.buf);
-    caster.RenderTile(r, &w.buf);
+    caster.RenderTile<true>(r, &w.buf);
     ni.Put(r, w.buf);
   });
   if (failed) return Fail("vox RenderTile failed in the check");
@@ -546,9 +601,11 @@ int main(int argc, char** argv) {
                   {"depth_diff_voxels_max", q(1.0)},
                   {"ok", off_ring == 0}};
   printf("%s\n", out.dump(2).c_str());
-  fprintf(stderr, "vox %.3g rays/s, nano %.3g rays/s: vox/nano %.2fx; check %s (%llu pixels differ on the "
+  fprintf(stderr,
+          "vox %.3g rays/s; NanoVDB shaded %.3g, bare %.3g rays/s: vox/NanoVDB %.2fx (frame), "
+          "%.2fx (bare loop), miss fraction %.2f; check %s (%llu pixels differ on the "
           "silhouette ring, %llu off it)\n",
-          pixels / vm, pixels / nm, nm / vm, off_ring == 0 ? "ok" : "FAILED",
-          (unsigned long long)ring, (unsigned long long)off_ring);
+          pixels / vm, pixels / nm, pixels / bm, nm / vm, bm / vm, 1.0 - double(vox_hits) / pixels,
+          off_ring == 0 ? "ok" : "FAILED", (unsigned long long)ring, (unsigned long long)off_ring);
   return off_ring == 0 && ab_differ == 0 ? 0 : 3;
 }

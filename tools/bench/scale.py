@@ -1216,9 +1216,10 @@ class Bench:
                     L.append(f"vdb_render: no .vdb for grid {n}: skipped.\n")
             L.append("vdb_render inputs: " + ", ".join(
                 f"{n}: `{p}` ({os.path.getsize(p) / MiB:.0f} MiB)" if os.path.exists(p) else f"{n}: `{p}`"
-                for n, p in sorted(a.vdb.items())) + " (`vdb_tool -sphere r=1 v=32/(15N) w=3`: the "
-                "same sphere, voxel size and band as the vox store; its whole grid is read before "
-                "rendering).\n")
+                for n, p in sorted(a.vdb.items())) + " (given with `--vdb N=PATH`, not made by this "
+                "script: each should hold the vox store's sphere at its voxel size, e.g. `vdb_tool "
+                "-sphere r=1 v=32/(15N)`, whose band, `w=`, the user chose; its whole grid is "
+                "read before rendering).\n")
             L.append("vdb_render rows: `-shader diffuse`, the same cameras and cgroups, whole-process wall time "
                      "(reading the .vdb included); limits are the same bytes as vox's (fractions of "
                      "the vox store), and its pixels are not compared with vox's.\n")

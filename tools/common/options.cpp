@@ -6,6 +6,7 @@
 
 #include "core/shapes.h"
 #include "render/camera.h"
+#include "render/frame_sequence.h"
 #include "render/lod.h"
 #include "storage/lod.h"
 #include "storage/memory_budget.h"
@@ -90,7 +91,7 @@ FlagArity RenderFlagArity(std::string_view flag) {
   if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
                    "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
                    "--io-threads", "--lod", "--silhouette-aa", "--compression", "--view",
-                   "--save-cam"}))
+                   "--save-cam", "--turntable", "--frames"}))
     return FlagArity::kValue;
   return FlagArity::kUnknown;
 }
@@ -183,6 +184,12 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->view = std::make_pair(az, el);
   } else if (a == "--save-cam") {
     o->save_camera_path = v;
+  } else if (a == "--turntable") {
+    if (!ParseInt(v, 1, kMaxFrames, &o->turntable))
+      return InvalidArgumentError("--turntable '" + v + "': expected a number of frames, 1.." +
+                                  std::to_string(kMaxFrames));
+  } else if (a == "--frames") {
+    VOX_ASSIGN_OR_RETURN(o->frames, ParseFrameRange(v));
   } else {
     return InvalidArgumentError("unknown flag " + a);
   }

@@ -7,13 +7,23 @@
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
+#include <map>
 #include <mutex>
+#include <set>
 #include <thread>
 
 #include "storage/file.h"
 
 namespace vox {
+
+std::string SignalName(int sig) {
+  const char* abbrev = sigabbrev_np(sig);
+  const char* text = strsignal(sig);
+  return (abbrev ? "SIG" + std::string(abbrev) : "signal " + std::to_string(sig)) + " (" +
+         (text ? text : "unknown") + ")";
+}
 
 void RemoveOwnTemporaries(const std::string& output, pid_t pid) {
   namespace fs = std::filesystem;
@@ -36,9 +46,46 @@ void RemoveOwnTemporaries(const std::string& output, pid_t pid) {
   }
 }
 
+void RemoveOwnTemporaries(const std::vector<std::string>& outputs, pid_t pid) {
+  namespace fs = std::filesystem;
+  // Directory -> the temporaries' name prefixes of its outputs.
+  std::map<std::string, std::set<std::string>> prefixes;
+  const std::string tag = ".tmp-" + std::to_string(pid) + "-";
+  for (std::string target : outputs) {
+    if (target.empty()) continue;
+    while (target.size() > 1 && target.back() == '/') target.pop_back();
+    fs::path tp(target), parent = tp.parent_path();
+    if (parent.empty()) parent = ".";
+    prefixes[parent.string()].insert("." + tp.filename().string() + tag);
+  }
+  for (const auto& [dir, names] : prefixes) {
+    for (int attempt = 0; attempt < 3; ++attempt) {  // writers may still be adding files
+      std::error_code ec;
+      bool left = false;
+      for (const auto& e : fs::directory_iterator(dir, ec)) {
+        const std::string name = e.path().filename().string();
+        const size_t at = name.find(tag);
+        if (at == std::string::npos || !names.count(name.substr(0, at + tag.size()))) continue;
+        std::error_code rec;
+        fs::remove_all(e.path(), rec);
+        left = left || fs::exists(e.path(), rec);
+      }
+      if (!left) break;
+    }
+  }
+}
+
 namespace {
 std::atomic<bool> g_signal_taken{false};
+// The outputs whose temporaries the signal thread removes.
+std::mutex g_outputs_mutex;
+std::vector<std::string> g_outputs;
 }  // namespace
+
+void AddSignalOutputs(const std::vector<std::string>& outputs) {
+  std::lock_guard<std::mutex> lock(g_outputs_mutex);
+  g_outputs.insert(g_outputs.end(), outputs.begin(), outputs.end());
+}
 
 int ToolExitCode(int code) {
   if (!g_signal_taken.load()) return code;
@@ -46,11 +93,12 @@ int ToolExitCode(int code) {
 }
 
 void StartOutputSignalThread(const std::string& tool, const std::vector<std::string>& outputs) {
+  AddSignalOutputs(outputs);
   sigset_t set;
   sigemptyset(&set);
   for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&set, sig);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);  // inherited by every thread created later
-  std::thread([set, tool, outputs] {
+  std::thread([set, tool] {
     int sig = 0;
     if (sigwait(&set, &sig) != 0) return;
     g_signal_taken = true;
@@ -60,8 +108,12 @@ void StartOutputSignalThread(const std::string& tool, const std::vector<std::str
     std::fprintf(stderr, "\n%s: %s: removing the unfinished outputs and exiting\n", tool.c_str(),
                  sig == SIGINT ? "interrupted (SIGINT)"
                  : sig == SIGHUP ? "hung up (SIGHUP)" : "terminated (SIGTERM)");
-    for (const std::string& output : outputs)
-      if (!output.empty()) RemoveOwnTemporaries(output, getpid());
+    std::vector<std::string> outputs;
+    {
+      std::lock_guard<std::mutex> lock(g_outputs_mutex);
+      outputs = g_outputs;
+    }
+    RemoveOwnTemporaries(outputs, getpid());
     std::_Exit(128 + sig);
   }).detach();
 }

@@ -15,9 +15,15 @@
 
 namespace vox {
 
+// A signal's name and description: "SIGSEGV (Segmentation fault)".
+std::string SignalName(int sig);
+
 // Removes the temporaries `.NAME.tmp-PID-*` (files or directories) of
 // process `pid` beside `output` (storage/file.h).
 void RemoveOwnTemporaries(const std::string& output, pid_t pid);
+
+// The same for many outputs at once: one listing of each directory.
+void RemoveOwnTemporaries(const std::vector<std::string>& outputs, pid_t pid);
 
 // vox-render, vox-merge and vox-ingest --add-lod, which run in-process: blocks
 // SIGINT, SIGTERM and SIGHUP in every thread created later and starts the
@@ -26,6 +32,10 @@ void RemoveOwnTemporaries(const std::string& output, pid_t pid);
 // path in `outputs` (`.NAME.tmp-PID-*` beside it), says so on stderr as
 // `tool` and exits with 128 + the signal: earlier outputs stay as they were.
 void StartOutputSignalThread(const std::string& tool, const std::vector<std::string>& outputs);
+
+// More outputs whose temporaries the signal thread removes (a frame
+// sequence's, known once its cameras are read). Thread-safe.
+void AddSignalOutputs(const std::vector<std::string>& outputs);
 
 // The tool's exit code `code`, unless the signal thread has taken a signal:
 // then the work may have failed only because its temporaries were removed

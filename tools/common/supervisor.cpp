@@ -21,14 +21,6 @@
 namespace vox {
 namespace {
 
-// "SIGSEGV (Segmentation fault)".
-std::string SignalName(int sig) {
-  const char* abbrev = sigabbrev_np(sig);
-  const char* text = strsignal(sig);
-  return (abbrev ? "SIG" + std::string(abbrev) : "signal " + std::to_string(sig)) + " (" +
-         (text ? text : "unknown") + ")";
-}
-
 class TestHookProgress : public ProgressSink {
  public:
   TestHookProgress(ProgressSink* inner, int crash_signal, int exit_code)

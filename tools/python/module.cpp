@@ -12,6 +12,9 @@
 //   vox.read_exr(path) -> dict (channels as numpy arrays, string attributes)
 //   vox.__version__ ("0.9.0"), vox.__git_describe__ (as `vox-* --version`)
 //
+// vox.ingest runs the ingest in a child interpreter (ingest_process.h): a
+// .vdb that crashes OpenVDB raises RuntimeError instead of ending Python.
+//
 // A Status becomes ValueError (InvalidArgument, Unsupported), OSError
 // (NotFound, IoError, Corruption) or RuntimeError (ResourceExhausted,
 // Internal), with the text the tool prints after its name; an allocation
@@ -19,11 +22,13 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <cstring>
 #include <exception>
 #include <functional>
 #include <limits>
@@ -42,6 +47,7 @@
 #include "tools/common/options.h"
 #include "tools/common/prober.h"
 #include "tools/common/version.h"
+#include "tools/python/ingest_process.h"
 
 namespace py = pybind11;
 
@@ -158,6 +164,8 @@ py::object JsonToPython(const std::string& text) {
 }
 
 // --- ingest -----------------------------------------------------------------
+
+std::string g_module_name = "vox._vox";  // set on import: the child imports it by name
 
 // Calls a Python progress(bricks_done, bricks_total, voxels_done) from the
 // ingest's thread; after it raises, it is not called again and the exception
@@ -284,9 +292,14 @@ py::dict Ingest(const py::object& vdb, const py::object& store, const py::object
   c.options.output = PathOf(store);
   // Recorded in the store's build_options, as the tool records its command line.
   std::string line = "vox.ingest " + c.options.input + " " + c.options.output;
+  std::vector<std::string> flags;  // for the child process: the same flags
   ApplyKwargs(rest, "ingest", vox::IngestFlagArity, [&](const std::string& f, const std::string& v) {
     line += " " + f;
-    if (vox::IngestFlagArity(f) == vox::FlagArity::kValue) line += " " + v;
+    flags.push_back(f);
+    if (vox::IngestFlagArity(f) == vox::FlagArity::kValue) {
+      line += " " + v;
+      flags.push_back(v);
+    }
     return vox::ApplyIngestFlag(&c, f, v);
   });
   c.options.command_line = line;
@@ -305,31 +318,41 @@ py::dict Ingest(const py::object& vdb, const py::object& store, const py::object
   }
   std::atomic<bool> cancel{false};
   CancelSink cancel_sink(sink, &cancel);
-  std::optional<vox::StatusOr<vox::IngestStats>> result;
-  // The limits too (max_voxels): every keyword does what its flag does.
-  RunPolled(&cancel, [&] { result.emplace(vox::Ingest(c.options, c.limits, &cancel_sink)); });
+  // The ingest runs in a child interpreter (tools/python/ingest_process.h),
+  // as vox-ingest's runs in a child: a crash there raises here.
+  const py::module_ sys = py::module_::import("sys");
+  const std::string python = py::str(sys.attr("executable"));
+  if (python.empty())
+    throw std::runtime_error("ingest(): sys.executable is empty: no interpreter to run the "
+                             "ingest's child process in");
+  const std::vector<std::string> argv = {
+      python, "-c",
+      "import importlib, sys; sys.exit(importlib.import_module(sys.argv[1])._ingest_child("
+      "sys.argv[2:]))",
+      g_module_name};
+  std::string path;  // the child imports the module from where this one came
+  for (const py::handle& entry : sys.attr("path")) {
+    const std::string e = py::str(entry);
+    if (!e.empty()) path += (path.empty() ? "" : ":") + e;
+  }
+  std::vector<std::string> env;
+  for (char** e = environ; *e; ++e)
+    if (std::strncmp(*e, "PYTHONPATH=", 11) != 0) env.emplace_back(*e);
+  env.push_back("PYTHONPATH=" + path);
+  const vox::IngestChildRequest request{c.options.input, c.options.output, line, flags};
+  std::optional<vox::StatusOr<std::string>> result;
+  RunPolled(&cancel, [&] {
+    result.emplace(vox::RunIngestChildProcess(argv, env, request, &cancel_sink, &cancel));
+  });
   if (py_progress) py_progress->Rethrow();
   CheckRun(result->status());
-  const vox::IngestStats& s = **result;
-  py::dict d;
-  d["store"] = c.options.output;
-  d["levels"] = s.meta.levels;
-  d["brick_level"] = s.meta.brick_level;
-  d["input_bytes"] = s.input_bytes;
-  d["active_voxels"] = s.active_voxels;
-  d["leaf_nodes"] = s.leaf_nodes;
-  d["active_tiles"] = s.active_tiles;
-  d["occupied_voxels"] = s.occupied_voxels;
-  d["occupied_tile_voxels"] = s.occupied_tile_voxels;
-  d["bricks"] = s.bricks;
-  d["bbox_leaves_read"] = s.bbox_leaves_read;
-  d["topology_bytes"] = s.topology_bytes;
-  d["memory_budget"] = s.memory_budget;
-  d["threads"] = s.threads;
-  d["seconds"] = py::dict(py::arg("open") = s.seconds_open, py::arg("bbox") = s.seconds_bbox,
-                          py::arg("bricks") = s.seconds_bricks,
-                          py::arg("finish") = s.seconds_finish, py::arg("total") = s.seconds_total);
-  return d;
+  return JsonToPython(**result);
+}
+
+// The child process of vox.ingest: the module's private entry point.
+int IngestChild(const std::vector<std::string>& args) {
+  py::gil_scoped_release release;
+  return vox::RunIngestChild(args);
 }
 
 // --- Store ------------------------------------------------------------------
@@ -422,7 +445,7 @@ py::dict Render(const py::object& store, const py::object& camera, const py::obj
   o.quiet = true;      // no stderr output unless quiet=False
   o.keep_image = true;
   auto dumps = py::module_::import("json").attr("dumps");
-  if (py::isinstance<py::dict>(camera))
+  if (py::isinstance<py::dict>(camera) || py::isinstance<py::list>(camera))  // a list: a sequence
     o.camera_json = dumps(camera).cast<std::string>();
   else if (!camera.is_none())
     o.camera_path = PathOf(camera);
@@ -537,9 +560,12 @@ py::dict ReadExr(const py::object& path) {
 }  // namespace
 
 PYBIND11_MODULE(_vox, m) {
+  g_module_name = py::str(m.attr("__name__"));
   m.doc() =
       "vox: out-of-core discrete ray tracing of huge sparse voxel volumes (ingest OpenVDB, "
       "render, probe). Options are the command-line tools' flags as keyword arguments.";
+  m.def("_ingest_child", &IngestChild, py::arg("args"),
+        "vox.ingest's child process (tools/python/ingest_process.h); not for direct use.");
   m.def("ingest", &Ingest, py::arg("vdb_path"), py::arg("store_path"),
         py::arg("progress") = py::none(),
         "Ingests an OpenVDB grid into a vox store, as vox-ingest; options are its flags "
@@ -557,7 +583,9 @@ PYBIND11_MODULE(_vox, m) {
         "Renders a store as vox-render. camera and scene are dicts in the cam.json and "
         "scene.json schema, or paths; options are vox-render's flags (split, single_step, "
         "memory_mb, cache_mb, threads, tile_size, tiles, layers, size, view, save_cam, prefetch, "
-        "o, preview, stats, quiet); size=(W, H) overrides the camera's. Returns {'rgba': (H, W, 4) float32 (premultiplied), 'z': (H, W) planar "
+        "o, preview, stats, quiet, turntable, frames); size=(W, H) overrides the camera's. "
+        "A list of cameras or turntable=N is a sequence, of which frames=K renders frame K (one "
+        "frame per call; vox-render renders whole sequences). Returns {'rgba': (H, W, 4) float32 (premultiplied), 'z': (H, W) planar "
         "depth, 'normal', 'voxel' and 'position': (H, W, 3) and 'distance': (H, W) when layers "
         "asks for them, 'stats': the --stats document}; docs/usage.md has the layout.");
   m.def("probe", &Probe, py::arg("store"), py::arg("rays"),

@@ -15,6 +15,7 @@ namespace {
 
 const char kUsage[] =
     "usage: vox-render STORE_DIR [--cam cam.json] [--scene scene.json] [-o out.exr]\n"
+    "                  [--turntable N] [--frames A-B]\n"
     "                  [--preview out.png] [--split N1+N2|N1] [--single-step] [--memory-mb M]\n"
     "                  [--cache-mb M] [--threads N] [--tile-size T] [--tiles I/N] [--stats stats.json] [--quiet]\n"
     "                  [--layers normal,voxel,position,distance] [--size WxH] [--view AZ,EL]\n"
@@ -22,14 +23,24 @@ const char kUsage[] =
     "                  [--compression C] [--prefetch [--io-threads N]] [--no-read-windows] [--no-beam]\n"
     "                  [--allow-huge]\n"
     "  --cam        camera JSON (world space of the source VDB; docs/usage.md); without it a\n"
-    "               default camera frames the whole volume\n"
+    "               default camera frames the whole volume. An array of cameras is a frame\n"
+    "               sequence: one frame per camera\n"
+    "  --turntable N  a sequence of N frames around the camera's look-at point (--cam's, --view's\n"
+    "               or the default camera's): the same distance and elevation, azimuth steps\n"
+    "               of 360/N degrees about its up axis; frame 1 is the camera itself\n"
+    "  --frames A-B render frames A to B of the sequence (1-based, inclusive; or N: frame N\n"
+    "               alone), e.g. one chunk per Slurm array task\n"
     "  --size WxH   image size, overriding the camera JSON's (default 1024x1024 without --cam)\n"
     "  --view AZ,EL look at the volume's centre from azimuth AZ and elevation EL (degrees),\n"
     "               framing its world box (--cam's lens, size and up, or the default camera's)\n"
-    "  --save-cam F write the camera used as camera JSON (reusable with --cam)\n"
+    "  --save-cam F write the camera used as camera JSON (reusable with --cam); in a sequence,\n"
+    "               a pattern writes each frame's camera, a plain name the array of the\n"
+    "               rendered frames' cameras (with the last frame)\n"
     "  --scene      lights, materials, background, volume, max_depth, samples_per_pixel\n"
     "  -o           output EXR (default render.exr); R G B A (half float, premultiplied) and\n"
-    "               Z (float, planar camera depth); docs/usage.md has the layout\n"
+    "               Z (float, planar camera depth); docs/usage.md has the layout. A printf\n"
+    "               frame pattern (out.%04d.exr; also for --preview and --stats) numbers\n"
+    "               the frames from 1; a sequence of several frames requires one\n"
     "  --float      write R G B A as 32-bit float\n"
     "  --compression  EXR tile compression: rle (default), zip (smaller, slower), zips, piz\n"
     "               or none (default for --tiles parts, which vox-merge recompresses)\n"
@@ -67,13 +78,14 @@ const char kUsage[] =
     "  --silhouette-aa G  with level of detail, a coarse stop next to a miss is shaded again\n"
     "               from GxG sub-pixel rays with cones G times narrower, so its alpha is the\n"
     "               covered fraction (default 4; 0: coarse silhouettes stay whole cells)\n"
-    "  --stats      write counters and timings as JSON\n"
+    "  --stats      write counters and timings as JSON (per frame: its number and camera)\n"
     "  --quiet      no progress output\n"
     "  --allow-huge render a frame of more than 2^28 pixels (16384x16384); the estimated\n"
     "               EXR size must still fit the output's disk\n"
     "  Outputs never replace inputs (store files, camera, scene) or each other; -o must\n"
-    "  end in .exr, --preview in .png. All outputs are published together at the end;\n"
-    "  SIGINT, SIGTERM and SIGHUP remove the unfinished ones and exit 128 + the signal.\n";
+    "  end in .exr, --preview in .png; every frame's are checked before any work. A frame's\n"
+    "  outputs are published together when it is done; SIGINT, SIGTERM and SIGHUP remove\n"
+    "  the unfinished ones (earlier frames stay) and exit 128 + the signal.\n";
 
 int Usage(const std::string& error) {
   if (!error.empty()) fprintf(stderr, "vox-render: %s\n", error.c_str());
@@ -114,6 +126,7 @@ static int RunTool(int argc, char** argv) {
   // SIGINT, SIGTERM, SIGHUP (Slurm's time limit): stop, remove the
   // temporaries, keep earlier outputs, exit 128 + the signal.
   vox::StartOutputSignalThread("vox-render", {o.exr_path, o.preview_path, o.stats_path});
+  o.on_outputs = vox::AddSignalOutputs;  // every frame's, once the sequence is known
   vox::Status s = vox::RunRenderJob(o);
   if (!s.ok()) {
     const int code = vox::ToolExitCode(1);  // an interrupt exits with 128 + N instead
