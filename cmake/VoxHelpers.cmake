@@ -36,3 +36,36 @@ function(vox_test name)
     set_tests_properties(${name} PROPERTIES LABELS "${ARG_LABELS}")
   endif()
 endfunction()
+
+# vox_find_openvdb_module(): puts the directory of OpenVDB's FindOpenVDB.cmake
+# on CMAKE_MODULE_PATH (OpenVDB installs that module and its FindTBB,
+# FindBlosc ... rather than a config file). Looked for in OpenVDB_DIR or
+# VOX_OPENVDB_MODULE_DIR when given, then under OpenVDB_ROOT, CMAKE_PREFIX_PATH
+# and the system prefixes in lib/<multiarch>/cmake/OpenVDB, lib64/..., lib/...
+# (Debian's libopenvdb-dev: /usr/lib/x86_64-linux-gnu/cmake/OpenVDB).
+function(vox_find_openvdb_module)
+  set(prefixes ${OpenVDB_ROOT} $ENV{OpenVDB_ROOT} ${CMAKE_PREFIX_PATH} $ENV{CMAKE_PREFIX_PATH}
+               ${CMAKE_INSTALL_PREFIX} ${CMAKE_SYSTEM_PREFIX_PATH})
+  string(REPLACE ":" ";" prefixes "${prefixes}")
+  set(candidates "")
+  foreach(prefix IN LISTS prefixes)
+    foreach(libdir lib/${CMAKE_LIBRARY_ARCHITECTURE} lib64 lib)
+      list(APPEND candidates "${prefix}/${libdir}/cmake/OpenVDB")
+    endforeach()
+  endforeach()
+  find_path(VOX_OPENVDB_MODULE_DIR FindOpenVDB.cmake
+            HINTS ${OpenVDB_DIR} $ENV{OpenVDB_DIR}
+            PATHS ${candidates}
+            NO_DEFAULT_PATH
+            DOC "the directory of OpenVDB's FindOpenVDB.cmake")
+  if(NOT VOX_OPENVDB_MODULE_DIR)
+    list(REMOVE_DUPLICATES candidates)
+    list(JOIN candidates "\n  " looked)
+    message(FATAL_ERROR "OpenVDB's FindOpenVDB.cmake not found (Debian: libopenvdb-dev). Give its "
+            "directory with -DOpenVDB_DIR=... (or the OpenVDB install prefix with "
+            "-DCMAKE_PREFIX_PATH=...). Looked in:\n  ${looked}")
+  endif()
+  list(APPEND CMAKE_MODULE_PATH "${VOX_OPENVDB_MODULE_DIR}")
+  set(CMAKE_MODULE_PATH "${CMAKE_MODULE_PATH}" PARENT_SCOPE)
+  message(STATUS "OpenVDB's CMake modules: ${VOX_OPENVDB_MODULE_DIR}")
+endfunction()

@@ -4,7 +4,7 @@
 # no output.
 #
 # Usage: scripts/identical.sh OLD_BUILD NEW_BUILD [WORKDIR]
-#   OLD_BUILD, NEW_BUILD  build directories (tools/*/vox-*, python/vox*.so)
+#   OLD_BUILD, NEW_BUILD  build directories (tools/*/vox-*, python/vox/)
 #   WORKDIR               scratch directory (default /tmp/vox-identical)
 #
 # Inputs (made once, shared by both builds): vox-gen sphere and bumpy at 256

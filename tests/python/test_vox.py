@@ -451,3 +451,52 @@ def test_ctrl_c_stops_long_calls_and_keeps_old_outputs(what, vdb, store, workdir
     after = store_bytes(target) if what == "ingest" else target.read_bytes()
     assert after == before
     assert temporaries(workdir) == []
+
+
+def test_version_is_the_tools_version(store):
+    """vox.__version__ and vox.__git_describe__ are what `vox-render --version` prints."""
+    assert re.fullmatch(r"\d+\.\d+\.\d+", vox.__version__), vox.__version__
+    code, out, err = run([tool("render"), "--version"])
+    assert code == 0, err
+    assert out == "vox-render %s (git %s)\n" % (vox.__version__, vox.__git_describe__)
+
+
+FAKED_INTERPRETER = r"""
+import sys
+sys.version_info = (3, 99, 1, "final", 0)   # as a Python the module was not built for
+sys.executable = "/opt/other/bin/python3.99"
+try:
+    import vox
+except ImportError as e:
+    print("loaded" if "vox._vox" in sys.modules else "not loaded")
+    print(e)
+else:
+    print("imported")
+"""
+
+
+def test_other_interpreter_is_told_which_one_vox_was_built_for():
+    """An interpreter other than the one the extension was built for gets an
+    ImportError naming both, before the extension is loaded."""
+    import subprocess
+    import sys
+    p = subprocess.run([sys.executable, "-c", FAKED_INTERPRETER], capture_output=True, text=True,
+                       timeout=60)
+    assert p.returncode == 0, p.stderr
+    loaded, message = p.stdout.splitlines()[:2]
+    built = vox._BUILT_FOR
+    assert loaded == "not loaded"
+    assert message.startswith("vox: built for %s %d.%d; this is /opt/other/bin/python3.99 3.99."
+                              % (built["executable"], *built["version"])), message
+    assert "-DPython_EXECUTABLE=/opt/other/bin/python3.99" in message
+
+
+def test_interpreter_check():
+    """The check itself: this interpreter passes; another version or
+    implementation does not."""
+    import sys
+    assert vox._interpreter_mismatch(sys.version_info, sys.implementation.name,
+                                     sys.executable) is None
+    major, minor = vox._BUILT_FOR["version"]
+    assert "3.%d" % (minor + 1) in vox._interpreter_mismatch((major, minor + 1, 0), "cpython", "py")
+    assert "(pypy)" in vox._interpreter_mismatch((major, minor, 0), "pypy", "/usr/bin/pypy3")

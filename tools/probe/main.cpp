@@ -18,7 +18,6 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
-#include <new>
 #include <optional>
 #include <string>
 
@@ -27,6 +26,7 @@
 #include "tools/common/flags.h"
 #include "tools/common/options.h"
 #include "tools/common/prober.h"
+#include "tools/common/tool_main.h"
 
 namespace {
 
@@ -131,13 +131,4 @@ static int RunTool(int argc, char** argv) {
   return Run(**prober, opt.stats);
 }
 
-// Allocation failures anywhere (an image, a brick, a table sized from input)
-// end with a clear message and exit 1, never an abort.
-int main(int argc, char** argv) {
-  try {
-    return RunTool(argc, argv);
-  } catch (const std::bad_alloc&) {
-    fprintf(stderr, "vox-probe: out of memory (std::bad_alloc); try smaller sizes or budgets\n");
-    return 1;
-  }
-}
+int main(int argc, char** argv) { return vox::ToolMain("vox-probe", argc, argv, RunTool); }

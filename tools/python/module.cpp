@@ -1,5 +1,6 @@
-// The Python module `vox`: bindings over the libraries the command-line
-// tools use, with the tools' options as keyword arguments (applied by
+// The Python module `vox`'s compiled part, `vox._vox` (the package's
+// __init__.py, tools/python/__init__.py.in, checks the interpreter and
+// re-exports it): bindings over the libraries the command-line tools use, with the tools' options as keyword arguments (applied by
 // tools/common/options.h, so values are checked, and refused with the
 // messages, exactly as on the command line). Long calls release the GIL.
 //
@@ -9,6 +10,7 @@
 //       arrays (rgba, z, normal, voxel) and "stats" (the --stats document)
 //   vox.probe(store, rays, **options) -> (voxels, t, hit)
 //   vox.read_exr(path) -> dict (channels as numpy arrays, string attributes)
+//   vox.__version__ ("0.9.0"), vox.__git_describe__ (as `vox-* --version`)
 //
 // vox.ingest runs the ingest in a child interpreter (ingest_process.h): a
 // .vdb that crashes OpenVDB raises RuntimeError instead of ending Python.
@@ -44,6 +46,7 @@
 #include "storage/store_info.h"
 #include "tools/common/options.h"
 #include "tools/common/prober.h"
+#include "tools/common/version.h"
 #include "tools/python/ingest_process.h"
 
 namespace py = pybind11;
@@ -162,7 +165,7 @@ py::object JsonToPython(const std::string& text) {
 
 // --- ingest -----------------------------------------------------------------
 
-std::string g_module_name = "vox";  // set on import: the child imports it by name
+std::string g_module_name = "vox._vox";  // set on import: the child imports it by name
 
 // Calls a Python progress(bricks_done, bricks_total, voxels_done) from the
 // ingest's thread; after it raises, it is not called again and the exception
@@ -556,7 +559,7 @@ py::dict ReadExr(const py::object& path) {
 
 }  // namespace
 
-PYBIND11_MODULE(vox, m) {
+PYBIND11_MODULE(_vox, m) {
   g_module_name = py::str(m.attr("__name__"));
   m.doc() =
       "vox: out-of-core discrete ray tracing of huge sparse voxel volumes (ingest OpenVDB, "
@@ -595,4 +598,6 @@ PYBIND11_MODULE(vox, m) {
   m.def("read_exr", &ReadExr, py::arg("path"),
         "Reads a complete EXR written by vox: {'width', 'height', 'channels': {name: (H, W) "
         "float32}, 'attributes': the string attributes}.");
+  m.attr("__version__") = vox::kVersion;
+  m.attr("__git_describe__") = vox::kGitDescribe;
 }
