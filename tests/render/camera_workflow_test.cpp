@@ -20,6 +20,7 @@
 #include "render/grid_transform.h"
 #include "render/job.h"
 #include "storage/file.h"
+#include "tests/render/store_suite.h"
 #include "tests/render/store_util.h"
 #include "tools/common/options.h"
 
@@ -31,24 +32,8 @@ namespace fs = std::filesystem;
 const char kCam[] =
     R"({"position":[3,4,17], "look_at":[0.5,-0.25,0], "up":[0,1,0], "fov_deg":38, "width":64, "height":48})";
 
-class CameraWorkflowTest : public ::testing::Test {
+class CameraWorkflowTest : public testing::SphereShellStoreSuite {
  protected:
-  static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() /
-                        ("vox_camera_workflow_test_" + std::to_string(getpid())));
-    fs::create_directories(*dir_);
-    ASSERT_TRUE(testing::WriteSphereShellStore(Path("store")).ok());
-  }
-  static void TearDownTestSuite() {
-    fs::remove_all(*dir_);
-    delete dir_;
-  }
-  static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
-  static std::string Write(const std::string& name, const std::string& text) {
-    std::ofstream(Path(name)) << text;
-    return Path(name);
-  }
-
   struct Run {
     Status status;
     RenderJobOutput out;
@@ -83,9 +68,7 @@ class CameraWorkflowTest : public ::testing::Test {
     return n;
   }
 
-  static fs::path* dir_;
 };
-fs::path* CameraWorkflowTest::dir_ = nullptr;
 
 TEST_F(CameraWorkflowTest, SizeOverridesTheCameraJsonAndStatsSaySo) {
   const std::string cam = Write("cam.json", kCam);

@@ -14,6 +14,7 @@
 #include "render/camera.h"
 #include "render/exr.h"
 #include "tests/common/run_command.h"
+#include "tests/render/store_suite.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
 
@@ -24,30 +25,12 @@ namespace fs = std::filesystem;
 
 using RunResult = testing::CommandResult;
 
-class CliTest : public ::testing::Test {
+class CliTest : public testing::SphereShellStoreSuite {
  protected:
-  static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() / ("vox_cli_test_" + std::to_string(getpid())));
-    fs::create_directories(*dir_);
-    Status s = testing::WriteSphereShellStore(Path("store"));
-    ASSERT_TRUE(s.ok()) << s.ToString();
-  }
-  static void TearDownTestSuite() {
-    fs::remove_all(*dir_);
-    delete dir_;
-  }
-  static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
-  static std::string Write(const std::string& name, const std::string& text) {
-    std::ofstream(Path(name)) << text;
-    return Path(name);
-  }
   static std::string Render(const std::string& args) {
     return std::string(VOX_RENDER_BIN) + " " + Path("store") + " " + args;
   }
-
-  static fs::path* dir_;
 };
-fs::path* CliTest::dir_ = nullptr;
 
 const char kCam[] =
     R"({"position":[0,3,20], "look_at":[0,0,0], "up":[0,1,0], "fov_deg":40, "width":64, "height":48, "projection":"perspective"})";

@@ -23,6 +23,7 @@
 #include "render/frame_sequence.h"
 #include "tests/common/run_command.h"
 #include "tests/common/spawn.h"
+#include "tests/render/store_suite.h"
 #include "tests/render/store_util.h"
 
 namespace vox {
@@ -143,23 +144,8 @@ TEST(CameraArrayTest, ParsesObjectsAndArraysNamingTheBadElement) {
   EXPECT_FALSE(ParseCameras("[1]", "c.json").ok());
 }
 
-class SequenceCliTest : public ::testing::Test {
+class SequenceCliTest : public testing::SphereShellStoreSuite {
  protected:
-  static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() / ("vox_sequence_test_" + std::to_string(getpid())));
-    fs::create_directories(*dir_);
-    Status s = testing::WriteSphereShellStore(Path("store"));
-    ASSERT_TRUE(s.ok()) << s.ToString();
-  }
-  static void TearDownTestSuite() {
-    fs::remove_all(*dir_);
-    delete dir_;
-  }
-  static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
-  static std::string Write(const std::string& name, const std::string& text) {
-    std::ofstream(Path(name)) << text;
-    return Path(name);
-  }
   static testing::CommandResult Render(const std::string& args) {
     return testing::RunCommand(std::string(VOX_RENDER_BIN) + " " + Path("store") +
                                " --threads 2 --tile-size 16 " + args);
@@ -189,9 +175,7 @@ class SequenceCliTest : public ::testing::Test {
     }
     EXPECT_EQ(x->info.attrs["vox:camera"], y->info.attrs["vox:camera"]);
   }
-  static fs::path* dir_;
 };
-fs::path* SequenceCliTest::dir_ = nullptr;
 
 const char kCamA[] =
     R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40, "width":48, "height":32})";

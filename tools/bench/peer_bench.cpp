@@ -137,7 +137,7 @@ void ForTiles(const vox::TileLayout& layout, int threads,
 class NanoCaster {
  public:
   NanoCaster(const nanovdb::FloatGrid* grid, const vox::Camera& cam, const vox::Scene& scene)
-      : grid_(grid), scene_(scene), width_(cam.width), height_(cam.height) {
+      : grid_(grid), scene_(scene) {
     perspective_ = cam.projection == vox::Projection::kPerspective;
     auto index_dir = [&](const glm::dvec3& d) {
       return grid_->worldToIndexDir(nanovdb::Vec3d(d.x, d.y, d.z));
@@ -201,7 +201,6 @@ class NanoCaster {
  private:
   const nanovdb::FloatGrid* grid_;
   const vox::Scene& scene_;
-  int width_, height_;
   bool perspective_ = true;
   nanovdb::Vec3f eye_, forward_, right_, up_;
   float sx0_ = 0, dsx_ = 0, sy0_ = 0, dsy_ = 0, voxel_ = 1;
