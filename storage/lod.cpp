@@ -9,7 +9,10 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <filesystem>
+#include <mutex>
+#include <thread>
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
@@ -80,63 +83,142 @@ StoreMeta CoarseMeta(const StoreMeta& base, uint64_t base_id, int l, int depth) 
   return m;
 }
 
-// One level of the cascade: the cell being summed, and the coarse brick
-// being filled, handed to the level's writer when the next brick begins.
-struct Level {
-  int l = 0, depth = 0;
+// How one coarse level stores its voxels.
+struct LevelFormat {
+  int l = 0, depth = 0;  // the level, and its coarse bricks' depth
   bool has_normal = false, has_color = false, has_density = false;
-  std::unique_ptr<StoreWriter> writer;
-  bool cell_active = false;
-  glm::u64vec3 cell{0};
-  Aggregate agg;
-  bool brick_active = false;
-  glm::u64vec3 brick{0};
-  std::vector<BrickVoxel> voxels;
-  uint64_t voxel_count = 0, brick_count = 0;
 };
 
+// A coarse voxel made by a Cascade: its coarse brick, and the voxel in it.
+struct CoarseVoxel {
+  glm::u64vec3 brick{0};
+  BrickVoxel voxel;
+};
+
+// A cell of level l - 1 handed up to level l with its sums: what a Cascade
+// passes on beyond its last level.
+struct CellUp {
+  int l = 0;
+  glm::u64vec3 coord{0};  // in level l - 1's grid
+  Aggregate sums;
+};
+
+// A cascade of run reducers over the consecutive levels `formats` (first ..
+// last): cells arrive in Morton order (Push), each level sums a run of them
+// into its cell, and a finished cell becomes a coarse voxel (out(l)) and is
+// handed up a level (to the next reducer, or to ups() beyond the last).
+// Pure arithmetic: the same pushes give the same voxels and sums, bit for
+// bit, however the work is split between cascades.
 class Cascade {
  public:
-  Status Init(const StoreMeta& base, uint64_t base_id, const std::string& dir, int max_level,
-              const LodBuildOptions& o) {
-    const int base_depth = base.levels - base.brick_level;
-    levels_.resize(size_t(max_level));
-    for (int l = 1; l <= max_level; ++l) {
-      Level& lv = levels_[size_t(l - 1)];
-      lv.l = l;
-      lv.depth = LodBrickDepth(base.levels, base_depth, l);
-      const StoreMeta m = CoarseMeta(base, base_id, l, lv.depth);
-      lv.has_normal = m.has_normal;
-      lv.has_color = m.has_color;
-      lv.has_density = m.has_density;
+  explicit Cascade(std::vector<LevelFormat> formats)
+      : formats_(std::move(formats)), cells_(formats_.size()), out_(formats_.size()) {}
+
+  int first() const { return formats_.empty() ? 1 : formats_.front().l; }
+  int last() const { return first() + int(formats_.size()) - 1; }
+
+  // A cell (or voxel) of level l - 1 at `coord` (that level's grid), with its sums.
+  void Push(int l, const glm::u64vec3& coord, const Aggregate& a) {
+    if (l > last()) {
+      ups_.push_back(CellUp{l, coord, a});
+      return;
+    }
+    Cell& c = cells_[size_t(l - first())];
+    const glm::u64vec3 parent = coord >> uint64_t(1);
+    if (c.active && c.coord != parent) Emit(l);
+    if (!c.active) {
+      c.active = true;
+      c.coord = parent;
+      c.sums = Aggregate{};
+    }
+    c.sums.Add(a);
+  }
+
+  // Emits every unfinished cell, finest level first (after the last push).
+  void Flush() {
+    for (int l = first(); l <= last(); ++l)
+      if (cells_[size_t(l - first())].active) Emit(l);
+  }
+
+  // Level l's coarse voxels made so far, in Morton order; the caller may take them.
+  std::vector<CoarseVoxel>& out(int l) { return out_[size_t(l - first())]; }
+  // Cells handed up beyond the last level, in order.
+  std::vector<CellUp>& ups() { return ups_; }
+
+ private:
+  struct Cell {
+    bool active = false;
+    glm::u64vec3 coord{0};
+    Aggregate sums;
+  };
+
+  // The finished cell of level l: its coarse voxel, its sums up a level.
+  void Emit(int l) {
+    const LevelFormat& f = formats_[size_t(l - first())];
+    Cell& c = cells_[size_t(l - first())];
+    c.active = false;
+    const Aggregate& a = c.sums;
+    CoarseVoxel cv;
+    cv.brick = c.coord >> uint64_t(f.depth);
+    const glm::u64vec3 local = c.coord - (cv.brick << uint64_t(f.depth));
+    BrickVoxel& v = cv.voxel;
+    v.x = uint32_t(local.x);
+    v.y = uint32_t(local.y);
+    v.z = uint32_t(local.z);
+    const double cell_voxels = std::ldexp(1.0, 3 * l);
+    v.attr.coverage = float(double(a.count) / cell_voxels);
+    if (f.has_normal) {
+      const glm::dvec3& n = glm::length(a.surface) > 0 ? a.surface : a.normal;
+      const double len = glm::length(n);
+      v.attr.normal = len > 0 ? glm::vec3(n / len) : glm::vec3(0.0f);
+    }
+    if (f.has_color) v.attr.color = glm::vec3(a.color / double(a.count));
+    if (f.has_density) v.attr.density = float(a.density / cell_voxels);
+    out_[size_t(l - first())].push_back(cv);
+    Push(l + 1, c.coord, a);
+  }
+
+  std::vector<LevelFormat> formats_;
+  std::vector<Cell> cells_;
+  std::vector<std::vector<CoarseVoxel>> out_;
+  std::vector<CellUp> ups_;
+};
+
+// The pyramid's writers: one store per level, coarse voxels arriving in
+// Morton order, a coarse brick handed to its writer when the next begins.
+class LevelWriters {
+ public:
+  Status Init(const StoreMeta& base, uint64_t base_id, const std::string& dir,
+              const std::vector<LevelFormat>& formats, const LodBuildOptions& o) {
+    levels_.resize(formats.size());
+    for (size_t i = 0; i < formats.size(); ++i) {
+      const int l = formats[i].l;
       WriteOptions wo;
       wo.zstd_level = o.zstd_level;
       wo.normal_bits = o.normal_bits;
       wo.store_id = LevelStoreId(base_id, l);
-      VOX_ASSIGN_OR_RETURN(lv.writer,
-                           StoreWriter::Create(dir + "/" + std::to_string(l), m, wo));
+      VOX_ASSIGN_OR_RETURN(levels_[i].writer,
+                           StoreWriter::Create(dir + "/" + std::to_string(l),
+                                               CoarseMeta(base, base_id, l, formats[i].depth), wo));
     }
     return OkStatus();
   }
 
-  // A cell (or voxel) of level l - 1 at `coord` (that level's grid), with its sums.
-  Status Push(int l, const glm::u64vec3& coord, const Aggregate& a) {
-    if (l > int(levels_.size())) return OkStatus();
+  // Appends level l's voxels (taking them), in Morton order.
+  Status Add(int l, std::vector<CoarseVoxel>& voxels) {
     Level& lv = levels_[size_t(l - 1)];
-    const glm::u64vec3 parent = coord >> uint64_t(1);
-    if (lv.cell_active && lv.cell != parent) VOX_RETURN_IF_ERROR(Emit(lv));
-    if (!lv.cell_active) {
-      lv.cell_active = true;
-      lv.cell = parent;
-      lv.agg = Aggregate{};
+    for (CoarseVoxel& cv : voxels) {
+      if (lv.brick_active && cv.brick != lv.brick) VOX_RETURN_IF_ERROR(FlushBrick(lv));
+      lv.brick_active = true;
+      lv.brick = cv.brick;
+      lv.voxels.push_back(cv.voxel);
+      ++lv.voxel_count;
     }
-    lv.agg.Add(a);
+    voxels.clear();
     return OkStatus();
   }
 
   Status Finish(LodBuildStats* stats) {
-    for (Level& lv : levels_)
-      if (lv.cell_active) VOX_RETURN_IF_ERROR(Emit(lv));
     for (Level& lv : levels_) {
       VOX_RETURN_IF_ERROR(FlushBrick(lv));
       VOX_RETURN_IF_ERROR(lv.writer->Finish());
@@ -148,32 +230,13 @@ class Cascade {
   }
 
  private:
-  // The finished cell of level lv: its voxel into the coarse brick, its sums up a level.
-  Status Emit(Level& lv) {
-    lv.cell_active = false;
-    const Aggregate& a = lv.agg;
-    const glm::u64vec3 brick = lv.cell >> uint64_t(lv.depth);
-    if (lv.brick_active && brick != lv.brick) VOX_RETURN_IF_ERROR(FlushBrick(lv));
-    lv.brick_active = true;
-    lv.brick = brick;
-    const double cell_voxels = std::ldexp(1.0, 3 * lv.l);
-    BrickVoxel v;
-    const glm::u64vec3 local = lv.cell - (brick << uint64_t(lv.depth));
-    v.x = uint32_t(local.x);
-    v.y = uint32_t(local.y);
-    v.z = uint32_t(local.z);
-    v.attr.coverage = float(double(a.count) / cell_voxels);
-    if (lv.has_normal) {
-      const glm::dvec3& n = glm::length(a.surface) > 0 ? a.surface : a.normal;
-      const double len = glm::length(n);
-      v.attr.normal = len > 0 ? glm::vec3(n / len) : glm::vec3(0.0f);
-    }
-    if (lv.has_color) v.attr.color = glm::vec3(a.color / double(a.count));
-    if (lv.has_density) v.attr.density = float(a.density / cell_voxels);
-    lv.voxels.push_back(v);
-    ++lv.voxel_count;
-    return Push(lv.l + 1, lv.cell, a);
-  }
+  struct Level {
+    std::unique_ptr<StoreWriter> writer;
+    bool brick_active = false;
+    glm::u64vec3 brick{0};
+    std::vector<BrickVoxel> voxels;
+    uint64_t voxel_count = 0, brick_count = 0;
+  };
 
   Status FlushBrick(Level& lv) {
     if (!lv.brick_active || lv.voxels.empty()) return OkStatus();
@@ -187,29 +250,90 @@ class Cascade {
   std::vector<Level> levels_;
 };
 
-// Visits the base store's voxels in Morton order (bricks in id order),
-// pushing each into the cascade.
-class BaseReader {
+// One unit of the base store's walk: a brick (or a voxel of the top pool,
+// brick == kNoBrick), with its coordinates at its tree level.
+struct BaseJob {
+  uint32_t index = 0;         // brick id, or the voxel's payload in the top pool
+  uint32_t brick = kNoBrick;  // == index for a brick
+  int level = 0;              // tree level of `coord`
+  glm::u64vec3 coord{0};
+};
+
+// The base store's bricks and top voxels in Morton order (the top alone is read).
+void CollectJobs(const OctreeView& view, const CompactCell* pool, uint32_t cell, int level,
+                 const glm::u64vec3& coord, std::vector<BaseJob>* jobs) {
+  const CompactCell c = pool[cell];
+  for (unsigned d = 0; d < 8; ++d) {
+    const ChildRef r = ChildOf(c, d, level, view);
+    if (r.kind == ChildRef::kEmpty) continue;
+    const glm::u64vec3 child =
+        (coord << uint64_t(1)) + glm::u64vec3(d & 1u, (d >> 1) & 1u, (d >> 2) & 1u);
+    if (r.kind == ChildRef::kCell) {
+      CollectJobs(view, pool, r.index, level + 1, child, jobs);
+    } else {
+      BaseJob j;
+      j.index = r.index;
+      j.brick = r.kind == ChildRef::kBrick ? r.index : kNoBrick;
+      j.level = level + 1;
+      j.coord = child;
+      jobs->push_back(j);
+    }
+  }
+}
+
+// Reduces one job: walks its voxels in Morton order through a cascade of
+// the levels whose cells lie inside one brick. One per thread.
+class JobReducer {
  public:
-  BaseReader(Store& store, Cascade& cascade, const LodBuildOptions& o)
-      : store_(store), cascade_(cascade), o_(o), view_(store.view()) {
+  JobReducer(Store& store, const std::vector<LevelFormat>& local) : store_(store), view_(store.view()), local_(local) {
     const StoreMeta& m = store.meta();
     fog_ = m.grid_class == GridClass::kFogVolume;
     has_density_ = m.has_density;
     has_normal_ = m.has_normal;
   }
 
-  Status Run(uint64_t* bricks_read) {
-    Status s = Walk(view_.top, 0, 0, glm::u64vec3(0), kNoBrick, nullptr);
-    *bricks_read = bricks_read_;
-    return s;
+  // The job's coarse voxels of the local levels, and the cells it hands up.
+  struct Result {
+    Status status;
+    std::vector<std::vector<CoarseVoxel>> out;  // per local level
+    std::vector<CellUp> ups;
+  };
+
+  void Run(const BaseJob& job, Result* r) {
+    Cascade cascade(local_);
+    r->status = job.brick != kNoBrick ? RunBrick(job, cascade) : Voxel(job, kNoBrick, nullptr, cascade);
+    if (!r->status.ok()) return;
+    cascade.Flush();
+    r->out.resize(local_.size());
+    for (size_t i = 0; i < local_.size(); ++i) r->out[i] = std::move(cascade.out(local_[i].l));
+    r->ups = std::move(cascade.ups());
   }
 
  private:
-  static constexpr uint32_t kPrefetchWindow = 8;
+  // A brick's voxels are listed first (and marked in an occupancy bitmap
+  // when the brick is at most kMaxBitmapDepth levels deep), then reduced:
+  // the surface test then looks up its neighbours in the same brick in the
+  // bitmap instead of descending the brick's cells.
+  static constexpr int kMaxBitmapDepth = 7;
 
-  Status Walk(const CompactCell* pool, uint32_t cell, int level, const glm::u64vec3& coord,
-              uint32_t brick, const void* brick_data) {
+  Status RunBrick(const BaseJob& job, Cascade& cascade) {
+    VOX_ASSIGN_OR_RETURN(BrickView b, store_.FetchBrick(job.brick));
+    brick_cells_ = b.cells;
+    brick_coord_ = job.coord;
+    const int depth = view_.levels - view_.brick_level;
+    bitmap_depth_ = depth <= kMaxBitmapDepth ? depth : -1;
+    if (bitmap_depth_ >= 0) occupied_.assign(std::max<size_t>(1, (size_t(1) << (3 * depth)) / 64), 0);
+    voxels_.clear();
+    Status s = List(b.cells, 0, job.level, job.coord);
+    for (size_t i = 0; s.ok() && i < voxels_.size(); ++i)
+      s = Voxel(voxels_[i], job.brick, b.data, cascade);
+    brick_cells_ = nullptr;
+    bitmap_depth_ = -1;
+    return s;
+  }
+
+  // Lists the voxels under `cell` in Morton order into voxels_, marking occupied_.
+  Status List(const CompactCell* pool, uint32_t cell, int level, const glm::u64vec3& coord) {
     const CompactCell c = pool[cell];
     for (unsigned d = 0; d < 8; ++d) {
       const ChildRef r = ChildOf(c, d, level, view_);
@@ -217,51 +341,56 @@ class BaseReader {
       const glm::u64vec3 child = (coord << uint64_t(1)) +
                                  glm::u64vec3(d & 1u, (d >> 1) & 1u, (d >> 2) & 1u);
       if (r.kind == ChildRef::kCell) {
-        VOX_RETURN_IF_ERROR(Walk(pool, r.index, level + 1, child, brick, brick_data));
-      } else if (r.kind == ChildRef::kBrick) {
-        if (o_.cancel != nullptr && o_.cancel->load())
-          return IoError("interrupted; no level-of-detail pyramid written");
-        brick_coord_ = child;
-        if (r.index >= prefetched_to_) {
-          std::vector<uint32_t> ids;
-          const uint64_t end = std::min<uint64_t>(r.index + kPrefetchWindow, store_.meta().brick_count);
-          for (uint64_t i = r.index + 1; i < end; ++i) ids.push_back(uint32_t(i));
-          store_.Prefetch(ids);
-          prefetched_to_ = uint32_t(end);
+        VOX_RETURN_IF_ERROR(List(pool, r.index, level + 1, child));
+      } else if (r.kind == ChildRef::kPayload) {
+        BaseJob v;
+        v.index = r.index;
+        v.level = level + 1;
+        v.coord = child;
+        voxels_.push_back(v);
+        if (bitmap_depth_ >= 0) {
+          const size_t bit = BitOf(child);
+          occupied_[bit >> 6] |= uint64_t(1) << (bit & 63);
         }
-        VOX_ASSIGN_OR_RETURN(BrickView b, store_.FetchBrick(r.index));
-        brick_cells_ = b.cells;
-        const Status walked = Walk(b.cells, 0, level + 1, child, r.index, b.data);
-        brick_cells_ = nullptr;
-        VOX_RETURN_IF_ERROR(walked);
-        ++bricks_read_;
-        if (o_.progress) o_.progress(bricks_read_, store_.meta().brick_count);
       } else {
-        Hit h;
-        h.brick = brick;
-        h.payload = r.index;
-        h.brick_data = brick_data;
-        VOX_ASSIGN_OR_RETURN(VoxelAttributes a, store_.HitAttributes(h));
-        Aggregate g;
-        g.count = 1;
-        g.normal = glm::dvec3(a.normal);
-        if (has_normal_) {
-          int axis = 0;
-          for (int k = 1; k < 3; ++k)
-            if (std::fabs(g.normal[k]) > std::fabs(g.normal[axis])) axis = k;
-          const double na = g.normal[axis];
-          if (na != 0) {
-            glm::i64vec3 out = glm::i64vec3(child);
-            out[axis] += na > 0 ? 1 : -1;
-            VOX_ASSIGN_OR_RETURN(const bool outside_occupied, Occupied(out));
-            if (!outside_occupied) g.surface = g.normal / std::fabs(na);
-          }
-        }
-        g.color = glm::dvec3(a.color);
-        g.density = has_density_ ? double(a.density) : (fog_ ? 1.0 : 0.0);
-        VOX_RETURN_IF_ERROR(cascade_.Push(1, child, g));
+        return CorruptionError("a brick inside a brick in the base store's octree");
       }
     }
+    return OkStatus();
+  }
+
+  // The bit of base voxel `c` (in the brick being walked) in occupied_.
+  size_t BitOf(const glm::u64vec3& c) const {
+    const uint64_t mask = (uint64_t(1) << bitmap_depth_) - 1;
+    return size_t(((c.z & mask) << (2 * bitmap_depth_)) | ((c.y & mask) << bitmap_depth_) |
+                  (c.x & mask));
+  }
+
+  // One occupied base voxel (payload v.index of `brick`) into the cascade.
+  Status Voxel(const BaseJob& v, uint32_t brick, const void* brick_data, Cascade& cascade) {
+    Hit h;
+    h.brick = brick;
+    h.payload = v.index;
+    h.brick_data = brick_data;
+    VOX_ASSIGN_OR_RETURN(VoxelAttributes a, store_.HitAttributes(h));
+    Aggregate g;
+    g.count = 1;
+    g.normal = glm::dvec3(a.normal);
+    if (has_normal_) {
+      int axis = 0;
+      for (int k = 1; k < 3; ++k)
+        if (std::fabs(g.normal[k]) > std::fabs(g.normal[axis])) axis = k;
+      const double na = g.normal[axis];
+      if (na != 0) {
+        glm::i64vec3 out = glm::i64vec3(v.coord);
+        out[axis] += na > 0 ? 1 : -1;
+        VOX_ASSIGN_OR_RETURN(const bool outside_occupied, Occupied(out));
+        if (!outside_occupied) g.surface = g.normal / std::fabs(na);
+      }
+    }
+    g.color = glm::dvec3(a.color);
+    g.density = has_density_ ? double(a.density) : (fog_ ? 1.0 : 0.0);
+    cascade.Push(1, v.coord, g);
     return OkStatus();
   }
 
@@ -274,6 +403,10 @@ class BaseReader {
     const glm::u64vec3 c(v);
     const int depth = view_.levels - view_.brick_level;
     const bool same_brick = brick_cells_ != nullptr && (c >> uint64_t(depth)) == brick_coord_;
+    if (same_brick && bitmap_depth_ >= 0) {
+      const size_t bit = BitOf(c);
+      return ((occupied_[bit >> 6] >> (bit & 63)) & 1) != 0;
+    }
     const CompactCell* pool = same_brick ? brick_cells_ : view_.top;
     int level = same_brick ? view_.brick_level : 0;
     CompactCell cell = pool[0];
@@ -297,15 +430,117 @@ class BaseReader {
   }
 
   Store& store_;
-  Cascade& cascade_;
-  const LodBuildOptions& o_;
   OctreeView view_;
+  const std::vector<LevelFormat>& local_;
   bool fog_ = false, has_density_ = false, has_normal_ = false;
   const CompactCell* brick_cells_ = nullptr;  // the brick being walked
   glm::u64vec3 brick_coord_{0};               // its coordinates in the brick grid
-  uint64_t bricks_read_ = 0;
-  uint32_t prefetched_to_ = 0;
+  int bitmap_depth_ = -1;                     // occupied_'s side is 2^this; -1: none
+  std::vector<uint64_t> occupied_;            // the brick's voxels, x fastest
+  std::vector<BaseJob> voxels_;               // the brick's voxels, Morton order
 };
+
+// Reduces `jobs` on LodBuildOptions::threads threads (0: one per core; 1:
+// on this thread alone) and hands each result to `take` on this thread, in
+// job order. Workers run at most a window of jobs ahead of `take`, so memory
+// stays bounded; the first error, or the cancel flag, stops the run.
+Status RunJobs(Store& base, const std::vector<BaseJob>& jobs,
+               const std::vector<LevelFormat>& local, const LodBuildOptions& o,
+               const std::function<Status(const BaseJob&, JobReducer::Result&)>& take) {
+  constexpr size_t kPrefetchWindow = 8;  // bricks asked for ahead of the walk
+  auto cancelled = [&] { return o.cancel != nullptr && o.cancel->load(); };
+  const Status interrupted = IoError("interrupted; no level-of-detail pyramid written");
+  size_t prefetched_to = 0;
+  auto prefetch = [&](size_t i) {  // ahead of job i
+    if (i < prefetched_to) return;
+    std::vector<uint32_t> ids;
+    const size_t end = std::min(jobs.size(), i + kPrefetchWindow);
+    for (size_t k = i + 1; k < end; ++k)
+      if (jobs[k].brick != kNoBrick) ids.push_back(jobs[k].brick);
+    base.Prefetch(ids);
+    prefetched_to = end;
+  };
+  const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
+  const int threads = o.threads > 0 ? o.threads : int(hw);
+  if (threads <= 1 || jobs.size() < 2) {
+    JobReducer reducer(base, local);
+    for (const BaseJob& job : jobs) {
+      if (cancelled()) return interrupted;
+      prefetch(size_t(&job - jobs.data()));
+      JobReducer::Result r;
+      reducer.Run(job, &r);
+      VOX_RETURN_IF_ERROR(r.status);
+      VOX_RETURN_IF_ERROR(take(job, r));
+    }
+    return OkStatus();
+  }
+
+  // Reduced bricks waiting for this thread: a few per worker keep them busy
+  // (bricks cost about the same), and each holds its coarse voxels (tens of KB).
+  const size_t window = 4 * size_t(threads) + 4;
+  struct Slot {
+    bool ready = false;
+    JobReducer::Result result;
+  };
+  std::vector<Slot> slots(window);
+  std::mutex mu;
+  std::condition_variable ready_cv, space_cv;
+  size_t next = 0, taken = 0;
+  bool stop = false;
+  auto work = [&] {
+    JobReducer reducer(base, local);
+    for (;;) {
+      size_t i;
+      {
+        std::unique_lock<std::mutex> lock(mu);
+        space_cv.wait(lock, [&] { return stop || next >= jobs.size() || next < taken + window; });
+        if (stop || next >= jobs.size()) return;
+        i = next++;
+        prefetch(i);
+      }
+      JobReducer::Result r;
+      if (cancelled())
+        r.status = interrupted;
+      else
+        reducer.Run(jobs[i], &r);
+      std::lock_guard<std::mutex> lock(mu);
+      slots[i % window].result = std::move(r);
+      slots[i % window].ready = true;
+      ready_cv.notify_all();
+    }
+  };
+  std::vector<std::thread> workers;
+  struct Join {  // however the run ends
+    std::vector<std::thread>& workers;
+    std::mutex& mu;
+    bool& stop;
+    std::condition_variable& cv;
+    ~Join() {
+      {
+        std::lock_guard<std::mutex> lock(mu);
+        stop = true;
+      }
+      cv.notify_all();
+      for (std::thread& t : workers) t.join();
+    }
+  } join{workers, mu, stop, space_cv};
+  for (int t = 0; t < threads; ++t) workers.emplace_back(work);
+  for (size_t i = 0; i < jobs.size(); ++i) {
+    JobReducer::Result r;
+    {
+      std::unique_lock<std::mutex> lock(mu);
+      ready_cv.wait(lock, [&] { return slots[i % window].ready; });
+      r = std::move(slots[i % window].result);
+      slots[i % window].ready = false;
+      taken = i + 1;
+    }
+    space_cv.notify_all();
+    if (cancelled()) return interrupted;
+    VOX_RETURN_IF_ERROR(r.status);
+    VOX_RETURN_IF_ERROR(take(jobs[i], r));
+  }
+  return OkStatus();
+}
 
 }  // namespace
 
@@ -330,7 +565,9 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
     return InvalidArgumentError("'" + target.string() +
                                 "' already exists (replace it with --force)");
   OpenOptions oo;
-  oo.cache_bytes = options.cache_bytes;
+  // Each worker walks a brick and may look into its neighbours.
+  const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
+  oo.cache_bytes = options.cache_bytes * size_t(options.threads > 0 ? options.threads : int(hw));
   VOX_ASSIGN_OR_RETURN(auto base, Store::Open(store_dir, oo));
   if (base->meta().lod_level != 0)
     return InvalidArgumentError("'" + store_dir + "' is a level-of-detail store, not a base store");
@@ -349,11 +586,52 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
 
   LodBuildStats stats;
   {
-    Cascade cascade;
-    VOX_RETURN_IF_ERROR(cascade.Init(base->meta(), base->store_id(), temp, max_level, options));
-    BaseReader reader(*base, cascade, options);
-    VOX_RETURN_IF_ERROR(reader.Run(&stats.base_bricks_read));
-    VOX_RETURN_IF_ERROR(cascade.Finish(&stats));
+    // Levels 1 .. D have their cells inside one base brick: reduced brick by
+    // brick on the worker threads. Coarser levels take one cell per brick,
+    // on this thread, as do the writers (bricks added in order, so the
+    // pyramid is byte-reproducible however many threads built it).
+    const StoreMeta& bm = base->meta();
+    const int local_levels = std::min(bm.levels - bm.brick_level, max_level);
+    std::vector<LevelFormat> local, upper, all;
+    for (int l = 1; l <= max_level; ++l) {
+      LevelFormat f;
+      f.l = l;
+      f.depth = LodBrickDepth(bm.levels, bm.levels - bm.brick_level, l);
+      const StoreMeta m = CoarseMeta(bm, base->store_id(), l, f.depth);
+      f.has_normal = m.has_normal;
+      f.has_color = m.has_color;
+      f.has_density = m.has_density;
+      (l <= local_levels ? local : upper).push_back(f);
+      all.push_back(f);
+    }
+    LevelWriters writers;
+    VOX_RETURN_IF_ERROR(writers.Init(bm, base->store_id(), temp, all, options));
+    Cascade serial(upper);
+    auto drain = [&]() -> Status {
+      for (const LevelFormat& f : upper) VOX_RETURN_IF_ERROR(writers.Add(f.l, serial.out(f.l)));
+      serial.ups().clear();  // beyond the coarsest level
+      return OkStatus();
+    };
+    std::vector<BaseJob> jobs;
+    const OctreeView view = base->view();
+    if (view.top != nullptr && bm.voxel_count > 0) CollectJobs(view, view.top, 0, 0, glm::u64vec3(0), &jobs);
+    uint64_t bricks_done = 0;
+    VOX_RETURN_IF_ERROR(RunJobs(
+        *base, jobs, local, options, [&](const BaseJob& job, JobReducer::Result& r) -> Status {
+          for (size_t i = 0; i < local.size(); ++i)
+            VOX_RETURN_IF_ERROR(writers.Add(local[i].l, r.out[i]));
+          for (const CellUp& up : r.ups) serial.Push(up.l, up.coord, up.sums);
+          VOX_RETURN_IF_ERROR(drain());
+          if (job.brick != kNoBrick) {
+            ++bricks_done;
+            if (options.progress) options.progress(bricks_done, bm.brick_count);
+          }
+          return OkStatus();
+        }));
+    serial.Flush();
+    VOX_RETURN_IF_ERROR(drain());
+    VOX_RETURN_IF_ERROR(writers.Finish(&stats));
+    stats.base_bricks_read = bricks_done;
   }
   VOX_RETURN_IF_ERROR(SyncDir(temp));
   VOX_RETURN_IF_ERROR(PublishAtomically(temp, target.string(), "level-of-detail pyramid"));

@@ -20,8 +20,11 @@
 // ids are Morton order, and so are the voxels inside a brick), and feeds a
 // cascade of run reducers: a cell's voxels are consecutive in Morton order,
 // so each level's voxels come out in Morton order too and each level's
-// coarse bricks are consecutive. Memory: the base store's brick cache plus
-// one coarse brick per level, never the volume. The pyramid is written into
+// coarse bricks are consecutive. The levels whose cells lie inside one base
+// brick are reduced brick by brick on worker threads; their results are
+// taken in brick order, so the pyramid does not depend on the threads.
+// Memory: the base store's brick cache, a bounded window of reduced bricks
+// and one coarse brick per level, never the volume. The pyramid is written into
 // a temporary directory and renamed to lod/ at the end, so a failure never
 // leaves a partial pyramid that opens.
 //
@@ -58,7 +61,10 @@ struct LodBuildOptions {
   // Decompressed-brick cache for reading the base store: each brick is read
   // once, so it needs only the brick being walked and those prefetched (the
   // build's memory stays flat however large the store).
-  size_t cache_bytes = size_t(2) << 20;
+  size_t cache_bytes = size_t(2) << 20;  // per thread
+  // Threads reducing the base bricks (0: one per core). The pyramid is the
+  // same, byte for byte, whatever the number.
+  int threads = 0;
   // Polled between bricks: when it turns true, the build stops and writes no pyramid.
   const std::atomic<bool>* cancel = nullptr;
   // Called after each base brick (from the calling thread).

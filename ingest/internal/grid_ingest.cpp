@@ -143,6 +143,7 @@ class GridIngest {
         LodBuildOptions lo;
         lo.zstd_level = cx_.options.zstd_level;
         lo.normal_bits = cx_.options.normal_bits;
+        lo.threads = cx_.options.threads;
         VOX_ASSIGN_OR_RETURN(LodBuildStats ls, BuildLod(temp_dir, lo));
         cx_.stats->lod_levels = ls.levels;
         cx_.stats->seconds_lod = lod_time.Seconds();

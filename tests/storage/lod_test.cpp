@@ -3,6 +3,7 @@
 // another store refused, stores without one, replacing a store with one.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <filesystem>
 #include <map>
 #include <random>
@@ -140,6 +141,53 @@ TEST(Lod, AggregatesEqualBruteForceLevelSetWithColour) {
   ASSERT_TRUE(st.ok()) << st.status().ToString();
   EXPECT_EQ(st->levels, 5);
   CheckPyramid(dir, voxels, meta);
+}
+
+// The brick-local levels are reduced on worker threads and taken in brick
+// order: any number of threads writes the same pyramid, byte for byte (the
+// same check as the aggregates: one thread is the plain serial cascade),
+// and a cancelled build leaves no pyramid.
+TEST(Lod, TheThreadsChangeNoByteOfThePyramid) {
+  TempDir tmp;
+  const StoreMeta meta = MetaFor(7, 4, GridClass::kLevelSet, /*color=*/true);  // bricks of 8^3
+  const auto voxels = RandomVoxels(7, 23);
+  ASSERT_TRUE(WriteVoxels(tmp / "s", voxels, meta).ok());
+  auto read = [&] {
+    std::map<std::string, std::string> bytes;
+    for (const auto& e : fs::recursive_directory_iterator(tmp / "s/lod"))
+      if (e.is_regular_file()) bytes[fs::relative(e.path(), tmp / "s").string()] = ReadFile(e.path());
+    return bytes;
+  };
+  auto files = [&](int threads) {
+    std::error_code ec;
+    fs::remove_all(tmp / "s/lod", ec);
+    LodBuildOptions lo;
+    lo.threads = threads;
+    auto st = BuildLod(tmp / "s", lo);
+    EXPECT_TRUE(st.ok()) << st.status().ToString();
+    if (st.ok()) EXPECT_GT(st->base_bricks_read, 200u);  // many times the workers' window
+    return read();
+  };
+  const auto one = files(1);
+  ASSERT_GE(one.size(), 2u * 5u);  // bricks and index of each of the 5 levels
+  EXPECT_EQ(files(2), one);
+  EXPECT_EQ(files(5), one);
+  CheckPyramid(tmp / "s", voxels, meta);
+
+  std::atomic<bool> cancel{false};
+  LodBuildOptions lo;
+  lo.threads = 3;
+  lo.force = true;
+  lo.cancel = &cancel;
+  lo.progress = [&](uint64_t done, uint64_t) {
+    if (done == 50) cancel = true;
+  };
+  auto st = BuildLod(tmp / "s", lo);
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.status().message().find("interrupted"), std::string::npos) << st.status().ToString();
+  EXPECT_EQ(read(), one);  // the old pyramid stays
+  EXPECT_EQ(std::distance(fs::directory_iterator(tmp / "s"), fs::directory_iterator()), 3)
+      << "a temporary was left beside the store's files and lod/";
 }
 
 // The levels a frame cannot use (finer than `first_level`) get the minimum

@@ -47,6 +47,8 @@ Result RunProbe(const std::string& args, const std::string& input) {
   };
   r.out = slurp(dir / "out.txt");
   r.err = slurp(dir / "err.txt");
+  std::error_code ec;
+  std::filesystem::remove_all(dir, ec);  // nothing left in the temporary directory
   return r;
 }
 

@@ -247,6 +247,7 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
       LodBuildOptions lo;
       lo.zstd_level = o.zstd_level;
       lo.normal_bits = o.normal_bits;
+      lo.threads = o.threads;
       lo.cancel = o.cancel;
       VOX_ASSIGN_OR_RETURN(LodBuildStats ls, BuildLod(temp_dir, lo));
       stats.lod_levels = ls.levels;

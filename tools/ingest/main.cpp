@@ -99,6 +99,7 @@ static int RunTool(int argc, char** argv) {
     vox::LodBuildOptions lo;
     lo.zstd_level = o.zstd_level;
     lo.normal_bits = o.normal_bits;
+    lo.threads = o.threads;
     lo.force = o.force;
     // Interrupted: the pyramid's temporary (STORE/.lod.tmp-PID-*) goes.
     vox::StartOutputSignalThread("vox-ingest", {add_lod + "/lod"});
