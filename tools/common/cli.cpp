@@ -48,7 +48,8 @@ class HelpFormatter : public CLI::Formatter {
 
   std::string make_help(const CLI::App* app, std::string, CLI::AppFormatMode mode) const override {
     std::string out = "usage: ";
-    for (const char* c = spec_.usage; *c; ++c) out += *c == '\n' ? std::string("\n       ") : std::string(1, *c);
+    for (const char* c = spec_.usage; *c; ++c)  // later lines under the first
+      out += *c == '\n' ? std::string("\n       ") : std::string(1, *c);
     out += "\n\n" + Wrap(spec_.description, kHelpWidth) + "\n\n";
     out += make_groups(app, mode);
     if (*spec_.footer) out += std::string("\n") + spec_.footer;
@@ -97,21 +98,6 @@ struct Refused {
   std::string message;
 };
 
-}  // namespace
-
-const OptionSpec* FindOption(OptionTable table, std::string_view flag) {
-  for (const OptionSpec& o : table)
-    if (flag == o.name) return &o;
-  return nullptr;
-}
-
-FlagArity ArityOf(OptionTable table, std::string_view flag) {
-  const OptionSpec* o = FindOption(table, flag);
-  return o ? o->arity : FlagArity::kUnknown;
-}
-
-namespace {
-
 // The CLI11 parser of `spec`; each option calls `apply` as soon as it is
 // read, so options take effect in command-line order.
 std::unique_ptr<CLI::App> BuildApp(const CommandLineSpec& spec, const ApplyOption& apply,
@@ -141,6 +127,17 @@ std::unique_ptr<CLI::App> BuildApp(const CommandLineSpec& spec, const ApplyOptio
 }
 
 }  // namespace
+
+const OptionSpec* FindOption(OptionTable table, std::string_view flag) {
+  for (const OptionSpec& o : table)
+    if (flag == o.name) return &o;
+  return nullptr;
+}
+
+FlagArity ArityOf(OptionTable table, std::string_view flag) {
+  const OptionSpec* o = FindOption(table, flag);
+  return o ? o->arity : FlagArity::kUnknown;
+}
 
 std::optional<int> ParseCommandLine(const CommandLineSpec& spec, int argc,
                                     const char* const* argv, const ApplyOption& apply,
