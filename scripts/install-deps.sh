@@ -6,7 +6,7 @@ set -euo pipefail
 pkgs=(build-essential cmake ninja-build pkg-config
       libopenvdb-dev libopenvdb-tools libnanovdb-dev libboost-dev libboost-iostreams-dev libimath-dev
       libopenexr-dev libzstd-dev libglm-dev libtbb-dev nlohmann-json3-dev libpng-dev
-      libgtest-dev libgmock-dev libbenchmark-dev libgmp-dev python3
+      libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libgmp-dev python3
       python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib
       clang libclang-rt-14-dev)
 missing=()

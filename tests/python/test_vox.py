@@ -249,6 +249,32 @@ def test_unknown_option_is_a_type_error(store):
         vox.render(store, threads=True)
 
 
+# Issue 28: the keywords are the tools' flags. Each tool's command line and
+# its Python function read one option table (tools/common/options.h); every
+# flag its --help lists is a keyword of the function (None: not given).
+def help_flags(name):
+    code, out, err = run([tool(name), "--help"])
+    assert code == 0, err
+    flags = set(re.findall(r"^  (-{1,2}[a-z][a-z0-9-]*)", out, re.M))
+    return flags - {"-h", "--help", "--version"}
+
+
+def test_every_flag_is_a_keyword(store, vdb, workdir):
+    calls = {
+        "ingest": lambda kw: vox.ingest(vdb, workdir / "kw.store", **kw, force=True),
+        "render": lambda kw: vox.render(store, **kw, size=(8, 6)),
+        "probe": lambda kw: vox.probe(store, np.zeros((0, 6)), **kw),
+    }
+    for name, call in calls.items():
+        flags = help_flags(name)
+        assert {"--threads", "--memory-mb"} & flags, (name, flags)  # the help was read
+        keywords = {f.lstrip("-").replace("-", "_"): None for f in flags}
+        keywords.pop("size" if name == "render" else "force", None)
+        call(keywords)
+    with pytest.raises(TypeError, match="no flag --no-such-flag"):
+        vox.probe(store, np.zeros((0, 6)), no_such_flag=None)
+
+
 def test_ingest_equals_vox_ingest(vdb, workdir):
     cli_store = workdir / "cli.store"
     code, _, err = run([tool("ingest"), vdb, cli_store, "--zstd-level", "5", "--normal-bits", "12",

@@ -1,7 +1,7 @@
-// vox::FlagReader and the number parsers: the command-line mechanics the vox
-// tools share. A tool walks its arguments with a FlagReader (flags, their
-// values, positional arguments) and parses values with ParseInt/ParseDouble;
-// its flags, usage text and messages stay its own. Values are parsed, not
+// vox::FlagReader and the number parsers. The tools parse their command
+// lines with tools/common/cli.h and their values with ParseInt/ParseDouble;
+// FlagReader (flags, their values, positional arguments, walked by hand) is
+// left to the benchmark programs (tools/bench). Values are parsed, not
 // judged: ranges that a library checks are left to the library.
 //
 // Thread safety: FlagReader is thread-compatible; the parsers are pure.

@@ -23,15 +23,50 @@ bool OneOf(std::string_view flag, std::initializer_list<std::string_view> names)
   return false;
 }
 
+constexpr FlagArity kSwitch = FlagArity::kSwitch, kValue = FlagArity::kValue;
+
+// The headings of the tools' help; each tool lists its groups in the order
+// of its table. "" hides an option (accepted, not shown).
+constexpr const char* kLodGroup = "Level of detail";
+constexpr const char* kOutputGroup = "Output";
+constexpr const char* kHidden = "";
+
+constexpr const char* kInputGroup = "Input grid";
+constexpr const char* kStoreGroup = "Store";
+constexpr const char* kIngestMemoryGroup = "Memory and threads";
+
+constexpr OptionSpec kIngestOptions[] = {
+    {"--grid", kValue, "NAME", kInputGroup, "the grid to ingest (default: the first float or double grid)"},
+    {"--isovalue", kValue, "F", kInputGroup,
+     "level sets: a voxel is occupied when active and value <= F (default 0)"},
+    {"--threshold", kValue, "F", kInputGroup,
+     "fog volumes: occupied when active and density > F (default 0)"},
+    {"--color", kValue, "GRID", kInputGroup, "a vec3s/vec3d grid sampled as each voxel's RGB colour"},
+    {"--max-voxels", kValue, "N", kInputGroup,
+     "the most voxels active tiles may expand to (default 1e10); a grid whose occupied tiles "
+     "cover more is refused"},
+    {"--levels", kValue, "N1+N2|auto", kStoreGroup,
+     "auto (32^3 bricks) or N1+N2: N1 resident levels above bricks of N2 levels (2^N2 voxels "
+     "per axis); each at most 20, N1+N2 at most 40"},
+    {"--zstd-level", kValue, "L", kStoreGroup, "brick compression level, 1..22 (default 3)"},
+    {"--normal-bits", kValue, "B", kStoreGroup,
+     "level sets: bits per octahedral normal component, 8..16 (default 16, max error 0.004 "
+     "degrees; 12: 0.06 degrees and a smaller store)"},
+    {"--no-lod", kSwitch, "", kLodGroup,
+     "skip the level-of-detail pyramid (store/lod/, for vox-render --lod; written by default)"},
+    {"--add-lod", kValue, "STORE", kLodGroup,
+     "add the level-of-detail pyramid to an existing store (--force replaces one it has)"},
+    {"--threads", kValue, "N", kIngestMemoryGroup, "worker threads (default: all cores)"},
+    {"--memory-mb", kValue, "N", kIngestMemoryGroup,
+     "memory the ingest may hold, MiB or with a unit (512, 2G; default: the process's memory "
+     "cgroup limit or available memory)"},
+    {"--force", kSwitch, "", kOutputGroup, "replace an existing store"},
+    {"--quiet", kSwitch, "", kOutputGroup, "no progress output"},
+};
+
 }  // namespace
 
-FlagArity IngestFlagArity(std::string_view flag) {
-  if (OneOf(flag, {"--force", "--quiet", "--no-lod"})) return FlagArity::kSwitch;
-  if (OneOf(flag, {"--grid", "--levels", "--isovalue", "--threshold", "--color", "--zstd-level",
-                   "--normal-bits", "--threads", "--memory-mb", "--add-lod", "--max-voxels"}))
-    return FlagArity::kValue;
-  return FlagArity::kUnknown;
-}
+OptionTable IngestOptionTable() { return kIngestOptions; }
 
 Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::string& v) {
   IngestOptions& o = c->options;
@@ -84,17 +119,100 @@ Status CheckIngestCommand(const IngestCommand& c) {
   return OkStatus();
 }
 
-FlagArity RenderFlagArity(std::string_view flag) {
-  if (OneOf(flag, {"--single-step", "--quiet", "--prefetch", "--no-prefetch", "--float",
-                   "--allow-huge", "--read-windows", "--no-read-windows", "--beam", "--no-beam"}))
-    return FlagArity::kSwitch;
-  if (OneOf(flag, {"--cam", "--scene", "-o", "--preview", "--split", "--cache-mb", "--memory-mb",
-                   "--threads", "--tile-size", "--tiles", "--stats", "--layers", "--size",
-                   "--io-threads", "--lod", "--silhouette-aa", "--compression", "--view",
-                   "--save-cam", "--turntable", "--frames"}))
-    return FlagArity::kValue;
-  return FlagArity::kUnknown;
-}
+namespace {
+
+constexpr const char* kCameraGroup = "Camera and scene";
+constexpr const char* kFramesGroup = "Frame sequences";
+constexpr const char* kRenderMemoryGroup = "Memory and I/O";
+constexpr const char* kTracingGroup = "Tracing and parallel runs";
+
+constexpr OptionSpec kRenderOptions[] = {
+    {"--cam", kValue, "cam.json", kCameraGroup,
+     "camera JSON (world space of the source VDB; docs/usage.md); without it a default camera "
+     "frames the whole volume. An array of cameras is a frame sequence: one frame per camera"},
+    {"--scene", kValue, "scene.json", kCameraGroup,
+     "lights, materials, background, volume, max_depth, samples_per_pixel"},
+    {"--size", kValue, "WxH", kCameraGroup,
+     "image size, overriding the camera JSON's (default 1024x1024 without --cam)"},
+    {"--view", kValue, "AZ,EL", kCameraGroup,
+     "look at the volume's centre from azimuth AZ and elevation EL (degrees), framing its world "
+     "box (--cam's lens, size and up, or the default camera's)"},
+    {"--save-cam", kValue, "cam.json", kCameraGroup,
+     "write the camera used as camera JSON (reusable with --cam); in a sequence, a pattern "
+     "writes each frame's camera, a plain name the array of the rendered frames' cameras (with "
+     "the last frame)"},
+    {"--turntable", kValue, "N", kFramesGroup,
+     "a sequence of N frames around the camera's look-at point (--cam's, --view's or the "
+     "default camera's): the same distance and elevation, azimuth steps of 360/N degrees about "
+     "its up axis; frame 1 is the camera itself"},
+    {"--frames", kValue, "A-B", kFramesGroup,
+     "render frames A to B of the sequence (1-based, inclusive; or N: frame N alone), e.g. one "
+     "chunk per Slurm array task"},
+    {"-o", kValue, "out.exr", kOutputGroup,
+     "output EXR (default render.exr); R G B A (half float, premultiplied) and Z (float, planar "
+     "camera depth); docs/usage.md has the layout. A printf frame pattern (out.%04d.exr; also "
+     "for --preview and --stats) numbers the frames from 1; a sequence of several frames "
+     "requires one"},
+    {"--float", kSwitch, "", kOutputGroup, "write R G B A as 32-bit float"},
+    {"--compression", kValue, "C", kOutputGroup,
+     "EXR tile compression: rle (default), zip (smaller, slower), zips, piz or none (default for "
+     "--tiles parts, which vox-merge recompresses)"},
+    {"--layers", kValue, "LIST", kOutputGroup,
+     "extra EXR layers, comma-separated: normal (N.X N.Y N.Z), voxel (voxel.i voxel.j voxel.k), "
+     "position (P.X P.Y P.Z), distance (along the ray)"},
+    {"--preview", kValue, "out.png", kOutputGroup, "also write an 8-bit sRGB PNG"},
+    {"--stats", kValue, "stats.json", kOutputGroup,
+     "write counters and timings as JSON (per frame: its number and camera)"},
+    {"--allow-huge", kSwitch, "", kOutputGroup,
+     "render a frame of more than 2^28 pixels (16384x16384); the estimated EXR size must still "
+     "fit the output's disk"},
+    {"--quiet", kSwitch, "", kOutputGroup, "no progress output"},
+    {"--lod", kValue, "F", kLodGroup,
+     "level of detail: a ray stops at the first occupied cell of the store's pyramid "
+     "(store/lod/) whose size is at most F times the pixel's cone width there. Default: 1 when "
+     "the store has a pyramid (a huge volume seen whole costs what its image costs; wherever a "
+     "voxel covers a pixel the frame is the exact one, bit for bit), else 0. --lod 0: the "
+     "paper's exact frame everywhere. See docs/lod.md"},
+    {"--silhouette-aa", kValue, "G", kLodGroup,
+     "with level of detail, a coarse stop next to a miss is shaded again from GxG sub-pixel rays "
+     "with cones G times narrower, so its alpha is the covered fraction (default 4; 0: coarse "
+     "silhouettes stay whole cells)"},
+    {"--memory-mb", kValue, "M", kRenderMemoryGroup,
+     "memory the whole process may use, in MiB (or with a unit: 2G); default: the memory "
+     "cgroup's limit (Slurm --mem, a container), or 3/4 of MemAvailable if smaller; the brick "
+     "cache, pinned bricks and buffers are sized within it (1/8 kept as headroom)"},
+    {"--cache-mb", kValue, "M", kRenderMemoryGroup,
+     "decompressed brick cache, inside the memory budget (default: what the budget leaves)"},
+    {"--prefetch", kSwitch, "", kRenderMemoryGroup,
+     "read bricks in the background: the next tiles' first bricks, and a pixel's missing brick "
+     "while other pixels are shaded (same image; helps on busy machines, reads more bytes under "
+     "tight memory limits)"},
+    {"--io-threads", kValue, "N", kRenderMemoryGroup,
+     "background reader threads of --prefetch (default 8; refused without --prefetch, where the "
+     "render threads read)"},
+    {"--no-read-windows", kSwitch, "", kRenderMemoryGroup,
+     "read each brick record alone, not with its file neighbours (by default a miss reads the "
+     "window of records around it, up to 1 MiB, kept compressed in 1/8 of the brick cache, at "
+     "most 64 MiB)"},
+    {"--read-windows", kSwitch, "", kHidden, "the default: read windows of records"},
+    {"--no-prefetch", kSwitch, "", kHidden, "removed: refused with a message"},
+    {"--split", kValue, "N1+N2|N1", kTracingGroup,
+     "first-step levels of the two-step traversal (N1, or N1+N2 = levels)"},
+    {"--single-step", kSwitch, "", kTracingGroup,
+     "one DDA step over the whole grid (grids of at most 2^20)"},
+    {"--no-beam", kSwitch, "", kTracingGroup,
+     "trace every primary ray from its start (no beam start distances; the same image, slower)"},
+    {"--beam", kSwitch, "", kHidden, "the default: beam start distances"},
+    {"--threads", kValue, "N", kTracingGroup, "render threads (default: all cores)"},
+    {"--tile-size", kValue, "T", kTracingGroup, "tile side in pixels (default 64)"},
+    {"--tiles", kValue, "I/N", kTracingGroup,
+     "render only part I (1-based) of N; assemble the parts with vox-merge (a part holds only "
+     "its tiles: it is for vox-merge, not other EXR tools)"},
+};
+
+}  // namespace
+
+OptionTable RenderOptionTable() { return kRenderOptions; }
 
 Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::string& v) {
   if (v.empty() && OneOf(a, {"--cam", "--scene", "-o", "--preview", "--stats"}))
@@ -191,18 +309,50 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
   } else if (a == "--frames") {
     VOX_ASSIGN_OR_RETURN(o->frames, ParseFrameRange(v));
   } else {
-    return InvalidArgumentError("unknown flag " + a);
+    return InvalidArgumentError("unknown option " + a);
   }
   return OkStatus();
 }
 
-FlagArity ProbeFlagArity(std::string_view flag) {
-  if (OneOf(flag, {"--single-step", "--stats"})) return FlagArity::kSwitch;
-  if (OneOf(flag, {"--generate", "--split", "--memory-mb", "--brick-level", "--cache-mb",
-                   "--fixed", "--tracer", "--lod", "--cone-rad", "--cone-width"}))
-    return FlagArity::kValue;
-  return FlagArity::kUnknown;
-}
+namespace {
+
+constexpr const char* kSourceGroup = "Source";
+constexpr const char* kProbeTracingGroup = "Tracing";
+constexpr const char* kProbeMemoryGroup = "Memory";
+
+constexpr OptionSpec kProbeOptions[] = {
+    {"--generate", kValue, "SHAPE", kSourceGroup,
+     "trace a generated shape instead of a store: sphere:N, torus:N, cubes:N, noise:N (N voxels "
+     "per axis), corner:L (2^L grid)"},
+    {"--brick-level", kValue, "L", kSourceGroup,
+     "the generated shape's brick level (levels per brick; default: its levels - 5, at least 1)"},
+    {"--tracer", kValue, "render|long-double", kProbeTracingGroup,
+     "render (default) answers as vox-render traces (double set-up, the store's occupied box); "
+     "long-double with a long-double set-up (docs/accuracy.md)"},
+    {"--split", kValue, "N1+N2|N1", kProbeTracingGroup,
+     "first-step levels of the two-step traversal (N1, or N1+N2 = levels)"},
+    {"--single-step", kSwitch, "", kProbeTracingGroup, "one DDA step over the whole grid"},
+    {"--fixed", kValue, "auto|64|128", kProbeTracingGroup,
+     "fixed-point word (auto: 64 up to 2^26 grids, else 128)"},
+    {"--stats", kSwitch, "", kProbeTracingGroup, "print the traversal counters on stderr"},
+    {"--lod", kValue, "F", kLodGroup,
+     "stop at the first occupied cell of the store's level-of-detail pyramid whose size is at "
+     "most F times the ray's cone width (W + R t |dir| voxels at t); prints 'lod L i j k t' for "
+     "a cell of level L > 0"},
+    {"--cone-rad", kValue, "R", kLodGroup,
+     "the cone's spread in radians: its width grows by R t |dir| voxels (required by --lod)"},
+    {"--cone-width", kValue, "W", kLodGroup,
+     "the cone's width at the ray's origin, in voxels (default 0; with --lod)"},
+    {"--memory-mb", kValue, "M", kProbeMemoryGroup,
+     "memory the process may use, in MiB (or 2G); default: the memory cgroup's limit, or 3/4 of "
+     "MemAvailable"},
+    {"--cache-mb", kValue, "M", kProbeMemoryGroup,
+     "the brick cache inside the memory budget (default: what the budget leaves)"},
+};
+
+}  // namespace
+
+OptionTable ProbeOptionTable() { return kProbeOptions; }
 
 Status ApplyProbeFlag(ProbeOptions* o, const std::string& a, const std::string& v) {
   if (a == "--single-step") {

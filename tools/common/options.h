@@ -1,11 +1,13 @@
-// The options of vox-ingest, vox-render and vox-probe, applied one flag at a
-// time from (flag, text value) pairs (vox-probe's tracing is
-// tools/common/prober.h). The tools' flag loops and the Python module
-// (tools/python) both use them, so the two accept the same options and
-// refuse bad ones with the same messages. Flags are spelled as on the
-// command line ("--zstd-level", "-o"); a switch's value is ignored.
+// The options of vox-ingest, vox-render and vox-probe: each tool's option
+// table (names, switch or value, help; tools/common/cli.h) and the function
+// that applies one (flag, text value) pair (vox-probe's tracing is
+// tools/common/prober.h). The tools' command lines and the Python module
+// (tools/python: keyword zstd_level=3 is --zstd-level 3) both use them, so
+// the two accept the same options and refuse bad ones with the same
+// messages. Flags are spelled as on the command line ("--zstd-level", "-o");
+// a switch's value is ignored.
 //
-// Thread safety: the Apply and Check functions are pure.
+// Thread safety: the tables are constants; the Apply and Check functions are pure.
 #ifndef VOX_TOOLS_COMMON_OPTIONS_H_
 #define VOX_TOOLS_COMMON_OPTIONS_H_
 
@@ -21,10 +23,9 @@
 #include "ingest/limits.h"
 #include "render/job.h"
 #include "render/lod.h"
+#include "tools/common/cli.h"
 
 namespace vox {
-
-enum class FlagArity { kUnknown, kSwitch, kValue };
 
 // vox-ingest: IngestOptions plus --quiet.
 struct IngestCommand {
@@ -33,14 +34,15 @@ struct IngestCommand {
   std::string add_lod;  // --add-lod STORE: build the pyramid of an existing store instead
   IngestLimits limits;  // --max-voxels
 };
-FlagArity IngestFlagArity(std::string_view flag);
+// The options of vox-ingest (the same table as the Python module's ingest keywords).
+OptionTable IngestOptionTable();
 // InvalidArgumentError with vox-ingest's usage message for a bad value.
 Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::string& value);
 // The checks vox-ingest makes once all flags are read (threads, zstd level, levels).
 Status CheckIngestCommand(const IngestCommand& c);
 
 // vox-render: RenderJobOptions.
-FlagArity RenderFlagArity(std::string_view flag);
+OptionTable RenderOptionTable();
 Status ApplyRenderFlag(RenderJobOptions* o, const std::string& flag, const std::string& value);
 
 // vox-probe.
@@ -58,7 +60,7 @@ struct ProbeOptions {
   double lod = 0.0;           // --lod F over the store's pyramid; 0: off
   double cone_rad = -1.0, cone_width = 0.0;  // the cone per ray: W + R t |dir| voxels at t
 };
-FlagArity ProbeFlagArity(std::string_view flag);
+OptionTable ProbeOptionTable();
 Status ApplyProbeFlag(ProbeOptions* o, const std::string& flag, const std::string& value);
 
 }  // namespace vox

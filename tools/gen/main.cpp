@@ -1,19 +1,16 @@
 // vox-gen: writes a procedural level-set shape as a vox store, brick by brick,
 // in memory independent of the store's size (tools/gen/generate.h).
-//   vox-gen SHAPE store/ --size N [--levels N1+N2|auto] [--band W] [--threads T]
-//           [--zstd-level L] [--normal-bits B] [--no-lod] [--force] [--quiet]
+//   vox-gen SHAPE store/ --size N [options]    (kOptions below; vox-gen --help)
 // Exit codes: 0 done, 1 the generation failed or was interrupted, 2 bad command line.
 #include <signal.h>
 
 #include <atomic>
-#include <cerrno>
 #include <chrono>
-#include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <string>
 #include <vector>
 
+#include "tools/common/cli.h"
 #include "tools/common/flags.h"
 #include "tools/common/tool_main.h"
 #include "tools/gen/generate.h"
@@ -21,42 +18,91 @@
 
 namespace {
 
-constexpr char kUsage[] =
-    "usage: vox-gen SHAPE store/ --size N [--levels N1+N2|auto] [--band W] [--threads T]\n"
-    "               [--zstd-level L] [--normal-bits B] [--no-lod] [--force] [--quiet]\n"
-    "  SHAPE            sphere: a level-set sphere shell (like vdb_tool -sphere)\n"
-    "                   bumpy: that sphere displaced by fixed multi-octave noise (fine detail)\n"
-    "                   rough: the sphere's voxels with jittered normals and speckled colours\n"
-    "                   (~10 B/voxel on disk against the sphere's 1: big stores, fast)\n"
-    "                   Both are the unit sphere, 15/16 of the grid across, centred on index 0\n"
-    "                   (world about [-1,1]^3, voxel size 32/(15 N)); occupied voxels are those\n"
-    "                   whose centre's signed distance d (voxels) has -W < d <= 0, with normals.\n"
-    "  --size N         voxels per axis: a power of two, 2..1048576 (2^20)\n"
-    "  --levels         auto (32^3 bricks) or N1+N2 with N1 + N2 = log2(N), N2 <= 10\n"
-    "  --band W         narrow-band half-width in voxels (default 3, like vdb_tool's width)\n"
-    "  --threads T      worker threads (default: all cores)\n"
-    "  --zstd-level L   brick compression level, 1..22 (default 3)\n"
-    "  --normal-bits B  bits per octahedral normal component, 8..16 (default 16)\n"
-    "  --no-lod         skip the level-of-detail pyramid (store/lod/, for vox-render --lod)\n"
-    "  --force          replace an existing store\n"
-    "  --quiet          no progress output\n";
+constexpr vox::FlagArity kSwitch = vox::FlagArity::kSwitch, kValue = vox::FlagArity::kValue;
+constexpr const char* kShapeGroup = "Shape and size";
+constexpr const char* kStoreGroup = "Store";
+constexpr const char* kRunGroup = "Run";
+
+constexpr vox::OptionSpec kOptions[] = {
+    {"--size", kValue, "N", kShapeGroup,
+     "voxels per axis: a power of two, 2..1048576 (2^20); required"},
+    {"--band", kValue, "W", kShapeGroup,
+     "narrow-band half-width in voxels (default 3, like vdb_tool's width)"},
+    {"--levels", kValue, "N1+N2|auto", kStoreGroup,
+     "auto (32^3 bricks) or N1+N2 with N1 + N2 = log2(N), N2 <= 10"},
+    {"--zstd-level", kValue, "L", kStoreGroup, "brick compression level, 1..22 (default 3)"},
+    {"--normal-bits", kValue, "B", kStoreGroup,
+     "bits per octahedral normal component, 8..16 (default 16)"},
+    {"--no-lod", kSwitch, "", kStoreGroup,
+     "skip the level-of-detail pyramid (store/lod/, for vox-render --lod)"},
+    {"--threads", kValue, "T", kRunGroup, "worker threads (default: all cores)"},
+    {"--force", kSwitch, "", kRunGroup, "replace an existing store"},
+    {"--quiet", kSwitch, "", kRunGroup, "no progress output"},
+};
+
+const vox::CommandLineSpec kCommandLine{
+    "vox-gen", "vox-gen SHAPE store/ --size N [options]",
+    "Writes a procedural level-set shape as the vox store store/, brick by brick, in memory "
+    "independent of the store's size.",
+    kOptions,
+    "SHAPE is one of:\n"
+    "  sphere  a level-set sphere shell (like vdb_tool -sphere)\n"
+    "  bumpy   that sphere displaced by fixed multi-octave noise (fine detail)\n"
+    "  rough   the sphere's voxels with jittered normals and speckled colours (~10 B/voxel\n"
+    "          on disk against the sphere's 1: big stores, fast)\n"
+    "All are the unit sphere, 15/16 of the grid across, centred on index 0 (world about\n"
+    "[-1,1]^3, voxel size 32/(15 N)); occupied voxels are those whose centre's signed distance\n"
+    "d (voxels) has -W < d <= 0, with normals. Exit codes: 0 done, 1 the generation failed or\n"
+    "was interrupted, 2 bad command line.\n"};
+
+struct GenCommand {
+  vox::gen::GenerateOptions options;
+  bool quiet = false, have_size = false;
+};
+
+// Applies one option of kOptions.
+vox::Status ApplyGenFlag(GenCommand* c, const std::string& a, const std::string& v) {
+  vox::gen::GenerateOptions& o = c->options;
+  int64_t n = 0;
+  if (a == "--force") {
+    o.force = true;
+  } else if (a == "--quiet") {
+    c->quiet = true;
+  } else if (a == "--no-lod") {
+    o.lod = false;
+  } else if (a == "--levels") {
+    o.levels = v;
+  } else if (a == "--band") {
+    if (!vox::ParseDouble(v, &o.band))
+      return vox::InvalidArgumentError("--band " + v + ": not a finite number");
+  } else if (!vox::ParseInt(v, int64_t{-1000000000000}, int64_t{1000000000000}, &n)) {
+    return vox::InvalidArgumentError(a + " " + v + ": not a whole number");
+  } else if (a == "--size") {
+    if (n < 0)
+      return vox::InvalidArgumentError("--size " + v + ": must be a power of two from 2 to 2^20");
+    o.size = uint64_t(n);
+    c->have_size = true;
+  } else if (n < -1000000 || n > 1000000) {
+    return vox::InvalidArgumentError(a + " " + v + ": out of range");
+  } else if (a == "--threads") {
+    if (n < 0 || n > vox::kMaxThreads)
+      return vox::InvalidArgumentError("--threads " + v + ": must be in 1.." +
+                                       std::to_string(vox::kMaxThreads) + " (or 0 for all cores)");
+    o.threads = int(n);
+  } else if (a == "--zstd-level") {
+    o.zstd_level = int(n);
+  } else {
+    o.normal_bits = int(n);
+  }
+  return vox::OkStatus();
+}
+
+int UsageError(const std::string& message) {
+  return vox::UsageError(kCommandLine.program, message);
+}
 
 std::atomic<bool> g_cancel{false};
 extern "C" void OnSignal(int) { g_cancel.store(true); }
-
-int UsageError(const std::string& message) {
-  std::fprintf(stderr, "vox-gen: %s\n%s", message.c_str(), kUsage);
-  return 2;
-}
-
-bool ParseInt(const std::string& s, long long lo, long long hi, long long* out) {
-  errno = 0;
-  char* end = nullptr;
-  long long v = std::strtoll(s.c_str(), &end, 10);
-  if (s.empty() || *end != '\0' || errno != 0 || v < lo || v > hi) return false;
-  *out = v;
-  return true;
-}
 
 double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -65,64 +111,21 @@ double Now() {
 }  // namespace
 
 static int RunTool(int argc, char** argv) {
-  vox::gen::GenerateOptions o;
-  bool quiet = false, have_size = false;
+  GenCommand command;
+  vox::gen::GenerateOptions& o = command.options;
+  const bool& quiet = command.quiet;
   std::vector<std::string> positional;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    if (a == "-h" || a == "--help") {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else if (a == "--force") {
-      o.force = true;
-    } else if (a == "--quiet") {
-      quiet = true;
-    } else if (a == "--no-lod") {
-      o.lod = false;
-    } else if (a == "--size" || a == "--levels" || a == "--band" || a == "--threads" ||
-               a == "--zstd-level" || a == "--normal-bits") {
-      if (i + 1 >= argc) return UsageError(a + " needs a value");
-      std::string v = argv[++i];
-      long long n = 0;
-      if (a == "--levels") {
-        o.levels = v;
-      } else if (a == "--band") {
-        char* end = nullptr;
-        errno = 0;
-        double d = std::strtod(v.c_str(), &end);
-        if (v.empty() || *end != '\0' || errno != 0 || !std::isfinite(d))
-          return UsageError("--band " + v + ": not a finite number");
-        o.band = d;
-      } else if (!ParseInt(v, -1000000000000LL, 1000000000000LL, &n)) {
-        return UsageError(a + " " + v + ": not a whole number");
-      } else if (a == "--size") {
-        if (n < 0) return UsageError("--size " + v + ": must be a power of two from 2 to 2^20");
-        o.size = uint64_t(n);
-        have_size = true;
-      } else if (n < -1000000 || n > 1000000) {
-        return UsageError(a + " " + v + ": out of range");
-      } else if (a == "--threads") {
-        if (n < 0 || n > vox::kMaxThreads)
-          return UsageError("--threads " + v + ": must be in 1.." + std::to_string(vox::kMaxThreads) +
-                            " (or 0 for all cores)");
-        o.threads = int(n);
-      } else if (a == "--zstd-level") {
-        o.zstd_level = int(n);
-      } else {
-        o.normal_bits = int(n);
-      }
-    } else if (a.size() > 1 && a[0] == '-') {
-      return UsageError("unknown option " + a);
-    } else {
-      positional.push_back(a);
-    }
-  }
+  const auto apply = [&](const std::string& flag, const std::string& value) {
+    return ApplyGenFlag(&command, flag, value);
+  };
+  if (auto exit_code = vox::ParseCommandLine(kCommandLine, argc, argv, apply, &positional))
+    return *exit_code;
   if (positional.size() != 2)
     return UsageError("expected a shape and an output store directory, got " +
                       std::to_string(positional.size()) + " arguments");
   o.shape = positional[0];
   o.output = positional[1];
-  if (!have_size) return UsageError("--size is required");
+  if (!command.have_size) return UsageError("--size is required");
   if (vox::Status s = vox::gen::ValidateOptions(o); !s.ok()) return UsageError(s.message());
 
   struct sigaction sa = {};

@@ -5,22 +5,16 @@
 // Exit status: 0 on success, 1 when the store cannot be read, 2 on bad usage.
 #include <cstdint>
 #include <cstdio>
-#include <optional>
 #include <string>
+#include <vector>
 
 #include "storage/store_budget.h"
 #include "storage/store_info.h"
+#include "tools/common/cli.h"
 #include "tools/common/flags.h"
 #include "tools/common/tool_main.h"
 
 namespace {
-
-constexpr const char* kUsage =
-    "usage: vox-info STORE_DIR [--verify] [--memory-mb M] [--cache-mb M]\n"
-    "  --verify       decompress and check every brick\n"
-    "  --memory-mb M  memory the process may use while verifying, in MiB (or 2G);\n"
-    "                 default: the memory cgroup's limit, or 3/4 of MemAvailable\n"
-    "  --cache-mb M   brick cache while verifying, inside that budget (default 64)\n";
 
 struct Options {
   std::string store;
@@ -30,45 +24,55 @@ struct Options {
   bool cache_given = false;
 };
 
-int Usage(const std::string& msg) {
-  std::fprintf(stderr, "vox-info: %s\n%s", msg.c_str(), kUsage);
-  return 2;
+constexpr vox::OptionSpec kOptions[] = {
+    {"--verify", vox::FlagArity::kSwitch, "", "Verification", "decompress and check every brick"},
+    {"--memory-mb", vox::FlagArity::kValue, "M", "Verification",
+     "memory the process may use while verifying, in MiB (or 2G); default: the memory cgroup's "
+     "limit, or 3/4 of MemAvailable"},
+    {"--cache-mb", vox::FlagArity::kValue, "M", "Verification",
+     "brick cache while verifying, inside that budget (default 64)"},
+};
+
+const vox::CommandLineSpec kCommandLine{
+    "vox-info", "vox-info STORE_DIR [--verify] [--memory-mb M] [--cache-mb M]",
+    "Prints a store's metadata and statistics, as vdb_print does for VDB files.", kOptions,
+    "Exit codes: 0 done, 1 the store cannot be read, 2 bad command line.\n"};
+
+// Applies one option of kOptions.
+vox::Status ApplyInfoFlag(Options* opt, const std::string& a, const std::string& v) {
+  if (a == "--verify") {
+    opt->verify = true;
+  } else if (a == "--cache-mb") {
+    int64_t mb = 0;
+    if (!vox::ParseInt(v, 1, INT64_MAX >> 20, &mb))
+      return vox::InvalidArgumentError("bad --cache-mb '" + v + "'");
+    opt->cache_mb = size_t(mb);
+    opt->cache_given = true;
+  } else if (a == "--memory-mb") {
+    VOX_ASSIGN_OR_RETURN(opt->memory_bytes, vox::ParseMemorySize("--memory-mb", v));
+  } else {
+    return vox::InvalidArgumentError("unknown option " + a);
+  }
+  return vox::OkStatus();
+}
+
+int UsageError(const std::string& message) {
+  return vox::UsageError(kCommandLine.program, message);
 }
 
 }  // namespace
 
 static int RunTool(int argc, char** argv) {
   Options opt;
-  vox::FlagReader flags(argc, argv);
-  while (flags.Next()) {
-    const std::string a = flags.arg();
-    if (flags.IsHelp()) {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else if (a == "--verify") {
-      opt.verify = true;
-    } else if (a == "--cache-mb") {
-      const std::optional<std::string> v = flags.Value();
-      if (!v) return Usage("--cache-mb needs a value");
-      int64_t mb = 0;
-      if (!vox::ParseInt(*v, 1, INT64_MAX >> 20, &mb)) return Usage("bad --cache-mb '" + *v + "'");
-      opt.cache_mb = size_t(mb);
-      opt.cache_given = true;
-    } else if (a == "--memory-mb") {
-      const std::optional<std::string> v = flags.Value();
-      if (!v) return Usage("--memory-mb needs a value");
-      auto bytes = vox::ParseMemorySize("--memory-mb", *v);
-      if (!bytes.ok()) return Usage(bytes.status().message());
-      opt.memory_bytes = *bytes;
-    } else if (flags.IsFlag()) {
-      return Usage("unknown option '" + a + "'");
-    } else if (opt.store.empty()) {
-      opt.store = a;
-    } else {
-      return Usage("more than one store given");
-    }
-  }
-  if (opt.store.empty()) return Usage("no store given");
+  std::vector<std::string> stores;
+  const auto apply = [&](const std::string& flag, const std::string& value) {
+    return ApplyInfoFlag(&opt, flag, value);
+  };
+  if (auto exit_code = vox::ParseCommandLine(kCommandLine, argc, argv, apply, &stores))
+    return *exit_code;
+  if (stores.empty()) return UsageError("no store given");
+  if (stores.size() > 1) return UsageError("more than one store given");
+  opt.store = stores[0];
   uint64_t cache_bytes = uint64_t(opt.cache_mb) << 20;
   if (opt.verify) {  // the cache must fit the process's memory budget
     vox::Status s = [&]() -> vox::Status {

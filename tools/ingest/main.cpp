@@ -1,8 +1,7 @@
 // vox-ingest: reads an OpenVDB grid and writes a vox store.
-//   vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]
-//              [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B] [--threads N]
-//              [--memory-mb N] [--max-voxels N] [--no-lod] [--force] [--quiet]
-//   vox-ingest --add-lod store/ [--force] [--quiet]
+//   vox-ingest data.vdb store/ [options]
+//   vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]
+// The options are tools/common/options.h's ingest table (vox-ingest --help).
 // Exit codes: 0 done, 1 the ingest failed (or its child process crashed),
 // 2 bad command line, 128+N killed by signal N (SIGINT, SIGTERM, SIGKILL: the
 // temporary store directory is removed).
@@ -14,7 +13,6 @@
 
 #include <cstdio>
 #include <memory>
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,7 +20,7 @@
 #include "ingest/limits.h"
 #include "storage/lod.h"
 #include "storage/memory_budget.h"
-#include "tools/common/flags.h"
+#include "tools/common/cli.h"
 #include "tools/common/options.h"
 #include "tools/common/signals.h"
 #include "tools/common/supervisor.h"
@@ -30,35 +28,18 @@
 
 namespace {
 
-constexpr char kUsage[] =
-    "usage: vox-ingest data.vdb store/ [--grid NAME] [--levels N1+N2|auto] [--isovalue F]\n"
-    "                  [--threshold F] [--color GRID] [--zstd-level L] [--normal-bits B]\n"
-    "                  [--threads N] [--memory-mb N] [--max-voxels N] [--no-lod] [--force] [--quiet]\n"
-    "       vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]\n"
-    "  --grid NAME      the grid to ingest (default: the first float or double grid)\n"
-    "  --levels         auto (32^3 bricks) or N1+N2: N1 resident levels above bricks of\n"
-    "                   N2 levels (2^N2 voxels per axis); each at most 20, N1+N2 at most 40\n"
-    "  --isovalue F     level sets: a voxel is occupied when active and value <= F (default 0)\n"
-    "  --threshold F    fog volumes: occupied when active and density > F (default 0)\n"
-    "  --color GRID     a vec3s/vec3d grid sampled as each voxel's RGB colour\n"
-    "  --zstd-level L   brick compression level, 1..22 (default 3)\n"
-    "  --normal-bits B  level sets: bits per octahedral normal component, 8..16 (default 16,\n"
-    "                   max error 0.004 degrees; 12: 0.06 degrees and a smaller store)\n"
-    "  --threads N      worker threads (default: all cores)\n"
-    "  --memory-mb N    memory the ingest may hold, MiB or with a unit (512, 2G; default: the\n"
-    "                   process's memory cgroup limit or available memory)\n"
-    "  --max-voxels N   the most voxels active tiles may expand to (default 1e10); a grid\n"
-    "                   whose occupied tiles cover more is refused\n"
-    "  --no-lod         skip the level-of-detail pyramid (store/lod/, for vox-render --lod;\n"
-    "                   written by default)\n"
-    "  --add-lod STORE  add the level-of-detail pyramid to an existing store (--force\n"
-    "                   replaces one it has)\n"
-    "  --force          replace an existing store\n"
-    "  --quiet          no progress output\n";
+const vox::CommandLineSpec kCommandLine{
+    "vox-ingest",
+    "vox-ingest data.vdb store/ [options]\n"
+    "vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]",
+    "Reads a grid of the OpenVDB file data.vdb and writes the vox store store/ (with its "
+    "level-of-detail pyramid), or adds the pyramid to an existing store.",
+    vox::IngestOptionTable(),
+    "Exit codes: 0 done, 1 the ingest failed (or its child process crashed), 2 bad command\n"
+    "line, 128+N killed by signal N (the temporary store directory is removed).\n"};
 
 int UsageError(const std::string& message) {
-  std::fprintf(stderr, "vox-ingest: %s\n%s", message.c_str(), kUsage);
-  return 2;
+  return vox::UsageError(kCommandLine.program, message);
 }
 
 }  // namespace
@@ -70,25 +51,12 @@ static int RunTool(int argc, char** argv) {
   vox::IngestCommand command;
   vox::IngestOptions& o = command.options;
   std::vector<std::string> positional;
-  vox::FlagReader flags(argc, argv);
-  o.command_line = flags.CommandLine("vox-ingest");
-  while (flags.Next()) {
-    const std::string a = flags.arg();
-    if (flags.IsHelp()) {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else if (flags.IsFlag()) {
-      const vox::FlagArity arity = vox::IngestFlagArity(a);
-      if (arity == vox::FlagArity::kUnknown) return UsageError("unknown option " + a);
-      std::optional<std::string> v;
-      if (arity == vox::FlagArity::kValue && !(v = flags.Value()))
-        return UsageError(a + " needs a value");
-      vox::Status s = vox::ApplyIngestFlag(&command, a, v.value_or(""));
-      if (!s.ok()) return UsageError(s.message());
-    } else {
-      positional.push_back(a);
-    }
-  }
+  o.command_line = vox::CommandLineText("vox-ingest", argc, argv);
+  const auto apply = [&](const std::string& flag, const std::string& value) {
+    return vox::ApplyIngestFlag(&command, flag, value);
+  };
+  if (auto exit_code = vox::ParseCommandLine(kCommandLine, argc, argv, apply, &positional))
+    return *exit_code;
   const bool quiet = command.quiet;
   const std::string& add_lod = command.add_lod;
   if (!add_lod.empty()) {

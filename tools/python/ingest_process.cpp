@@ -170,7 +170,8 @@ int RunIngestChild(const std::vector<std::string>& args) {
   for (size_t i = 5; i < args.size(); ++i) {
     const std::string& flag = args[i];
     std::string value;
-    if (IngestFlagArity(flag) == FlagArity::kValue && i + 1 < args.size()) value = args[++i];
+    if (ArityOf(IngestOptionTable(), flag) == FlagArity::kValue && i + 1 < args.size())
+      value = args[++i];
     if (Status s = ApplyIngestFlag(&c, flag, value); !s.ok())
       return WriteAll(up, ErrorLine(s)) ? 0 : 1;
   }

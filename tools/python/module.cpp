@@ -128,13 +128,14 @@ KwFlag ToFlag(const std::string& key, const py::handle& v) {
   return f;
 }
 
-// Applies keyword arguments through a tool's flag table.
-template <class Arity, class Apply>
-void ApplyKwargs(const py::kwargs& kwargs, const char* fn, Arity arity, Apply apply) {
+// Applies keyword arguments through a tool's option table (tools/common/options.h,
+// the one its command line is built from).
+template <class Apply>
+void ApplyKwargs(const py::kwargs& kwargs, const char* fn, vox::OptionTable table, Apply apply) {
   for (const auto& [k, v] : kwargs) {
     const std::string key = py::str(k);
     const KwFlag f = ToFlag(key, v);
-    const vox::FlagArity a = arity(f.flag);
+    const vox::FlagArity a = vox::ArityOf(table, f.flag);
     if (a == vox::FlagArity::kUnknown)
       throw py::type_error(std::string(fn) + "() got an unexpected keyword argument '" + key +
                            "' (no flag " + f.flag + ")");
@@ -147,7 +148,7 @@ void ApplyKwargs(const py::kwargs& kwargs, const char* fn, Arity arity, Apply ap
     } else if (f.is_bool && f.flag.rfind("--", 0) == 0) {
       // False for a switch that is on by default: its "--no-" form (prefetch=False).
       const std::string off = "--no-" + f.flag.substr(2);
-      if (arity(off) == vox::FlagArity::kSwitch) CheckUsage(apply(off, ""));
+      if (vox::ArityOf(table, off) == vox::FlagArity::kSwitch) CheckUsage(apply(off, ""));
     }
   }
 }
@@ -293,10 +294,10 @@ py::dict Ingest(const py::object& vdb, const py::object& store, const py::object
   // Recorded in the store's build_options, as the tool records its command line.
   std::string line = "vox.ingest " + c.options.input + " " + c.options.output;
   std::vector<std::string> flags;  // for the child process: the same flags
-  ApplyKwargs(rest, "ingest", vox::IngestFlagArity, [&](const std::string& f, const std::string& v) {
+  ApplyKwargs(rest, "ingest", vox::IngestOptionTable(), [&](const std::string& f, const std::string& v) {
     line += " " + f;
     flags.push_back(f);
-    if (vox::IngestFlagArity(f) == vox::FlagArity::kValue) {
+    if (vox::ArityOf(vox::IngestOptionTable(), f) == vox::FlagArity::kValue) {
       line += " " + v;
       flags.push_back(v);
     }
@@ -460,7 +461,7 @@ py::dict Render(const py::object& store, const py::object& camera, const py::obj
     else
       rest[k] = v;
   }
-  ApplyKwargs(rest, "render", vox::RenderFlagArity,
+  ApplyKwargs(rest, "render", vox::RenderOptionTable(),
               [&](const std::string& f, const std::string& v) { return vox::ApplyRenderFlag(&o, f, v); });
   std::atomic<bool> cancel{false};
   o.interrupted = [&cancel]() -> vox::Status {
@@ -487,7 +488,7 @@ py::dict Render(const py::object& store, const py::object& camera, const py::obj
 py::tuple Probe(const py::object& store, const py::object& rays_in, const py::kwargs& kwargs) {
   vox::ProbeOptions opt;
   if (!store.is_none()) opt.store = PathOf(store);
-  ApplyKwargs(kwargs, "probe", vox::ProbeFlagArity,
+  ApplyKwargs(kwargs, "probe", vox::ProbeOptionTable(),
               [&](const std::string& f, const std::string& v) { return vox::ApplyProbeFlag(&opt, f, v); });
   auto rays = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(rays_in);
   if (!rays || rays.ndim() != 2 || rays.shape(1) != 6)

@@ -1,0 +1,173 @@
+// The command line of each vox tool, end to end (issue 28): --flag=value
+// works, --version prints the version line, --help groups the options by
+// topic, and a bad command line prints one line and a pointer to the help,
+// exit 2.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "tests/common/run_command.h"
+#include "tools/common/options.h"
+
+namespace vox {
+namespace {
+
+struct Tool {
+  std::string name, binary;
+  std::vector<std::string> groups;  // the help's headings
+  std::string value_flag;           // a flag that takes a value
+  std::string switch_flag;          // a switch ("" if none)
+};
+
+const std::vector<Tool>& Tools() {
+  static const std::vector<Tool> tools = {
+      {"vox-ingest", VOX_INGEST_BIN,
+       {"Input grid", "Store", "Level of detail", "Memory and threads", "Output", "General"},
+       "--zstd-level", "--quiet"},
+      {"vox-render", VOX_RENDER_BIN,
+       {"Camera and scene", "Frame sequences", "Output", "Level of detail", "Memory and I/O",
+        "Tracing and parallel runs", "General"},
+       "--threads", "--quiet"},
+      {"vox-probe", VOX_PROBE_BIN, {"Source", "Tracing", "Level of detail", "Memory", "General"},
+       "--cache-mb", "--stats"},
+      {"vox-gen", VOX_GEN_BIN, {"Shape and size", "Store", "Run", "General"}, "--size", "--quiet"},
+      {"vox-info", VOX_INFO_BIN, {"Verification", "General"}, "--cache-mb", "--verify"},
+      {"vox-merge", VOX_MERGE_BIN, {"Output", "General"}, "--preview", "--quiet"},
+  };
+  return tools;
+}
+
+// Standard output and standard error apart.
+struct ToolRun {
+  int code;
+  std::string out, err;
+};
+
+ToolRun RunTool(const Tool& t, const std::string& args) {
+  const std::string cmd = t.binary + " " + args + " </dev/null";
+  // RunCommand folds standard error into standard output: a group keeps one.
+  const testing::CommandResult out = testing::RunCommand("{ " + cmd + " 2>/dev/null; }");
+  const testing::CommandResult err = testing::RunCommand("{ " + cmd + " 2>&1 >/dev/null; }");
+  EXPECT_EQ(out.code, err.code) << cmd;
+  return {out.code, out.output, err.output};
+}
+
+void ExpectUsageError(const Tool& t, const std::string& args, const std::string& message) {
+  const ToolRun r = RunTool(t, args);
+  EXPECT_EQ(r.code, 2) << t.name << " " << args << "\n" << r.err;
+  EXPECT_EQ(r.err, t.name + ": " + message + "\nsee " + t.name + " --help\n") << args;
+  EXPECT_EQ(r.out, "") << args;
+}
+
+TEST(ToolCommandLine, VersionPrintsOneLine) {
+  for (const Tool& t : Tools()) {
+    const ToolRun r = RunTool(t, "--version");
+    EXPECT_EQ(r.code, 0) << t.name;
+    EXPECT_EQ(r.err, "") << t.name;
+    EXPECT_EQ(r.out.rfind(t.name + " ", 0), 0u) << r.out;
+    EXPECT_NE(r.out.find(" (git "), std::string::npos) << r.out;
+    EXPECT_EQ(r.out.find('\n'), r.out.size() - 1) << r.out;
+  }
+}
+
+TEST(ToolCommandLine, HelpIsGroupedByTopic) {
+  for (const Tool& t : Tools()) {
+    for (const char* flag : {"--help", "-h"}) {
+      const ToolRun r = RunTool(t, flag);
+      EXPECT_EQ(r.code, 0) << t.name;
+      EXPECT_EQ(r.err, "") << t.name;
+      EXPECT_EQ(r.out.rfind("usage: " + t.name + " ", 0), 0u) << r.out;
+      size_t at = 0;
+      for (const std::string& group : t.groups) {  // in this order
+        const size_t found = r.out.find("\n" + group + ":\n", at);
+        EXPECT_NE(found, std::string::npos) << t.name << ": no group " << group << "\n" << r.out;
+        if (found != std::string::npos) at = found;
+      }
+      EXPECT_NE(r.out.find("  " + t.value_flag + " "), std::string::npos) << r.out;
+      EXPECT_NE(r.out.find("--version"), std::string::npos) << r.out;
+    }
+  }
+}
+
+TEST(ToolCommandLine, BadCommandLinesPrintOneLineAndExit2) {
+  for (const Tool& t : Tools()) {
+    ExpectUsageError(t, "--no-such-flag", "unknown option --no-such-flag");
+    ExpectUsageError(t, "x --no-such-flag=3 y", "unknown option --no-such-flag");
+    ExpectUsageError(t, "x " + t.value_flag, t.value_flag + " needs a value");
+    ExpectUsageError(t, "x " + t.switch_flag + "=1",
+                     t.switch_flag + " is a switch and takes no value");
+  }
+}
+
+// --flag=value is --flag value: the same value checks, the same message.
+TEST(ToolCommandLine, FlagEqualsValueIsFlagSpaceValue) {
+  for (const Tool& t : Tools()) {
+    for (const std::string value : {"abc", "-5", "0"}) {
+      const ToolRun spaced = RunTool(t, "/nonexistent-vox " + t.value_flag + " " + value);
+      const ToolRun joined = RunTool(t, "/nonexistent-vox " + t.value_flag + "=" + value);
+      EXPECT_EQ(spaced.code, joined.code) << t.name << " " << value;
+      EXPECT_EQ(spaced.err, joined.err) << t.name << " " << value;
+    }
+  }
+  // Every option of the tools whose options Python shares, with a value each
+  // accepts or refuses: the same outcome in both spellings.
+  const std::pair<std::string, OptionTable> tables[] = {
+      {VOX_INGEST_BIN, IngestOptionTable()},
+      {VOX_RENDER_BIN, RenderOptionTable()},
+      {VOX_PROBE_BIN, ProbeOptionTable()},
+  };
+  for (const auto& [binary, table] : tables) {
+    for (const OptionSpec& o : table) {
+      if (o.arity != FlagArity::kValue || std::string(o.name) == "-o") continue;
+      const std::string head = binary + " /nonexistent-vox /nonexistent-vox-2 ";
+      const testing::CommandResult spaced = testing::RunCommand(head + o.name + " 7 </dev/null");
+      const testing::CommandResult joined = testing::RunCommand(head + o.name + "=7 </dev/null");
+      EXPECT_EQ(spaced.code, joined.code) << binary << " " << o.name;
+      EXPECT_EQ(spaced.output, joined.output) << binary << " " << o.name;
+      EXPECT_EQ(joined.output.find("unknown option"), std::string::npos) << joined.output;
+    }
+  }
+}
+
+// --flag=value does its work: a store generated, pyramided, inspected,
+// rendered in two parts, merged and probed with values given after '='.
+TEST(ToolCommandLine, ToolsRunWithFlagEqualsValue) {
+  const std::filesystem::path dir =
+      std::filesystem::path(::testing::TempDir()) / ("tool_cli_" + std::to_string(getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string store = (dir / "s").string();
+  const auto run = [](const std::string& cmd) {
+    const testing::CommandResult r = testing::RunCommand(cmd + " </dev/null");
+    EXPECT_EQ(r.code, 0) << cmd << "\n" << r.output;
+    return r.output;
+  };
+  run(std::string(VOX_GEN_BIN) + " sphere " + store + " --size=32 --levels=auto --no-lod --quiet");
+  run(std::string(VOX_INGEST_BIN) + " --add-lod=" + store + " --zstd-level=5 --quiet");
+  EXPECT_TRUE(std::filesystem::exists(store + "/lod"));
+  EXPECT_NE(run(std::string(VOX_INFO_BIN) + " " + store + " --verify --cache-mb=8").find("vox store"),
+            std::string::npos);
+  std::string parts;
+  for (int part = 1; part <= 2; ++part) {
+    const std::string exr = (dir / ("p" + std::to_string(part) + ".exr")).string();
+    run(std::string(VOX_RENDER_BIN) + " " + store + " --size=24x16 --tile-size=8 --tiles=" +
+        std::to_string(part) + "/2 --threads=1 --quiet -o" + exr);
+    parts += " " + exr;
+  }
+  run(std::string(VOX_MERGE_BIN) + parts + " -o " + (dir / "m.exr").string() +
+      " --preview=" + (dir / "m.png").string() + " --quiet");
+  EXPECT_TRUE(std::filesystem::exists(dir / "m.exr"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "m.png"));
+  const testing::CommandResult probe = testing::RunCommand(
+      "echo '-100 0.5 0.5 1 0 0' | " + std::string(VOX_PROBE_BIN) + " " + store +
+      " --cache-mb=8 --tracer=render");
+  EXPECT_EQ(probe.code, 0) << probe.output;
+  EXPECT_EQ(probe.output.rfind("hit ", 0), 0u) << probe.output;
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace vox
