@@ -86,9 +86,10 @@ class ProgressSink {
   virtual void Message(std::string_view line) = 0;
   virtual void Progress(uint64_t bricks_done, uint64_t bricks_total, uint64_t voxels_done) = 0;
   virtual void Done() = 0;
-  // Polled at each progress point (a brick) and before the store is
-  // finished: true stops the ingest (an Unavailable status, "cancelled"), and the
-  // temporary store is removed (the Python module's KeyboardInterrupt).
+  // Polled at each progress point (a brick; also each base brick the
+  // level-of-detail pyramid reads) and before the store is published: true
+  // stops the ingest (an Unavailable status, "cancelled"), and the temporary
+  // store is removed (the Python module's KeyboardInterrupt).
   virtual bool Cancelled() { return false; }
 };
 

@@ -144,7 +144,18 @@ class GridIngest {
         lo.zstd_level = cx_.options.zstd_level;
         lo.normal_bits = cx_.options.normal_bits;
         lo.threads = cx_.options.threads;
-        VOX_ASSIGN_OR_RETURN(LodBuildStats ls, BuildLod(temp_dir, lo));
+        // A cancel (Ctrl-C in Python, whose ingest child polls it here) stops
+        // the pyramid at its next brick, and one that comes as it ends still
+        // stops the publication: no store, the old one kept.
+        std::atomic<bool> cancel{false};
+        lo.cancel = &cancel;
+        lo.progress = [this, &cancel](uint64_t, uint64_t) {
+          if (cx_.progress && cx_.progress->Cancelled()) cancel = true;
+        };
+        StatusOr<LodBuildStats> built = BuildLod(temp_dir, lo);
+        if (cancel || (cx_.progress && cx_.progress->Cancelled()))
+          return UnavailableError(cx_.options.input + ": ingest cancelled");
+        VOX_ASSIGN_OR_RETURN(LodBuildStats ls, std::move(built));
         cx_.stats->lod_levels = ls.levels;
         cx_.stats->seconds_lod = lod_time.Seconds();
         return OkStatus();

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <string>
 #include <vector>
@@ -323,6 +324,63 @@ TEST_F(IngestStoreTest, FailedIngestLeavesNoStore) {
   o.grid_name = "missing";
   EXPECT_FALSE(Ingest(o).ok());
   EXPECT_TRUE(Store::Open(o.output, OpenOptions{}).ok());
+}
+
+// A cancel while the level-of-detail pyramid is built (the pyramid's bricks
+// are the ingest's last progress points) stops the ingest: --force or not,
+// the old store stays, byte for byte, and nothing is left beside it.
+TEST_F(IngestStoreTest, CancelDuringThePyramidKeepsTheOldStore) {
+  auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+      40.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
+  const std::string vdb = dir_.File("s.vdb");
+  testutil::WriteVdb(vdb, {grid});
+  IngestOptions o;
+  o.input = vdb;
+  o.output = dir_.File("store");
+  o.levels = "5+2";  // small bricks: many pyramid progress points
+  ASSERT_TRUE(Ingest(o).ok());
+  auto snapshot = [&] {
+    std::map<std::string, std::string> files;
+    for (const auto& e : std::filesystem::recursive_directory_iterator(o.output))
+      if (e.is_regular_file()) {
+        std::ifstream f(e.path(), std::ios::binary);
+        files[e.path().string()] = std::string(std::istreambuf_iterator<char>(f), {});
+      }
+    return files;
+  };
+  const auto before = snapshot();
+  ASSERT_TRUE(before.count(o.output + "/lod/1/bricks.vxb"));
+
+  // Cancelled once the pyramid has begun: after `polls` more questions.
+  class CancelInPyramid : public ProgressSink {
+   public:
+    explicit CancelInPyramid(int polls) : polls_(polls) {}
+    void Message(std::string_view line) override {
+      if (line.find("level-of-detail") != std::string_view::npos) in_pyramid_ = true;
+    }
+    void Progress(uint64_t, uint64_t, uint64_t) override {}
+    void Done() override {}
+    bool Cancelled() override { return in_pyramid_ && polls_-- <= 0; }
+    bool in_pyramid_ = false;
+
+   private:
+    int polls_;
+  };
+  o.force = true;
+  for (int polls : {0, 5}) {
+    CancelInPyramid sink(polls);
+    auto st = Ingest(o, &sink);
+    ASSERT_TRUE(sink.in_pyramid_);
+    ASSERT_FALSE(st.ok()) << "polls " << polls;
+    EXPECT_NE(st.status().message().find("cancelled"), std::string::npos) << st.status().ToString();
+    EXPECT_EQ(snapshot(), before) << "polls " << polls;
+    size_t entries = 0;
+    for (const auto& e : std::filesystem::directory_iterator(dir_.path())) {
+      ++entries;
+      EXPECT_TRUE(e.path().filename() == "s.vdb" || e.path().filename() == "store") << e.path();
+    }
+    EXPECT_EQ(entries, 2u);
+  }
 }
 
 TEST_F(IngestStoreTest, ExistingAndUnwritableTargets) {
