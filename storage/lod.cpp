@@ -285,7 +285,8 @@ void CollectJobs(const OctreeView& view, const CompactCell* pool, uint32_t cell,
 // the levels whose cells lie inside one brick. One per thread.
 class JobReducer {
  public:
-  JobReducer(Store& store, const std::vector<LevelFormat>& local) : store_(store), view_(store.view()), local_(local) {
+  JobReducer(Store& store, const std::vector<LevelFormat>& local)
+      : store_(store), view_(store.view()), local_(local) {
     const StoreMeta& m = store.meta();
     fog_ = m.grid_class == GridClass::kFogVolume;
     has_density_ = m.has_density;
@@ -301,7 +302,8 @@ class JobReducer {
 
   void Run(const BaseJob& job, Result* r) {
     Cascade cascade(local_);
-    r->status = job.brick != kNoBrick ? RunBrick(job, cascade) : Voxel(job, kNoBrick, nullptr, cascade);
+    r->status =
+        job.brick != kNoBrick ? RunBrick(job, cascade) : Voxel(job, kNoBrick, nullptr, cascade);
     if (!r->status.ok()) return;
     cascade.Flush();
     r->out.resize(local_.size());
@@ -322,7 +324,8 @@ class JobReducer {
     brick_coord_ = job.coord;
     const int depth = view_.levels - view_.brick_level;
     bitmap_depth_ = depth <= kMaxBitmapDepth ? depth : -1;
-    if (bitmap_depth_ >= 0) occupied_.assign(std::max<size_t>(1, (size_t(1) << (3 * depth)) / 64), 0);
+    if (bitmap_depth_ >= 0)
+      occupied_.assign(std::max<size_t>(1, (size_t(1) << (3 * depth)) / 64), 0);
     voxels_.clear();
     Status s = List(b.cells, 0, job.level, job.coord);
     for (size_t i = 0; s.ok() && i < voxels_.size(); ++i)
@@ -614,20 +617,22 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
     };
     std::vector<BaseJob> jobs;
     const OctreeView view = base->view();
-    if (view.top != nullptr && bm.voxel_count > 0) CollectJobs(view, view.top, 0, 0, glm::u64vec3(0), &jobs);
+    if (view.top != nullptr && bm.voxel_count > 0)
+      CollectJobs(view, view.top, 0, 0, glm::u64vec3(0), &jobs);
     uint64_t bricks_done = 0;
-    VOX_RETURN_IF_ERROR(RunJobs(
-        *base, jobs, local, options, [&](const BaseJob& job, JobReducer::Result& r) -> Status {
-          for (size_t i = 0; i < local.size(); ++i)
-            VOX_RETURN_IF_ERROR(writers.Add(local[i].l, r.out[i]));
-          for (const CellUp& up : r.ups) serial.Push(up.l, up.coord, up.sums);
-          VOX_RETURN_IF_ERROR(drain());
-          if (job.brick != kNoBrick) {
-            ++bricks_done;
-            if (options.progress) options.progress(bricks_done, bm.brick_count);
-          }
-          return OkStatus();
-        }));
+    // Each reduced brick, in brick order, on this thread.
+    auto take = [&](const BaseJob& job, JobReducer::Result& r) -> Status {
+      for (size_t i = 0; i < local.size(); ++i)
+        VOX_RETURN_IF_ERROR(writers.Add(local[i].l, r.out[i]));
+      for (const CellUp& up : r.ups) serial.Push(up.l, up.coord, up.sums);
+      VOX_RETURN_IF_ERROR(drain());
+      if (job.brick != kNoBrick) {
+        ++bricks_done;
+        if (options.progress) options.progress(bricks_done, bm.brick_count);
+      }
+      return OkStatus();
+    };
+    VOX_RETURN_IF_ERROR(RunJobs(*base, jobs, local, options, take));
     serial.Flush();
     VOX_RETURN_IF_ERROR(drain());
     VOX_RETURN_IF_ERROR(writers.Finish(&stats));

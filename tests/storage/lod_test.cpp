@@ -155,7 +155,8 @@ TEST(Lod, TheThreadsChangeNoByteOfThePyramid) {
   auto read = [&] {
     std::map<std::string, std::string> bytes;
     for (const auto& e : fs::recursive_directory_iterator(tmp / "s/lod"))
-      if (e.is_regular_file()) bytes[fs::relative(e.path(), tmp / "s").string()] = ReadFile(e.path());
+      if (e.is_regular_file())
+        bytes[fs::relative(e.path(), tmp / "s").string()] = ReadFile(e.path());
     return bytes;
   };
   auto files = [&](int threads) {
