@@ -443,6 +443,11 @@ class JobReducer {
   std::vector<BaseJob> voxels_;               // the brick's voxels, Morton order
 };
 
+// LodBuildOptions::threads, 0 meaning one per core.
+int BuildThreads(const LodBuildOptions& o) {
+  return o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+}
+
 // Reduces `jobs` on LodBuildOptions::threads threads (0: one per core; 1:
 // on this thread alone) and hands each result to `take` on this thread, in
 // job order. Workers run at most a window of jobs ahead of `take`, so memory
@@ -463,8 +468,7 @@ Status RunJobs(Store& base, const std::vector<BaseJob>& jobs,
     base.Prefetch(ids);
     prefetched_to = end;
   };
-  const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
-  const int threads = o.threads > 0 ? o.threads : int(hw);
+  const int threads = BuildThreads(o);
   if (threads <= 1 || jobs.size() < 2) {
     JobReducer reducer(base, local);
     for (const BaseJob& job : jobs) {
@@ -569,8 +573,7 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
                                 "' already exists (replace it with --force)");
   OpenOptions oo;
   // Each worker walks a brick and may look into its neighbours.
-  const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
-  oo.cache_bytes = options.cache_bytes * size_t(options.threads > 0 ? options.threads : int(hw));
+  oo.cache_bytes = options.cache_bytes * size_t(BuildThreads(options));
   VOX_ASSIGN_OR_RETURN(auto base, Store::Open(store_dir, oo));
   if (base->meta().lod_level != 0)
     return InvalidArgumentError("'" + store_dir + "' is a level-of-detail store, not a base store");
