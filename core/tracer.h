@@ -107,10 +107,15 @@ class Tracer {
   // without a walk. The widened test is conservative (its rounding errors are
   // far below a voxel for any ray the tracer accepts), so it drops only rays
   // that meet no occupied voxel: every hit stays as the walk finds it (rays
-  // from far origins, IsFarOrigin, are always walked).
+  // from far origins, IsFarOrigin, are always walked). And each step's DDA
+  // starts at the box: it jumps over the driving slabs before the box's
+  // first layer (JumpToBox), in both steps, in exact integers, so the walk
+  // meets the same voxels with the same hits and t.
   void SetOccupiedBox(const int64_t lo[3], const int64_t hi[3]) {
     has_box_ = true;
     for (int a = 0; a < 3; ++a) {
+      box_lo_i_[a] = lo[a];
+      box_hi_i_[a] = hi[a];
       box_lo_[a] = double(lo[a]) - kBoxMargin;
       box_hi_[a] = double(hi[a]) + 1.0 + kBoxMargin;
     }
@@ -215,11 +220,14 @@ class Tracer {
       for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * t.down2_;
       Dda st = t.InitStep(cx, l1, p1, xyz);
       if (start != nullptr) t.JumpToPlane(cx, l1, p1, *start, &st, xyz);
+      if (t.has_box_) t.JumpToBox(cx, l1, t.n2_, 0, &st, xyz);
       return st;
     }
     Dda SecondStep(const internal::StepLayout& l1, const internal::StepLayout& l2, uint64_t xyz,
                    uint64_t prev, const Dda& first, uint64_t* xyz2) {
-      return t.Transition(cx, l1, l2, xyz, prev, first, xyz2);
+      Dda st = t.Transition(cx, l1, l2, xyz, prev, first, xyz2);
+      if (t.has_box_) t.JumpToBox(cx, l2, 0, l1.Coord(xyz, cx.d) << t.n2_, &st, xyz2);
+      return st;
     }
     void AddMoves(const Dda& dda, TraceCounters* c) const { dda.AddTo(cx, c); }
   };
@@ -338,8 +346,19 @@ class Tracer {
       if (ud >= end + 2.0) *xyz = lay.carry;
       return;
     }
-    const int64_t target = int64_t(std::floor(ud)) - 1;
-    if (target <= st->dprime) return;
+    JumpToSlab(cx, lay, int64_t(std::floor(ud)) - 1, st, xyz);
+  }
+
+  // Moves a step's DDA `st` (voxel *xyz, per `lay`) to the state it has on
+  // entering oriented driving slab `target`, if that lies ahead, in exact
+  // integer arithmetic (see JumpToPlane); the moves it stands for are
+  // counted. A ray that leaves the step's grid before that slab: *xyz gets
+  // the carry bits (the walk ends at once).
+  static void JumpToSlab(const ScaledRay& cx, const internal::StepLayout& lay, int64_t target,
+                         Dda* st, uint64_t* xyz) {
+    if (target <= st->dprime || (*xyz & lay.carry)) return;  // (carry: the walk has ended)
+    const int d = cx.d, sd = cx.s[d];
+    const int64_t size = int64_t(1) << lay.n;
     const int64_t moved = target - st->dprime;
     int64_t v[3];
     for (int a = 0; a < 3; ++a) v[a] = lay.Coord(*xyz, a);
@@ -369,6 +388,20 @@ class Tracer {
     st->n1 += k[0];
     st->n2 += k[1];
     *xyz = lay.Pack(v);
+  }
+
+  // The box jump (SetOccupiedBox): every voxel outside the occupied box is
+  // empty, so a step's DDA may jump to the driving slab just before the
+  // box's first layer along its travel (JumpToSlab; the slab it lands in
+  // is empty, so the walk meets the same voxels from there). A step voxel
+  // is 2^shift grid voxels, and its voxel 0 lies at grid coordinate `base`
+  // along the driving axis.
+  void JumpToBox(const ScaledRay& cx, const internal::StepLayout& lay, int shift, int64_t base,
+                 Dda* st, uint64_t* xyz) const {
+    const int d = cx.d;
+    const int64_t target = cx.s[d] > 0 ? (box_lo_i_[d] >> shift) - base - 1
+                                       : -((box_hi_i_[d] >> shift) - base + 1) - 1;
+    JumpToSlab(cx, lay, target, st, xyz);
   }
 
   // A step's DDA with the ray's slopes and the step's increments.
@@ -464,6 +497,7 @@ class Tracer {
   Real grid_size_ = 0;        // 2^levels
   bool has_box_ = false;      // SetOccupiedBox: the widened occupied box
   double box_lo_[3] = {}, box_hi_[3] = {};
+  int64_t box_lo_i_[3] = {}, box_hi_i_[3] = {};  // and the box itself (inclusive)
 };
 
 // The first-step levels vox uses unless told otherwise: the paper's best

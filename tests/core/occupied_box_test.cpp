@@ -135,7 +135,7 @@ TEST_P(OccupiedBoxTest, SameFirstHitsAndVisitsAsThePlainWalk) {
   std::vector<Ray> rays = HardRays(s, rng);
   const size_t hard = rays.size();
   for (const Ray& r : RandomRays(s, rng, RayCount(6000))) rays.push_back(r);
-  size_t hits = 0, dropped = 0, failures = 0;
+  size_t hits = 0, dropped = 0, jumped = 0, failures = 0;
   for (size_t i = 0; i < rays.size(); ++i) {
     const Ray& ray = rays[i];
     TraceCounters cp, cb;
@@ -145,6 +145,7 @@ TEST_P(OccupiedBoxTest, SameFirstHitsAndVisitsAsThePlainWalk) {
     if (!a.ok()) continue;
     hits += a->has_value();
     if (cb.total_moves() == 0 && cp.total_moves() > 0) ++dropped;
+    if (cb.cells_visited < cp.cells_visited && cb.total_moves() > 0) ++jumped;
     if (!SameHit(*a, *b) && ++failures <= 10)
       ADD_FAILURE() << (i < hard ? "hard" : "random") << " ray " << i << " origin ("
                     << ray.origin.x << ", " << ray.origin.y << ", " << ray.origin.z << ") dir ("
@@ -159,11 +160,13 @@ TEST_P(OccupiedBoxTest, SameFirstHitsAndVisitsAsThePlainWalk) {
       EXPECT_EQ(va, vb) << "ray " << i;
     }
   }
-  printf("bl=%d n1=%d: %zu rays (%zu hard), %zu hit, %zu dropped by the box\n", brick_level, n1,
-         rays.size(), hard, hits, dropped);
+  printf("bl=%d n1=%d: %zu rays (%zu hard), %zu hit, %zu dropped by the box, %zu walked fewer "
+         "cells (the box jump)\n",
+         brick_level, n1, rays.size(), hard, hits, dropped, jumped);
   EXPECT_EQ(failures, 0u);
   EXPECT_GT(hits, rays.size() / 10);     // the rays do meet the voxels
   EXPECT_GT(dropped, rays.size() / 10);  // and the box does drop walks
+  EXPECT_GT(jumped, rays.size() / 10);   // and shortens others
 }
 
 INSTANTIATE_TEST_SUITE_P(Splits, OccupiedBoxTest,
