@@ -75,7 +75,9 @@ struct IngestStats {
   double seconds_open = 0, seconds_bbox = 0, seconds_bricks = 0, seconds_finish = 0;
   double seconds_total = 0;
   int lod_levels = 0;               // coarse levels of the pyramid written (0: none)
-  double seconds_lod = 0;           // building the pyramid (part of seconds_finish)
+  // Finishing the pyramid (part of seconds_finish); built with the bricks,
+  // its reduction is part of seconds_bricks.
+  double seconds_lod = 0;
 };
 
 // Receives progress: phase messages and brick counts. Implementations need

@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -15,9 +16,11 @@
 #include <thread>
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/packing.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "storage/file.h"
+#include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/store_writer.h"
 
@@ -49,6 +52,42 @@ struct Aggregate {
     density += o.density;
   }
 };
+
+// What a base voxel's sums depend on in its store's format.
+struct BaseFormat {
+  BaseFormat() = default;
+  explicit BaseFormat(const StoreMeta& m)
+      : fog(m.grid_class == GridClass::kFogVolume),
+        has_density(m.has_density),
+        has_normal(m.has_normal) {}
+  bool fog = false, has_density = false, has_normal = false;
+};
+
+// The sums of one occupied base voxel at grid `coord` whose attributes, as
+// the store returns them, are `a`. `occupied(g)` (a bool) tells whether grid
+// voxel g, maybe outside the grid, is occupied. BuildLod and LodStream both
+// sum their voxels here, so their pyramids agree bit for bit.
+template <class OccupiedFn>
+inline Aggregate VoxelSums(const VoxelAttributes& a, const glm::u64vec3& coord,
+                           const BaseFormat& f, OccupiedFn&& occupied) {
+  Aggregate g;
+  g.count = 1;
+  g.normal = glm::dvec3(a.normal);
+  if (f.has_normal) {
+    int axis = 0;
+    for (int k = 1; k < 3; ++k)
+      if (std::fabs(g.normal[k]) > std::fabs(g.normal[axis])) axis = k;
+    const double na = g.normal[axis];
+    if (na != 0) {
+      glm::i64vec3 out = glm::i64vec3(coord);
+      out[axis] += na > 0 ? 1 : -1;
+      if (!occupied(out)) g.surface = g.normal / std::fabs(na);
+    }
+  }
+  g.color = glm::dvec3(a.color);
+  g.density = f.has_density ? double(a.density) : (f.fog ? 1.0 : 0.0);
+  return g;
+}
 
 // A level's deterministic store id, from the base's (never 0).
 uint64_t LevelStoreId(uint64_t base_id, int level) {
@@ -87,6 +126,7 @@ StoreMeta CoarseMeta(const StoreMeta& base, uint64_t base_id, int l, int depth) 
 struct LevelFormat {
   int l = 0, depth = 0;  // the level, and its coarse bricks' depth
   bool has_normal = false, has_color = false, has_density = false;
+  double cell_voxels = 1;  // base voxels in a cell, 8^l
 };
 
 // A coarse voxel made by a Cascade: its coarse brick, and the voxel in it.
@@ -102,6 +142,20 @@ struct CellUp {
   glm::u64vec3 coord{0};  // in level l - 1's grid
   Aggregate sums;
 };
+
+}  // namespace
+
+// A base brick's share of the pyramid: the coarse voxels of the levels whose
+// cells lie inside one base brick ("local" levels), and the cells it hands
+// up to the coarser ones.
+struct LodReducedBrick {
+  Status status;
+  glm::u64vec3 brick{0};                      // LodStream: its coordinates
+  std::vector<std::vector<CoarseVoxel>> out;  // per local level
+  std::vector<CellUp> ups;
+};
+
+namespace {
 
 // A cascade of run reducers over the consecutive levels `formats` (first ..
 // last): cells arrive in Morton order (Push), each level sums a run of them
@@ -140,6 +194,12 @@ class Cascade {
       if (cells_[size_t(l - first())].active) Emit(l);
   }
 
+  // Room for the voxels of `base_voxels` base voxels of a surface (4^-l per level).
+  void Reserve(size_t base_voxels) {
+    for (size_t i = 0; i < out_.size(); ++i)
+      out_[i].reserve((base_voxels >> (2 * (first() + int(i)))) + 8);
+  }
+
   // Level l's coarse voxels made so far, in Morton order; the caller may take them.
   std::vector<CoarseVoxel>& out(int l) { return out_[size_t(l - first())]; }
   // Cells handed up beyond the last level, in order.
@@ -165,7 +225,7 @@ class Cascade {
     v.x = uint32_t(local.x);
     v.y = uint32_t(local.y);
     v.z = uint32_t(local.z);
-    const double cell_voxels = std::ldexp(1.0, 3 * l);
+    const double cell_voxels = f.cell_voxels;
     v.attr.coverage = float(double(a.count) / cell_voxels);
     if (f.has_normal) {
       const glm::dvec3& n = glm::length(a.surface) > 0 ? a.surface : a.normal;
@@ -286,19 +346,10 @@ void CollectJobs(const OctreeView& view, const CompactCell* pool, uint32_t cell,
 class JobReducer {
  public:
   JobReducer(Store& store, const std::vector<LevelFormat>& local)
-      : store_(store), view_(store.view()), local_(local) {
-    const StoreMeta& m = store.meta();
-    fog_ = m.grid_class == GridClass::kFogVolume;
-    has_density_ = m.has_density;
-    has_normal_ = m.has_normal;
-  }
+      : store_(store), view_(store.view()), local_(local), base_(store.meta()) {}
 
   // The job's coarse voxels of the local levels, and the cells it hands up.
-  struct Result {
-    Status status;
-    std::vector<std::vector<CoarseVoxel>> out;  // per local level
-    std::vector<CellUp> ups;
-  };
+  using Result = LodReducedBrick;
 
   void Run(const BaseJob& job, Result* r) {
     Cascade cascade(local_);
@@ -376,23 +427,13 @@ class JobReducer {
     h.payload = v.index;
     h.brick_data = brick_data;
     VOX_ASSIGN_OR_RETURN(VoxelAttributes a, store_.HitAttributes(h));
-    Aggregate g;
-    g.count = 1;
-    g.normal = glm::dvec3(a.normal);
-    if (has_normal_) {
-      int axis = 0;
-      for (int k = 1; k < 3; ++k)
-        if (std::fabs(g.normal[k]) > std::fabs(g.normal[axis])) axis = k;
-      const double na = g.normal[axis];
-      if (na != 0) {
-        glm::i64vec3 out = glm::i64vec3(v.coord);
-        out[axis] += na > 0 ? 1 : -1;
-        VOX_ASSIGN_OR_RETURN(const bool outside_occupied, Occupied(out));
-        if (!outside_occupied) g.surface = g.normal / std::fabs(na);
-      }
-    }
-    g.color = glm::dvec3(a.color);
-    g.density = has_density_ ? double(a.density) : (fog_ ? 1.0 : 0.0);
+    Status error;
+    const Aggregate g = VoxelSums(a, v.coord, base_, [&](const glm::i64vec3& out) {
+      StatusOr<bool> o = Occupied(out);
+      if (!o.ok()) error = o.status();
+      return o.ok() && *o;
+    });
+    VOX_RETURN_IF_ERROR(error);
     cascade.Push(1, v.coord, g);
     return OkStatus();
   }
@@ -435,7 +476,7 @@ class JobReducer {
   Store& store_;
   OctreeView view_;
   const std::vector<LevelFormat>& local_;
-  bool fog_ = false, has_density_ = false, has_normal_ = false;
+  const BaseFormat base_;
   const CompactCell* brick_cells_ = nullptr;  // the brick being walked
   glm::u64vec3 brick_coord_{0};               // its coordinates in the brick grid
   int bitmap_depth_ = -1;                     // occupied_'s side is 2^this; -1: none
@@ -549,6 +590,66 @@ Status RunJobs(Store& base, const std::vector<BaseJob>& jobs,
   return OkStatus();
 }
 
+// The ordered half of a pyramid's build: the reduced base bricks, taken in
+// brick order, go to the writers (local levels) and through the cascade of
+// the coarser levels, whose cells take one or more whole bricks. One thread;
+// the writers get their bricks in order, so the pyramid is byte-reproducible
+// however many threads reduced the base bricks.
+class PyramidWriter {
+ public:
+  Status Init(const StoreMeta& bm, uint64_t base_id, const std::string& dir,
+              const LodBuildOptions& o) {
+    // Levels 1 .. D have their cells inside one base brick (local), the coarser ones not.
+    const int max_level = LodMaxLevel(bm.levels);
+    const int local_levels = std::min(bm.levels - bm.brick_level, max_level);
+    std::vector<LevelFormat> all;
+    for (int l = 1; l <= max_level; ++l) {
+      LevelFormat f;
+      f.l = l;
+      f.depth = LodBrickDepth(bm.levels, bm.levels - bm.brick_level, l);
+      f.cell_voxels = std::ldexp(1.0, 3 * l);
+      const StoreMeta m = CoarseMeta(bm, base_id, l, f.depth);
+      f.has_normal = m.has_normal;
+      f.has_color = m.has_color;
+      f.has_density = m.has_density;
+      (l <= local_levels ? local_ : upper_).push_back(f);
+      all.push_back(f);
+    }
+    serial_ = Cascade(upper_);
+    return writers_.Init(bm, base_id, dir, all, o);
+  }
+
+  // The levels reduced brick by brick (LodReducedBrick::out's).
+  const std::vector<LevelFormat>& local() const { return local_; }
+
+  // The next base brick (or top voxel) in brick order, reduced.
+  Status Take(LodReducedBrick& r) {
+    VOX_RETURN_IF_ERROR(r.status);
+    for (size_t i = 0; i < local_.size(); ++i)
+      VOX_RETURN_IF_ERROR(writers_.Add(local_[i].l, r.out[i]));
+    for (const CellUp& up : r.ups) serial_.Push(up.l, up.coord, up.sums);
+    return Drain();
+  }
+
+  // After the last brick: the coarse levels' last cells, and every level's store.
+  Status Finish(LodBuildStats* stats) {
+    serial_.Flush();
+    VOX_RETURN_IF_ERROR(Drain());
+    return writers_.Finish(stats);
+  }
+
+ private:
+  Status Drain() {
+    for (const LevelFormat& f : upper_) VOX_RETURN_IF_ERROR(writers_.Add(f.l, serial_.out(f.l)));
+    serial_.ups().clear();  // beyond the coarsest level
+    return OkStatus();
+  }
+
+  std::vector<LevelFormat> local_, upper_;
+  Cascade serial_{{}};
+  LevelWriters writers_;
+};
+
 }  // namespace
 
 int LodMaxLevel(int base_levels) { return base_levels >= 3 ? base_levels - 2 : 0; }
@@ -577,7 +678,6 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
   VOX_ASSIGN_OR_RETURN(auto base, Store::Open(store_dir, oo));
   if (base->meta().lod_level != 0)
     return InvalidArgumentError("'" + store_dir + "' is a level-of-detail store, not a base store");
-  const int max_level = LodMaxLevel(base->meta().levels);
 
   VOX_ASSIGN_OR_RETURN(const std::string temp,
                        CreateTemporary(target.string(), /*directory=*/true));
@@ -592,32 +692,11 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
 
   LodBuildStats stats;
   {
-    // Levels 1 .. D have their cells inside one base brick: reduced brick by
-    // brick on the worker threads. Coarser levels take one cell per brick,
-    // on this thread, as do the writers (bricks added in order, so the
-    // pyramid is byte-reproducible however many threads built it).
+    // The levels whose cells lie inside one base brick are reduced brick by
+    // brick on the worker threads, the rest on this thread (PyramidWriter).
     const StoreMeta& bm = base->meta();
-    const int local_levels = std::min(bm.levels - bm.brick_level, max_level);
-    std::vector<LevelFormat> local, upper, all;
-    for (int l = 1; l <= max_level; ++l) {
-      LevelFormat f;
-      f.l = l;
-      f.depth = LodBrickDepth(bm.levels, bm.levels - bm.brick_level, l);
-      const StoreMeta m = CoarseMeta(bm, base->store_id(), l, f.depth);
-      f.has_normal = m.has_normal;
-      f.has_color = m.has_color;
-      f.has_density = m.has_density;
-      (l <= local_levels ? local : upper).push_back(f);
-      all.push_back(f);
-    }
-    LevelWriters writers;
-    VOX_RETURN_IF_ERROR(writers.Init(bm, base->store_id(), temp, all, options));
-    Cascade serial(upper);
-    auto drain = [&]() -> Status {
-      for (const LevelFormat& f : upper) VOX_RETURN_IF_ERROR(writers.Add(f.l, serial.out(f.l)));
-      serial.ups().clear();  // beyond the coarsest level
-      return OkStatus();
-    };
+    PyramidWriter pyramid;
+    VOX_RETURN_IF_ERROR(pyramid.Init(bm, base->store_id(), temp, options));
     std::vector<BaseJob> jobs;
     const OctreeView view = base->view();
     if (view.top != nullptr && bm.voxel_count > 0)
@@ -625,20 +704,15 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
     uint64_t bricks_done = 0;
     // Each reduced brick, in brick order, on this thread.
     auto take = [&](const BaseJob& job, JobReducer::Result& r) -> Status {
-      for (size_t i = 0; i < local.size(); ++i)
-        VOX_RETURN_IF_ERROR(writers.Add(local[i].l, r.out[i]));
-      for (const CellUp& up : r.ups) serial.Push(up.l, up.coord, up.sums);
-      VOX_RETURN_IF_ERROR(drain());
+      VOX_RETURN_IF_ERROR(pyramid.Take(r));
       if (job.brick != kNoBrick) {
         ++bricks_done;
         if (options.progress) options.progress(bricks_done, bm.brick_count);
       }
       return OkStatus();
     };
-    VOX_RETURN_IF_ERROR(RunJobs(*base, jobs, local, options, take));
-    serial.Flush();
-    VOX_RETURN_IF_ERROR(drain());
-    VOX_RETURN_IF_ERROR(writers.Finish(&stats));
+    VOX_RETURN_IF_ERROR(RunJobs(*base, jobs, pyramid.local(), options, take));
+    VOX_RETURN_IF_ERROR(pyramid.Finish(&stats));
     stats.base_bricks_read = bricks_done;
   }
   VOX_RETURN_IF_ERROR(SyncDir(temp));
@@ -646,6 +720,217 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
   cleanup.keep = true;
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return stats;
+}
+
+// LodStream: the producer's bricks reduced as BuildLod's JobReducer reduces
+// them from the store (VoxelSums), into a PyramidWriter inside the store's
+// temporary directory.
+class LodStream::Impl {
+ public:
+  Impl(const StoreMeta& base, const WriteOptions& base_options, const LodBuildOptions& options)
+      : meta_(base),
+        store_id_(base_options.store_id),
+        normal_bits_(base_options.normal_bits),
+        options_(options),
+        format_(base),
+        flags_(storage_internal::AttrFlags(base)),
+        depth_(base.levels - base.brick_level) {}
+
+  ~Impl() {
+    pyramid_.reset();  // its writers' temporaries first
+    std::error_code ec;
+    if (!temp_.empty() && !published_) fs::remove_all(temp_, ec);
+  }
+
+  Status Init(const std::string& store_temp_dir) {
+    if (store_id_ == 0)
+      return InvalidArgumentError("a pyramid built with its store needs the store's id");
+    if (meta_.lod_level != 0)
+      return InvalidArgumentError("a level-of-detail store has no pyramid of its own");
+    target_ = (fs::path(store_temp_dir) / kLodDirName).string();
+    VOX_ASSIGN_OR_RETURN(temp_, CreateTemporary(target_, /*directory=*/true));
+    pyramid_ = std::make_unique<PyramidWriter>();
+    return pyramid_->Init(meta_, store_id_, temp_, options_);
+  }
+
+  StatusOr<std::shared_ptr<LodReducedBrick>> Reduce(const glm::u64vec3& brick,
+                                                    const std::vector<BrickVoxel>& voxels,
+                                                    const Occupied& occupied) const {
+    if (voxels.empty()) return InvalidArgumentError("a base brick without voxels");
+    const uint64_t side = uint64_t(1) << depth_;
+    // The voxels in Morton order, as the store keeps them (they usually
+    // come so; brick-local coordinates fit MortonKey21's 21 bits).
+    thread_local std::vector<LeafPoint> points;
+    thread_local std::vector<uint32_t> order;
+    bool sorted = depth_ <= 21;
+    uint64_t prev = 0;
+    for (size_t i = 0; i < voxels.size(); ++i) {
+      const BrickVoxel& v = voxels[i];
+      if (v.x >= side || v.y >= side || v.z >= side)
+        return InvalidArgumentError("a voxel outside its brick");
+      if (!sorted) continue;
+      const uint64_t key = MortonKey21(v.x, v.y, v.z);
+      sorted = i == 0 || key > prev;
+      prev = key;
+    }
+    order.resize(voxels.size());
+    points.clear();
+    if (sorted) {
+      for (size_t i = 0; i < order.size(); ++i) order[i] = uint32_t(i);
+    } else {
+      points.resize(voxels.size());
+      for (size_t i = 0; i < voxels.size(); ++i)
+        points[i] = {voxels[i].x, voxels[i].y, voxels[i].z, NodeRef(i)};
+      SortMorton(&points);
+      for (size_t i = 0; i < order.size(); ++i) order[i] = uint32_t(points[i].ref);
+    }
+    // Occupancy inside the brick: a bitmap while it is small, else a search.
+    thread_local std::vector<uint64_t> bitmap;
+    const bool use_bitmap = depth_ <= kMaxBitmapDepth;
+    auto bit_of = [&](const glm::u64vec3& l) {
+      return size_t((l.z << (2 * depth_)) | (l.y << depth_) | l.x);
+    };
+    if (use_bitmap) {
+      bitmap.assign(std::max<size_t>(1, (size_t(1) << (3 * depth_)) / 64), 0);
+      for (const BrickVoxel& v : voxels) {
+        const size_t b = bit_of(glm::u64vec3(v.x, v.y, v.z));
+        bitmap[b >> 6] |= uint64_t(1) << (b & 63);
+      }
+    } else if (sorted) {  // the points, for the search
+      points.resize(voxels.size());
+      for (size_t i = 0; i < voxels.size(); ++i)
+        points[i] = {voxels[i].x, voxels[i].y, voxels[i].z, NodeRef(i)};
+    }
+    const int64_t n = int64_t(1) << meta_.levels;
+    auto occupied_at = [&](const glm::i64vec3& g) -> bool {
+      if (g.x < 0 || g.y < 0 || g.z < 0 || g.x >= n || g.y >= n || g.z >= n) return false;
+      const glm::u64vec3 c(g);
+      if ((c >> uint64_t(depth_)) != brick) return occupied(c);
+      const glm::u64vec3 l = c - (brick << uint64_t(depth_));
+      if (use_bitmap) {
+        const size_t b = bit_of(l);
+        return ((bitmap[b >> 6] >> (b & 63)) & 1) != 0;
+      }
+      return std::binary_search(points.begin(), points.end(), LeafPoint{l.x, l.y, l.z},
+                                MortonLess);
+    };
+
+    auto r = std::make_shared<LodReducedBrick>();
+    r->brick = brick;
+    Cascade cascade(pyramid_->local());
+    cascade.Reserve(voxels.size());
+    const glm::u64vec3 corner = brick << uint64_t(depth_);
+    for (const uint32_t i : order) {
+      const BrickVoxel& v = voxels[i];
+      const glm::u64vec3 coord = corner + glm::u64vec3(v.x, v.y, v.z);
+      cascade.Push(1, coord, VoxelSums(Stored(v.attr), coord, format_, occupied_at));
+    }
+    cascade.Flush();
+    const std::vector<LevelFormat>& local = pyramid_->local();
+    r->out.resize(local.size());
+    for (size_t i = 0; i < local.size(); ++i) r->out[i] = std::move(cascade.out(local[i].l));
+    r->ups = std::move(cascade.ups());
+    return r;
+  }
+
+  Status Take(LodReducedBrick& r) {
+    if (options_.cancel != nullptr && options_.cancel->load())
+      return IoError("interrupted; no level-of-detail pyramid written");
+    const LeafPoint at{r.brick.x, r.brick.y, r.brick.z};
+    if (taken_ > 0 && !MortonLess(last_, at))
+      return InvalidArgumentError("the pyramid's base bricks came out of brick order");
+    last_ = at;
+    ++taken_;
+    return pyramid_->Take(r);
+  }
+
+  StatusOr<LodBuildStats> Finish(const std::string& store_temp_dir) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (options_.cancel != nullptr && options_.cancel->load())
+      return IoError("interrupted; no level-of-detail pyramid written");
+    if ((fs::path(store_temp_dir) / kLodDirName).string() != target_)
+      return InvalidArgumentError("the pyramid was begun in another directory");
+    // The store it was built with: this one, bricks and all.
+    VOX_ASSIGN_OR_RETURN(auto base, Store::Open(store_temp_dir, OpenOptions{}));
+    StoreMeta expected = meta_;
+    const StoreMeta& got = base->meta();
+    expected.voxel_count = got.voxel_count;
+    expected.brick_count = got.brick_count;
+    expected.top_cells = got.top_cells;
+    expected.bbox_min = got.bbox_min;
+    expected.bbox_max = got.bbox_max;
+    const uint64_t bricks = depth_ == 0 ? got.voxel_count : got.brick_count;
+    if (base->store_id() != store_id_ || bricks != taken_ ||
+        storage_internal::EncodeMeta(expected) != storage_internal::EncodeMeta(got))
+      return InternalError("the level-of-detail pyramid built with store '" + store_temp_dir +
+                           "' does not match it");
+    base.reset();
+    LodBuildStats stats;
+    VOX_RETURN_IF_ERROR(pyramid_->Finish(&stats));
+    pyramid_.reset();
+    stats.base_bricks_read = taken_;
+    VOX_RETURN_IF_ERROR(SyncDir(temp_));
+    VOX_RETURN_IF_ERROR(PublishAtomically(temp_, target_, "level-of-detail pyramid"));
+    published_ = true;
+    stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return stats;
+  }
+
+ private:
+  static constexpr int kMaxBitmapDepth = 7;
+
+  // The attributes the store gives back for `a` (FORMAT.md: quantised
+  // normals, half colours; fields it lacks at their defaults).
+  VoxelAttributes Stored(const VoxelAttributes& a) const {
+    VoxelAttributes s;
+    if (flags_ & storage_internal::kAttrNormal)
+      s.normal = storage_internal::DecodeOctNormal(
+          storage_internal::EncodeOctNormal(a.normal, normal_bits_));
+    if (flags_ & storage_internal::kAttrDensity) s.density = a.density;
+    if (flags_ & storage_internal::kAttrColor)
+      for (int k = 0; k < 3; ++k) s.color[k] = glm::unpackHalf1x16(glm::packHalf1x16(a.color[k]));
+    return s;
+  }
+
+  const StoreMeta meta_;
+  const uint64_t store_id_;
+  const int normal_bits_;
+  const LodBuildOptions options_;
+  const BaseFormat format_;
+  const uint8_t flags_;
+  const int depth_;
+  std::string target_, temp_;  // STORE_TEMP/lod, and the pyramid's temporary beside it
+  bool published_ = false;
+  std::unique_ptr<PyramidWriter> pyramid_;
+  uint64_t taken_ = 0;
+  LeafPoint last_;  // the last brick taken
+};
+
+StatusOr<std::unique_ptr<LodStream>> LodStream::Create(const std::string& store_temp_dir,
+                                                       const StoreMeta& base,
+                                                       const WriteOptions& base_options,
+                                                       const LodBuildOptions& options) {
+  auto impl = std::make_unique<Impl>(base, base_options, options);
+  VOX_RETURN_IF_ERROR(impl->Init(store_temp_dir));
+  return std::unique_ptr<LodStream>(new LodStream(std::move(impl)));
+}
+
+LodStream::LodStream(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+LodStream::~LodStream() = default;
+
+StatusOr<std::shared_ptr<LodReducedBrick>> LodStream::Reduce(
+    const glm::u64vec3& brick, const std::vector<BrickVoxel>& voxels,
+    const Occupied& occupied) const {
+  return impl_->Reduce(brick, voxels, occupied);
+}
+
+Status LodStream::Take(const std::shared_ptr<LodReducedBrick>& brick) {
+  if (brick == nullptr) return InvalidArgumentError("no reduced brick");
+  return impl_->Take(*brick);
+}
+
+StatusOr<LodBuildStats> LodStream::Finish(const std::string& store_temp_dir) {
+  return impl_->Finish(store_temp_dir);
 }
 
 StatusOr<std::unique_ptr<LodPyramid>> LodPyramid::Open(const std::string& store_dir, Store& base,

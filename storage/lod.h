@@ -24,7 +24,9 @@
 // brick are reduced brick by brick on worker threads; their results are
 // taken in brick order, so the pyramid does not depend on the threads.
 // Memory: the base store's brick cache, a bounded window of reduced bricks
-// and one coarse brick per level, never the volume. The pyramid is written into
+// and one coarse brick per level, never the volume. LodStream builds the
+// same pyramid, byte for byte, from the bricks a producer hands to its
+// StoreWriter (vox-ingest, vox-gen), without reading the store again. The pyramid is written into
 // a temporary directory and renamed to lod/ at the end, so a failure never
 // leaves a partial pyramid that opens.
 //
@@ -42,6 +44,7 @@
 
 #include "core/status.h"
 #include "storage/store.h"
+#include "storage/store_writer.h"
 
 namespace vox {
 
@@ -81,6 +84,57 @@ struct LodBuildStats {
 // Builds the pyramid of the store at `store_dir` into `store_dir`/lod.
 // Refuses an existing lod/ unless options.force.
 StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOptions& options);
+
+// A base brick's share of the pyramid, reduced by LodStream::Reduce.
+struct LodReducedBrick;
+
+// Builds the pyramid of a store while its StoreWriter writes it, from the
+// voxels its producer hands to the writer (vox-ingest, vox-gen): no second
+// pass over the written store. The pyramid is, byte for byte, the one
+// BuildLod would write of the finished store. Use:
+//  1. Create, once the writer exists, with its temporary directory
+//     (StoreWriter::temp_dir), the meta and the options it was made with
+//     (options.store_id must be set: the pyramid names it);
+//  2. for each brick given to AddBrick, Reduce its voxels (any thread), and
+//     Take the reduced bricks on one thread in brick-id (Morton) order;
+//  3. Finish from the writer's before_publish: it checks that the store in
+//     the directory is the one the bricks made, writes lod/ into it, and
+//     the pyramid is published with the store, or not at all.
+// Memory: the reduced bricks the caller holds, and one coarse brick per
+// level. Without Finish the pyramid's temporaries are removed.
+// LodBuildOptions: zstd_level, normal_bits (the coarse stores'), cancel
+// (polled by Take and Finish); threads, cache_bytes and progress unused.
+//
+// Thread safety: Reduce may run on many threads at once; Take and Finish on
+// one thread at a time.
+class LodStream {
+ public:
+  // Whether base grid voxel `g` (outside the brick being reduced, inside
+  // the grid) is an occupied voxel of the store.
+  using Occupied = std::function<bool(const glm::u64vec3& g)>;
+
+  static StatusOr<std::unique_ptr<LodStream>> Create(const std::string& store_temp_dir,
+                                                     const StoreMeta& base,
+                                                     const WriteOptions& base_options,
+                                                     const LodBuildOptions& options);
+  ~LodStream();
+
+  // Reduces the brick of the brick grid at `brick` whose voxels (as given
+  // to StoreWriter::AddBrick, any order) are `voxels`; `occupied` answers
+  // for the voxels beside it (level sets' surface test).
+  StatusOr<std::shared_ptr<LodReducedBrick>> Reduce(const glm::u64vec3& brick,
+                                                    const std::vector<BrickVoxel>& voxels,
+                                                    const Occupied& occupied) const;
+  // The next brick in brick-id order (InvalidArgument out of order).
+  Status Take(const std::shared_ptr<LodReducedBrick>& brick);
+  // Writes `store_temp_dir`/lod (the directory given to Create).
+  StatusOr<LodBuildStats> Finish(const std::string& store_temp_dir);
+
+ private:
+  class Impl;
+  explicit LodStream(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
 
 // Whether `store_dir` has a lod/ directory (not whether it opens).
 bool HasLod(const std::string& store_dir);

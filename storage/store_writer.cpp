@@ -235,6 +235,8 @@ class StoreWriterImpl : public StoreWriter {
     return OkStatus();
   }
 
+  std::string temp_dir() const override { return temp_; }
+
   Status Finish() override {
     std::lock_guard<std::mutex> lock(mu_);
     if (!status_.ok()) return status_;

@@ -62,6 +62,9 @@ class StoreWriter {
   virtual Status AddBrick(const glm::u64vec3& brick_coord, std::vector<BrickVoxel> voxels) = 0;
   // Writes the top and the index, fsyncs and renames into place.
   virtual Status Finish() = 0;
+  // The temporary directory the store is built in until Finish renames it
+  // (what before_publish is given); empty for writers without one.
+  virtual std::string temp_dir() const { return {}; }
 };
 
 }  // namespace vox

@@ -16,7 +16,11 @@
 //     (and, for the gradient, the face neighbours it touches) from the file,
 //     builds its voxels (voxel_builder.h) in Morton order and hands them to
 //     the writer (which compresses in the calling thread); a serial in-order
-//     stage keeps the books. Bricks in flight are bounded by the memory
+//     stage keeps the books and takes each brick's share of the
+//     level-of-detail pyramid (LodStream: reduced in the parallel stage,
+//     with the neighbours' occupancy from the decoded leaves and the
+//     occupied tiles), so the pyramid needs no second pass over the written
+//     store. Bricks in flight are bounded by the memory
 //     budget (at most 2 per thread). Leaves on a brick's faces are decoded by
 //     both bricks (a few % of CPU).
 #include "core/stopwatch.h"
@@ -25,10 +29,14 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <random>
+#include <set>
 #include <unordered_map>
 #include <vector>
 
@@ -76,6 +84,10 @@ class GridIngest {
       if (!Occupied(t.value)) continue;
       tiles_.push_back({t.box, t.value});
       cx_.stats->occupied_tile_voxels += t.box.volume();
+      const int log2 = std::countr_zero(uint32_t(t.box.dim().x()));
+      tile_set_.insert({t.box.min().x(), t.box.min().y(), t.box.min().z(), log2});
+      if (std::find(tile_log2_.begin(), tile_log2_.end(), log2) == tile_log2_.end())
+        tile_log2_.push_back(log2);
     }
     if (cx_.stats->occupied_tile_voxels > cx_.max_tile_voxels)
       return ResourceExhaustedError(
@@ -135,25 +147,21 @@ class GridIngest {
     wo.normal_bits = cx_.options.normal_bits;
     wo.force = cx_.options.force;
     if (cx_.options.lod) {
-      // The level-of-detail pyramid, built from the finished base store
-      // inside the temporary directory: published with it, or not at all.
+      // The level-of-detail pyramid, built with the bricks (LodStream; or,
+      // for a writer without a temporary directory, from the finished base
+      // store) inside the store's temporary directory: published with it,
+      // or not at all. Its coarse stores name the base store's id, chosen here.
+      wo.store_id = NewStoreId();
       wo.before_publish = [this](const std::string& temp_dir) -> Status {
-        Message("building the level-of-detail pyramid");
         Stopwatch lod_time;
-        LodBuildOptions lo;
-        lo.zstd_level = cx_.options.zstd_level;
-        lo.normal_bits = cx_.options.normal_bits;
-        lo.threads = cx_.options.threads;
         // A cancel (Ctrl-C in Python, whose ingest child polls it here) stops
         // the pyramid at its next brick, and one that comes as it ends still
         // stops the publication: no store, the old one kept.
-        std::atomic<bool> cancel{false};
-        lo.cancel = &cancel;
-        lo.progress = [this, &cancel](uint64_t, uint64_t) {
-          if (cx_.progress && cx_.progress->Cancelled()) cancel = true;
-        };
-        StatusOr<LodBuildStats> built = BuildLod(temp_dir, lo);
-        if (cancel || (cx_.progress && cx_.progress->Cancelled()))
+        if (lod_ == nullptr) Message("building the level-of-detail pyramid");
+        lod_cancel_ = cx_.progress && cx_.progress->Cancelled();
+        StatusOr<LodBuildStats> built =
+            lod_ ? lod_->Finish(temp_dir) : BuildLod(temp_dir, LodOptions());
+        if (lod_cancel_ || (cx_.progress && cx_.progress->Cancelled()))
           return UnavailableError(cx_.options.input + ": ingest cancelled");
         VOX_ASSIGN_OR_RETURN(LodBuildStats ls, std::move(built));
         cx_.stats->lod_levels = ls.levels;
@@ -164,6 +172,10 @@ class GridIngest {
     auto writer_or = cx_.factory(cx_.options.output, meta, wo);
     if (!writer_or.ok()) return writer_or.status();
     std::unique_ptr<StoreWriter> writer = std::move(writer_or).value();
+    if (cx_.options.lod && !writer->temp_dir().empty()) {
+      Message("building the level-of-detail pyramid with the bricks");
+      VOX_ASSIGN_OR_RETURN(lod_, LodStream::Create(writer->temp_dir(), meta, wo, LodOptions()));
+    }
 
     // 4. Bricks.
     t0.Restart();
@@ -192,6 +204,35 @@ class GridIngest {
   };
 
   bool Occupied(ValueT v) const { return level_set_ ? !(v > iso_) : v > threshold_; }
+
+  LodBuildOptions LodOptions() {
+    LodBuildOptions lo;
+    lo.zstd_level = cx_.options.zstd_level;
+    lo.normal_bits = cx_.options.normal_bits;
+    lo.threads = cx_.options.threads;
+    lo.cancel = &lod_cancel_;
+    lo.progress = [this](uint64_t, uint64_t) {
+      if (cx_.progress && cx_.progress->Cancelled()) lod_cancel_ = true;
+    };
+    return lo;
+  }
+
+  // A random store id (never 0, which asks the writer for one).
+  static uint64_t NewStoreId() {
+    std::random_device rd;
+    const uint64_t id = (uint64_t(rd()) << 32) ^ rd() ^
+                        uint64_t(std::chrono::steady_clock::now().time_since_epoch().count());
+    return id != 0 ? id : 1;
+  }
+
+  // Whether index voxel c lies in an occupied active tile.
+  bool InOccupiedTile(const Coord& c) const {
+    for (const int log2 : tile_log2_) {
+      const int mask = ~((1 << log2) - 1);
+      if (tile_set_.count({c.x() & mask, c.y() & mask, c.z() & mask, log2})) return true;
+    }
+    return false;
+  }
 
   void Message(const std::string& m) {
     if (cx_.progress) cx_.progress->Message(m);
@@ -332,18 +373,53 @@ class GridIngest {
     return bw;
   }
 
-  // One brick's voxels in Morton order. Runs concurrently on many bricks;
-  // decodes the leaves it needs from the file, then drops them.
-  std::vector<BrickVoxel> ExtractBrick(const BrickWork& bw) {
-    const int64_t size = int64_t(1) << B_;
-    int64_t rmin[3], rmax[3];
-    for (int a = 0; a < 3; ++a) {
-      rmin[a] = origin_[a] + (KeyCoord(bw.key, a) << B_);
-      rmax[a] = rmin[a] + size - 1;
-    }
-    std::vector<BrickVoxel> out;
+  // One brick's voxels in Morton order and, with the pyramid, its share of
+  // it in *reduced. Runs concurrently on many bricks; decodes the leaves it
+  // needs from the file, then drops them.
+  StatusOr<std::vector<BrickVoxel>> ExtractBrick(const BrickWork& bw,
+                                                 std::shared_ptr<LodReducedBrick>* reduced) {
+    int64_t rmin[3];
+    for (int a = 0; a < 3; ++a) rmin[a] = origin_[a] + (KeyCoord(bw.key, a) << B_);
     std::unique_ptr<ColorReader> color = cx_.color ? cx_.color->NewReader() : nullptr;
     Builder builder(*topo_, level_set_, color.get(), rmin);
+    std::vector<BrickVoxel> out = BrickVoxels(bw, rmin, builder);
+    if (lod_ == nullptr || out.empty()) return out;
+    // The store's voxels beside the brick, from the leaves the builder has
+    // decoded (a level set's normals read the same face neighbours) and
+    // the occupied tiles.
+    auto& source = builder.source();
+    Status read_error;
+    auto occupied = [&](const glm::u64vec3& g) {
+      const Coord c(int(origin_[0] + int64_t(g.x)), int(origin_[1] + int64_t(g.y)),
+                    int(origin_[2] + int64_t(g.z)));
+      try {
+        uint32_t leaf;
+        ValueT v;
+        if (!source.Probe(c, &leaf, &v)) return Occupied(v) && InOccupiedTile(c);
+        const openvdb::Index n = openvdb::Index(((c.x() & 7) << 6) | ((c.y() & 7) << 3) |
+                                                (c.z() & 7));
+        return source.Mask(leaf).isOn(n) && Occupied(source.Values(leaf)[n]);
+      } catch (const openvdb::Exception& e) {
+        if (read_error.ok())
+          read_error = CorruptionError(cx_.options.input + ": grid " + Quote(cx_.meta.grid_name) +
+                                       ": cannot read voxel data: " + e.what());
+        return false;
+      }
+    };
+    const glm::u64vec3 brick(KeyCoord(bw.key, 0), KeyCoord(bw.key, 1), KeyCoord(bw.key, 2));
+    auto r = lod_->Reduce(brick, out, occupied);
+    VOX_RETURN_IF_ERROR(read_error);
+    VOX_ASSIGN_OR_RETURN(*reduced, std::move(r));
+    return out;
+  }
+
+  // The voxels of the brick whose lowest index coordinate is rmin, in Morton order.
+  std::vector<BrickVoxel> BrickVoxels(const BrickWork& bw, const int64_t rmin[3],
+                                      Builder& builder) {
+    const int64_t size = int64_t(1) << B_;
+    int64_t rmax[3];
+    for (int a = 0; a < 3; ++a) rmax[a] = rmin[a] + size - 1;
+    std::vector<BrickVoxel> out;
     auto& source = builder.source();
 
     // Fast path: bricks of at least 8^3 without tiles hold whole leaves
@@ -439,6 +515,7 @@ class GridIngest {
       size_t index = 0;
       size_t voxels = 0;
       std::shared_ptr<BrickWork> work;
+      std::shared_ptr<LodReducedBrick> lod;  // its share of the pyramid
     };
     const size_t total = brick_count_;
     Message("writing " + std::to_string(total) + " bricks of " + std::to_string(1 << B_) +
@@ -464,7 +541,7 @@ class GridIngest {
                 return Item{};
               }
               return Item{next++, 0,
-                          std::make_shared<BrickWork>(NextBrick(&li, &ti))};
+                          std::make_shared<BrickWork>(NextBrick(&li, &ti)), nullptr};
             }) &
             tbb::make_filter<Item, Item>(
                 tbb::filter_mode::parallel,
@@ -472,7 +549,12 @@ class GridIngest {
                   if (failed.load()) return it;
                   const BrickWork& bw = *it.work;
                   try {
-                    std::vector<BrickVoxel> voxels = ExtractBrick(bw);
+                    StatusOr<std::vector<BrickVoxel>> extracted = ExtractBrick(bw, &it.lod);
+                    if (!extracted.ok()) {
+                      fail(extracted.status());
+                      return it;
+                    }
+                    std::vector<BrickVoxel> voxels = std::move(extracted).value();
                     it.voxels = voxels.size();
                     if (!voxels.empty()) {
                       Status s = writer->AddBrick(
@@ -498,6 +580,11 @@ class GridIngest {
             tbb::make_filter<Item, void>(
                 tbb::filter_mode::serial_in_order, [&](Item it) {
                   if (failed.load()) return;
+                  if (it.lod) {  // in brick order
+                    Status s = lod_->Take(it.lod);
+                    it.lod.reset();
+                    if (!s.ok()) return fail(s);
+                  }
                   voxels_done += it.voxels;
                   if (it.voxels) ++written;
                   if (cx_.progress) cx_.progress->Progress(it.index + 1, total, voxels_done);
@@ -546,6 +633,10 @@ class GridIngest {
   int64_t origin_[3] = {0, 0, 0};
   std::vector<std::pair<uint64_t, uint32_t>> leaf_map_, tile_map_;  // (brick key, index)
   size_t brick_count_ = 0;
+  std::set<std::array<int, 4>> tile_set_;  // occupied tiles: origin, log2 of their side
+  std::vector<int> tile_log2_;             // the sides they have
+  std::atomic<bool> lod_cancel_{false};
+  std::unique_ptr<LodStream> lod_;  // the pyramid built with the bricks
 };
 }  // namespace
 

@@ -42,9 +42,14 @@ uint32_t EncodeOctNormal(const glm::vec3& n, int bits) {
   }
   const uint32_t step = uint32_t(1) << (16 - std::clamp(bits, 8, 16));
   const uint32_t top = 65535 / step * step;
+  const double per_step = 1.0 / step;  // a power of two: the product is the quotient, exactly
   auto q = [&](float v) {
-    double t = std::clamp(double(v) * 0.5 + 0.5, 0.0, 1.0) * 65535.0 / step;
-    return std::min(uint32_t(std::lround(t)) * step, top);
+    double t = std::clamp(double(v) * 0.5 + 0.5, 0.0, 1.0) * 65535.0 * per_step;
+    // std::lround(t) for t >= 0, without the library call: t's fraction
+    // (exact) rounds half up.
+    uint32_t r = uint32_t(t);
+    if (t - double(r) >= 0.5) ++r;
+    return std::min(r * step, top);
   };
   return q(px) | (q(py) << 16);
 }

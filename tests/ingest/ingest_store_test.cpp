@@ -22,6 +22,7 @@
 
 #include "core/tracer.h"
 #include "ingest/ingest.h"
+#include "storage/lod.h"
 #include "storage/store.h"
 #include "storage/store_writer.h"
 #include "tests/core/test_util.h"
@@ -271,6 +272,59 @@ TEST_F(IngestStoreTest, ColorsStored) {
     EXPECT_NEAR(attr->color.g, 0.25f, 1e-3);
     EXPECT_NEAR(attr->color.b, 1.0f - z * 0.01f, 1e-3);
   }
+}
+
+// The pyramid the ingest builds with the bricks is, byte for byte, the one
+// BuildLod (as `vox-ingest --add-lod` runs it) writes of the finished store:
+// a level set with an occupied active tile (whose voxels the surface test of
+// neighbouring bricks looks up) and a fog volume (interior tiles), bricks of
+// 4^3 (most voxels' neighbours in another brick) and of 2^5, 1 and 2 threads.
+TEST_F(IngestStoreTest, ThePyramidBuiltWithTheBricksIsBuildLods) {
+  auto ls = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+      20.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
+  ls->tree().addTile(1, Coord(16, 0, 0), -1.0f, true);  // an 8^3 tile on the surface
+  ls->setName("ls");
+  auto fog = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+      20.0f, openvdb::Vec3f(0.0f), 1.0f, 3.0f);
+  openvdb::tools::sdfToFogVolume(*fog);
+  fog->setName("fog");
+  const std::string ls_vdb = dir_.File("ls.vdb"), fog_vdb = dir_.File("fog.vdb");
+  testutil::WriteVdb(ls_vdb, {ls});
+  testutil::WriteVdb(fog_vdb, {fog});
+  auto files = [](const std::string& store) {
+    std::map<std::string, std::string> bytes;
+    for (const auto& e : std::filesystem::recursive_directory_iterator(store + "/lod"))
+      if (e.is_regular_file()) {
+        std::ifstream f(e.path(), std::ios::binary);
+        bytes[std::filesystem::relative(e.path(), store).string()] =
+            std::string(std::istreambuf_iterator<char>(f), {});
+      }
+    return bytes;
+  };
+  int n = 0;
+  for (const std::string& vdb : {ls_vdb, fog_vdb})
+    for (const char* levels : {"5+2", "auto"})
+      for (int threads : {1, 2}) {
+        SCOPED_TRACE(vdb + " " + levels + " threads " + std::to_string(threads));
+        IngestOptions o;
+        o.input = vdb;
+        o.output = dir_.File("lod" + std::to_string(n++));
+        o.levels = levels;
+        o.threads = threads;
+        auto st = Ingest(o);
+        ASSERT_TRUE(st.ok()) << st.status().ToString();
+        ASSERT_GT(st->lod_levels, 2);
+        if (vdb == ls_vdb) {
+          EXPECT_GT(st->occupied_tile_voxels, 0u);
+        }
+        const auto streamed = files(o.output);
+        ASSERT_EQ(streamed.size(), 2u * size_t(st->lod_levels));
+        LodBuildOptions lo;
+        lo.force = true;
+        ASSERT_TRUE(BuildLod(o.output, lo).ok());
+        for (const auto& [name, bytes] : files(o.output))
+          EXPECT_TRUE(streamed.at(name) == bytes) << name << " differs";
+      }
 }
 
 // A StoreWriter that passes bricks to the real writer and fails on demand.

@@ -20,6 +20,7 @@
 #include "core/octree.h"
 #include "tools/gen/generate.h"
 #include "tools/gen/shapes.h"
+#include "storage/lod.h"
 #include "storage/store.h"
 #include "storage/store_info.h"
 
@@ -288,6 +289,36 @@ TEST(GenStore, SameOptionsGiveByteIdenticalStores) {
   ASSERT_TRUE(gen::Generate(c).ok());
   EXPECT_NE(Slurp(c.output + "/index.vxi").substr(16, 8),
             Slurp(t / "sphere1/index.vxi").substr(16, 8));
+}
+
+// The pyramid built with the bricks is, byte for byte, the one BuildLod (as
+// `vox-ingest --add-lod` runs it) writes of the finished store: every shape,
+// bricks of 2^5 and of 2^2 voxels (the generator's occupancy then tests the
+// neighbours of most voxels).
+TEST(GenStore, ThePyramidBuiltWithTheBricksIsBuildLods) {
+  TempDir t;
+  int n = 0;
+  for (const char* shape : {"sphere", "bumpy", "rough"})
+    for (const char* levels : {"auto", "5+2"}) {
+      SCOPED_TRACE(std::string(shape) + " " + levels);
+      gen::GenerateOptions o = Options(shape, 128, t / ("s" + std::to_string(n++)));
+      o.levels = levels;
+      ASSERT_TRUE(gen::Generate(o).ok());
+      auto files = [&] {
+        std::map<std::string, std::string> bytes;
+        for (const auto& e : fs::recursive_directory_iterator(o.output + "/lod"))
+          if (e.is_regular_file())
+            bytes[fs::relative(e.path(), o.output).string()] = Slurp(e.path());
+        return bytes;
+      };
+      const auto streamed = files();
+      ASSERT_EQ(streamed.size(), 2u * 5u);  // levels 1..5 of a 2^7 grid
+      LodBuildOptions lo;
+      lo.force = true;
+      ASSERT_TRUE(BuildLod(o.output, lo).ok());
+      const auto built = files();
+      for (const auto& [name, bytes] : built) EXPECT_TRUE(streamed.at(name) == bytes) << name;
+    }
 }
 
 TEST(GenStore, BadOptionsAreRefusedBeforeWriting) {

@@ -143,6 +143,33 @@ class BrickFiller {
   const double band_, half_;
 };
 
+// Whether a grid voxel is in the store: the tests BrickEnumerator and
+// BrickFiller make of the blocks holding it (from the root down to the
+// filler's 4^3 blocks, or to the brick when it is smaller), then the band's.
+// The same arithmetic on the same (integral) coordinates, so the same answer.
+class StoreOccupancy {
+ public:
+  StoreOccupancy(const Shape& shape, int levels, int brick_level, double band)
+      : shape_(shape), levels_(levels), last_(std::max(brick_level, levels - 2)), band_(band),
+        half_(double(uint64_t(1) << (levels - 1))) {}
+
+  bool operator()(const glm::u64vec3& g) const {
+    for (int level = 0; level <= last_; ++level) {
+      const int k = levels_ - level;  // the block's side is 2^k
+      const uint64_t s = uint64_t(1) << k;
+      const glm::dvec3 lo = glm::dvec3((g >> uint64_t(k)) * s) - half_;
+      if (!shape_.MayOccupy(lo, lo + double(s - 1), band_)) return false;
+    }
+    const double d = shape_.Distance(glm::dvec3(g) - half_);
+    return d > -band_ && d <= 0;
+  }
+
+ private:
+  const Shape& shape_;
+  const int levels_, last_;
+  const double band_, half_;
+};
+
 }  // namespace
 
 StatusOr<Levels> ChooseLevels(std::string_view text, int n) {
@@ -239,17 +266,19 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   wo.normal_bits = o.normal_bits;
   wo.force = o.force;
   wo.store_id = HashId(meta.build_options);
+  // The pyramid is built with the bricks (LodStream) in the store's
+  // temporary directory and published with it (deterministic: its ids
+  // derive from the store's).
+  LodBuildOptions lo;
+  lo.zstd_level = o.zstd_level;
+  lo.normal_bits = o.normal_bits;
+  lo.threads = o.threads;
+  lo.cancel = o.cancel;
+  std::unique_ptr<LodStream> lod;
   if (o.lod) {
-    // The pyramid is built from the finished store in its temporary
-    // directory and published with it (deterministic: ids derive from the store's).
-    wo.before_publish = [&o, &stats](const std::string& temp_dir) -> Status {
+    wo.before_publish = [&lod, &stats](const std::string& temp_dir) -> Status {
       const double t = Now();
-      LodBuildOptions lo;
-      lo.zstd_level = o.zstd_level;
-      lo.normal_bits = o.normal_bits;
-      lo.threads = o.threads;
-      lo.cancel = o.cancel;
-      VOX_ASSIGN_OR_RETURN(LodBuildStats ls, BuildLod(temp_dir, lo));
+      VOX_ASSIGN_OR_RETURN(LodBuildStats ls, lod->Finish(temp_dir));
       stats.lod_levels = ls.levels;
       stats.seconds_lod = Now() - t;
       return OkStatus();
@@ -257,6 +286,10 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   }
   VOX_ASSIGN_OR_RETURN(std::unique_ptr<StoreWriter> writer,
                        StoreWriter::Create(o.output, meta, wo));
+  if (o.lod) {
+    VOX_ASSIGN_OR_RETURN(lod, LodStream::Create(writer->temp_dir(), meta, wo, lo));
+  }
+  const StoreOccupancy occupancy(*shape, n, lv.brick_level, o.band);
 
   stats.threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
   BrickEnumerator bricks(*shape, n, lv.brick_level, o.band);
@@ -272,6 +305,7 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   struct Item {
     glm::u64vec3 brick{0};
     std::vector<BrickVoxel> voxels;
+    std::shared_ptr<LodReducedBrick> lod;  // its share of the pyramid
   };
   const double t1 = Now();
   tbb::task_arena arena(stats.threads);
@@ -293,6 +327,12 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
                                            if (failed.load()) return it;
                                            try {
                                              it.voxels = filler.Fill(it.brick);
+                                             if (lod && !it.voxels.empty()) {
+                                               auto r = lod->Reduce(it.brick, it.voxels,
+                                                                    occupancy);
+                                               if (!r.ok()) fail(r.status());
+                                               else it.lod = std::move(r).value();
+                                             }
                                            } catch (const std::bad_alloc&) {
                                              fail(ResourceExhaustedError(
                                                  "out of memory while filling a brick"));
@@ -305,6 +345,7 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
               if (failed.load() || it.voxels.empty()) return;
               const size_t count = it.voxels.size();
               Status s = writer->AddBrick(it.brick, std::move(it.voxels));
+              if (s.ok() && lod) s = lod->Take(it.lod);
               if (!s.ok()) return fail(s);
               ++stats.bricks;
               stats.voxels += count;
