@@ -93,24 +93,34 @@ int Components(uint8_t flags, int* widths) {
 }
 
 // Replaces each component's values by their differences (mod 2^(8 width))
-// from the previous voxel's, or undoes that. Neighbours in Morton order have
-// similar normals, densities and colours: small differences compress well.
+// from the previous voxel's. Neighbours in Morton order have similar
+// normals, densities and colours: small differences compress well.
 template <int W>
-void DeltaComponent(uint8_t* planes, uint32_t count, bool encode) {
+void DeltaComponent(uint8_t* planes, uint32_t count) {
   using T = std::conditional_t<W == 2, uint16_t, uint32_t>;
   uint8_t* p[W];
   for (int b = 0; b < W; ++b) p[b] = planes + size_t(b) * count;
   T prev = 0;
-  if (encode) {
-    for (uint32_t i = 0; i < count; ++i) {
-      T v = 0;
-      for (int b = 0; b < W; ++b) v = T(v | (T(p[b][i]) << (8 * b)));
-      const T out = T(v - prev);
-      for (int b = 0; b < W; ++b) p[b][i] = uint8_t(out >> (8 * b));
-      prev = v;
-    }
-    return;
+  for (uint32_t i = 0; i < count; ++i) {
+    T v = 0;
+    for (int b = 0; b < W; ++b) v = T(v | (T(p[b][i]) << (8 * b)));
+    const T out = T(v - prev);
+    for (int b = 0; b < W; ++b) p[b][i] = uint8_t(out >> (8 * b));
+    prev = v;
   }
+}
+
+// Undoes DeltaComponent, reading the differences from `src` and writing the
+// values to `dst` (the same bytes or others: each byte is read before its
+// own is written), so a decoder copies its planes out of the decompressed
+// record in the same pass.
+template <int W>
+void UndeltaComponent(const uint8_t* src, uint8_t* dst, uint32_t count) {
+  using T = std::conditional_t<W == 2, uint16_t, uint32_t>;
+  const uint8_t* p[W];
+  uint8_t* q[W];
+  for (int b = 0; b < W; ++b) p[b] = src + size_t(b) * count, q[b] = dst + size_t(b) * count;
+  T prev = 0;
   // Decoding runs on every brick a reader loads. Two-byte components (normals,
   // colours, coverage: nearly all of it) go 8 at a time with SSE2 (x86-64's
   // baseline): join the byte planes, add each lane's predecessors in three
@@ -131,8 +141,8 @@ void DeltaComponent(uint8_t* planes, uint32_t count, bool encode) {
       const __m128i mask = _mm_set1_epi16(0xff);
       const __m128i out_lo = _mm_packus_epi16(_mm_and_si128(v, mask), _mm_setzero_si128());
       const __m128i out_hi = _mm_packus_epi16(_mm_srli_epi16(v, 8), _mm_setzero_si128());
-      _mm_storel_epi64(reinterpret_cast<__m128i*>(p[0] + i), out_lo);
-      _mm_storel_epi64(reinterpret_cast<__m128i*>(p[1] + i), out_hi);
+      _mm_storel_epi64(reinterpret_cast<__m128i*>(q[0] + i), out_lo);
+      _mm_storel_epi64(reinterpret_cast<__m128i*>(q[1] + i), out_hi);
     }
     prev = T(_mm_extract_epi16(carry, 0));
   }
@@ -141,17 +151,30 @@ void DeltaComponent(uint8_t* planes, uint32_t count, bool encode) {
     T d = 0;
     for (int b = 0; b < W; ++b) d = T(d | (T(p[b][i]) << (8 * b)));
     prev = T(prev + d);
-    for (int b = 0; b < W; ++b) p[b][i] = uint8_t(prev >> (8 * b));
+    for (int b = 0; b < W; ++b) q[b][i] = uint8_t(prev >> (8 * b));
   }
 }
 
-void DeltaPlanes(uint8_t* planes, uint32_t count, uint8_t flags, bool encode) {
+void DeltaPlanes(uint8_t* planes, uint32_t count, uint8_t flags) {
   int widths[6];
   int n = Components(flags, widths);
   for (int c = 0; c < n; ++c) {
-    if (widths[c] == 2) DeltaComponent<2>(planes, count, encode);
-    else DeltaComponent<4>(planes, count, encode);
+    if (widths[c] == 2) DeltaComponent<2>(planes, count);
+    else DeltaComponent<4>(planes, count);
     planes += size_t(widths[c]) * count;
+  }
+}
+
+// DeltaPlanes undone from `src` into `dst` (all AttrBytesPerVoxel(flags) *
+// count bytes of it are written).
+void UndeltaPlanes(const uint8_t* src, uint8_t* dst, uint32_t count, uint8_t flags) {
+  int widths[6];
+  int n = Components(flags, widths);
+  for (int c = 0; c < n; ++c) {
+    if (widths[c] == 2) UndeltaComponent<2>(src, dst, count);
+    else UndeltaComponent<4>(src, dst, count);
+    src += size_t(widths[c]) * count;
+    dst += size_t(widths[c]) * count;
   }
 }
 }  // namespace
@@ -223,7 +246,7 @@ std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAtt
   }
   size_t at = s.size();
   WriteAttributes(attrs, flags, &s, normal_bits);
-  DeltaPlanes(reinterpret_cast<uint8_t*>(s.data()) + at, uint32_t(attrs.size()), flags, true);
+  DeltaPlanes(reinterpret_cast<uint8_t*>(s.data()) + at, uint32_t(attrs.size()), flags);
   return s;
 }
 
@@ -329,8 +352,8 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
     b->cells[start[l] + count[l]++] = MakeCompactCell(first, masks[i]);
   }
   const uint8_t* planes = raw + kBrickHeaderSize + num_cells;
-  b->attr_planes.assign(planes, raw + n);
-  DeltaPlanes(b->attr_planes.data(), voxel_count, flags, false);
+  b->attr_planes.resize(n - kBrickHeaderSize - num_cells);  // left uninitialised
+  UndeltaPlanes(planes, b->attr_planes.data(), voxel_count, flags);
   b->voxel_count = voxel_count;
   b->flags = flags;
   return b;

@@ -12,6 +12,8 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include <glm/vec3.hpp>
@@ -52,10 +54,33 @@ void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std:
 std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
                            int depth, uint8_t flags, int normal_bits = 16);
 
+// An allocator whose value-initialising construct (vector::resize) leaves
+// trivial elements uninitialised: for buffers a decoder fills completely.
+template <class T>
+struct UninitializedAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitializedAllocator<U>;
+  };
+  UninitializedAllocator() = default;
+  template <class U>
+  UninitializedAllocator(const UninitializedAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+
 // A decoded brick as the cache holds it: its pool in traversal form.
 struct DecodedBrick {
   std::vector<CompactCell> cells;
-  std::vector<uint8_t> attr_planes;
+  // Written whole by DecodeBrickRaw straight from the decompressed record
+  // (delta decoding and copying in one pass), so never zeroed first.
+  std::vector<uint8_t, UninitializedAllocator<uint8_t>> attr_planes;
   uint32_t voxel_count = 0;
   uint8_t flags = 0;
   // What it costs in memory: this struct, its two heap blocks (capacity, as
