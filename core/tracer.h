@@ -147,9 +147,12 @@ class Tracer {
   // The same hits and counters as FirstHit on each ray. Returns the first
   // error met (an invalid ray, a brick that cannot be fetched); the hits are
   // then partial. A lending BrickSource keeps one ray in flight.
+  // `yield_in_top`: a ray hands over before reading a cell of the resident
+  // top pool too (else it reads those at once, and hands over before brick cells only).
   Status FirstHits(const Ray* rays, size_t n, std::optional<Hit>* hits, int in_flight,
-                   TraceCounters* counters = nullptr) const {
-    const internal::WalkPlan plan(tree_, n1_, n2_);
+                   TraceCounters* counters = nullptr, bool yield_in_top = true) const {
+    internal::WalkPlan plan(tree_, n1_, n2_);
+    plan.yield_in_top = yield_in_top;
     auto make = [this](void* where, const Ray& ray) {
       return new (where) PerRay{*this, ScaledRay{ray}, nullptr};
     };

@@ -44,6 +44,7 @@ struct WalkPlan {
   int n1, n2;
   StepLayout l1, l2;
   int top1, top2;  // the steps' TopBits
+  bool yield_in_top = true;
 };
 
 // One step's walk (WalkStep's locals): the register, the register before the
@@ -197,6 +198,14 @@ Resumed Resume(const WalkPlan& plan, WalkState<PerRay>& w, Hit* hit, TraceCounte
           w.pending = p;
           w.phase = WalkState<PerRay>::Phase::kRoot2;
           return Resumed::kPending;
+        }
+        if (bit > top_bit && !plan.yield_in_top) {  // the top pool: read it at once
+          cell = plan.tree.top[child];
+          ++depth;
+          s->stack[depth] = cell;
+          --bit;
+          mask >>= 1;
+          continue;
         }
         const CompactCell* p = w.pinner.Locate(child, bit, top_bit);
         if (p == nullptr) return finish(Resumed::kError);

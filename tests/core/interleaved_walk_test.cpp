@@ -1,7 +1,7 @@
 // Several rays in flight (Tracer::FirstHits, core/internal/walk_state.h)
 // against the one-ray walk (Tracer::FirstHit): for K = 1, 4, 8, 16 rays in
-// flight, every ray's first hit (voxel, t bit for bit, brick, payload) and
-// the summed counters (moves per axis, skips, cells, transitions, fetches,
+// flight, handing over at top-pool cells or not, every ray's first hit (voxel, t bit for bit,
+// brick, payload) and the summed counters (moves per axis, skips, cells, transitions, fetches,
 // hits) must be FirstHit's, over the generated shapes with and without
 // bricks, single step and two steps, on random rays from outside and inside,
 // along axes, voxel edges and through voxel corners, with -0.0 components.
@@ -29,8 +29,8 @@ std::vector<Ray> TestRays(Rng& rng, int levels, const std::vector<LeafPoint>& vo
   for (int k = 0; k < 300; ++k) {
     const LeafPoint& v = voxels[size_t(rng.Int(0, int64_t(voxels.size()) - 1))];
     rays.push_back(RayFrom(rng, rng.PointIn({int64_t(v.x), int64_t(v.y), int64_t(v.z)})));
-    rays.push_back(RayFrom(rng, glm::dvec3(rng.Uniform(0, g), rng.Uniform(0, g),
-                                           rng.Uniform(0, g))));
+    rays.push_back(
+        RayFrom(rng, glm::dvec3(rng.Uniform(0, g), rng.Uniform(0, g), rng.Uniform(0, g))));
   }
   // Along axes, voxel edges and face diagonals, and through voxel corners.
   const int64_t gi = int64_t(1) << levels;
@@ -86,18 +86,21 @@ void CheckShape(const std::string& spec, const std::vector<int>& brick_levels,
         expected.push_back(*h);
       }
       ASSERT_GT(one.hits, rays.size() / 20) << where;
-      for (int k : {1, 4, 8, 16}) {
-        TraceCounters many;
-        std::vector<std::optional<Hit>> got(rays.size());
-        Status s = tracer->FirstHits(rays.data(), rays.size(), got.data(), k, &many);
-        ASSERT_TRUE(s.ok()) << where << " k=" << k << " " << s.ToString();
-        for (size_t i = 0; i < rays.size(); ++i)
-          ASSERT_TRUE(SameHit(expected[i], got[i]))
-              << where << " k=" << k << " ray " << i << " " << RayString(rays[i]);
-        EXPECT_TRUE(SameCounters(one, many))
-            << where << " k=" << k << "\none-ray:  " << one.ToString()
-            << "\nin flight: " << many.ToString();
-      }
+      for (int k : {1, 4, 8, 16})
+        for (bool yield_in_top : {true, false}) {
+          const std::string run =
+              where + " k=" + std::to_string(k) + (yield_in_top ? "" : " top at once");
+          TraceCounters many;
+          std::vector<std::optional<Hit>> got(rays.size());
+          Status s =
+              tracer->FirstHits(rays.data(), rays.size(), got.data(), k, &many, yield_in_top);
+          ASSERT_TRUE(s.ok()) << run << " " << s.ToString();
+          for (size_t i = 0; i < rays.size(); ++i)
+            ASSERT_TRUE(SameHit(expected[i], got[i]))
+                << run << " ray " << i << " " << RayString(rays[i]);
+          EXPECT_TRUE(SameCounters(one, many))
+              << run << "\none-ray:  " << one.ToString() << "\nin flight: " << many.ToString();
+        }
     }
   }
 }
