@@ -44,6 +44,8 @@ struct WalkPlan {
   int n1, n2;
   StepLayout l1, l2;
   int top1, top2;  // the steps' TopBits
+  // Hand over before reading a cell of the resident top pool too (false:
+  // read those at once, hand over before brick cells only).
   bool yield_in_top = true;
 };
 
