@@ -97,6 +97,18 @@ struct BrickPinner {
     return true;
   }
 
+  // Resolve without the load: where child `index` of a cell at step bit
+  // `bit` lies (fetching its brick at the top pool's last level), for a
+  // walk that prefetches it and reads it later (walk_state.h). Null on a
+  // fetch error (kept in `error`).
+  const CompactCell* Locate(uint32_t index, int bit, int top_bit) {
+    if (bit < top_bit) [[likely]]
+      return cells + index;
+    if (bit > top_bit) return top + index;
+    if (index != id && !Fetch(index)) return nullptr;
+    return cells;
+  }
+
  private:
   bool Fetch(uint32_t want) {
     if (source == nullptr) {

@@ -7,8 +7,11 @@
 #include <benchmark/benchmark.h>
 
 #include <cmath>
+#include <glm/geometric.hpp>
 #include <memory>
+#include <optional>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "core/core.h"
@@ -20,7 +23,8 @@ namespace {
 std::unique_ptr<MemoryOctree> MakeTree(const char* shape, int brick_levels) {
   auto vol = GenerateShape(shape);
   if (!vol.ok()) std::abort();
-  auto t = MemoryOctree::Build(vol->voxels, vol->levels, std::max(1, vol->levels - brick_levels));
+  auto t = MemoryOctree::Build(std::move(vol->voxels), vol->levels,
+                               std::max(1, vol->levels - brick_levels));
   if (!t.ok()) std::abort();
   return std::move(t).value();
 }
@@ -38,7 +42,8 @@ void BM_Moves(benchmark::State& state) {
     auto h = tracer.FirstHit(ray, &c);
     benchmark::DoNotOptimize(h);
   }
-  state.counters["moves/s"] = benchmark::Counter(double(c.total_moves()), benchmark::Counter::kIsRate);
+  state.counters["moves/s"] =
+      benchmark::Counter(double(c.total_moves()), benchmark::Counter::kIsRate);
   state.counters["passive_frac"] = double(c.passive_moves) / double(c.total_moves());
   state.SetItemsProcessed(int64_t(c.total_moves()));
 }
@@ -55,8 +60,10 @@ std::vector<Ray> AimedRays(int levels, int count, uint64_t seed) {
   std::vector<Ray> rays;
   for (int i = 0; i < count; ++i) {
     double th = 2 * M_PI * u(rng), z = 2 * u(rng) - 1, r = std::sqrt(1 - z * z);
-    glm::dvec3 from = glm::dvec3(n / 2) + 1.5 * n * glm::dvec3(r * std::cos(th), r * std::sin(th), z);
-    glm::dvec3 to = glm::dvec3(n * (0.3 + 0.4 * u(rng)), n * (0.3 + 0.4 * u(rng)), n * (0.3 + 0.4 * u(rng)));
+    glm::dvec3 from =
+        glm::dvec3(n / 2) + 1.5 * n * glm::dvec3(r * std::cos(th), r * std::sin(th), z);
+    glm::dvec3 to =
+        glm::dvec3(n * (0.3 + 0.4 * u(rng)), n * (0.3 + 0.4 * u(rng)), n * (0.3 + 0.4 * u(rng)));
     rays.push_back({from, to - from});
   }
   return rays;
@@ -87,6 +94,89 @@ BENCHMARK_CAPTURE(BM_FirstHit, sphere1024, "sphere:1024")->Arg(10)->Arg(4)->Arg(
 
 // Empty-space skipping: sparse random voxels; skips and moves per ray.
 BENCHMARK_CAPTURE(BM_FirstHit, noise1024, "noise:1024")->Arg(10)->Arg(6);
+
+// Several rays in flight (Tracer::FirstHits, core/internal/walk_state.h)
+// against the one-ray walk, on the same rays in the same order: a pinhole
+// camera's 256 x 256 pixel rays in row order ("coherent", what a renderer
+// traces), or AimedRays ("random"), as many: 256 x 256, 128 x 128 on noise
+// (whose rays walk 10 to 25 times as many cells). Rays go in batches of one
+// image row. docs/benchmarks.md, "Several rays in flight", runs
+//   vox-core-bench --benchmark_filter=InFlight --benchmark_repetitions=5
+//     --benchmark_report_aggregates_only=true The tree
+// is built once per shape (the benchmarks of a shape run one after another).
+MemoryOctree& SharedTree(const char* shape) {
+  static std::unique_ptr<MemoryOctree> tree;
+  static std::string built;
+  if (built != shape) {
+    tree.reset();
+    tree = MakeTree(shape, 5);
+    built = shape;
+  }
+  return *tree;
+}
+
+std::vector<Ray> CameraRays(int levels, int width) {
+  const double n = std::ldexp(1.0, levels);
+  const glm::dvec3 centre(n / 2), back = glm::normalize(glm::dvec3(0.6, 0.45, 0.66));
+  const glm::dvec3 right = glm::normalize(glm::cross(glm::dvec3(0, 0, 1), back));
+  const glm::dvec3 up = glm::cross(back, right);
+  const double half = 0.35;  // tan of half the field of view
+  std::vector<Ray> rays;
+  for (int y = 0; y < width; ++y)
+    for (int x = 0; x < width; ++x) {
+      const double u = (2 * (x + 0.5) / width - 1) * half, v = (1 - 2 * (y + 0.5) / width) * half;
+      rays.push_back({centre + 1.5 * n * back, -back + u * right + v * up});
+    }
+  return rays;
+}
+
+void BM_InFlight(benchmark::State& state, const char* shape, bool coherent) {
+  MemoryOctree& tree = SharedTree(shape);
+  auto tracer = DefaultTracer::Create(tree.view(), DefaultFirstStepLevels(tree.levels())).value();
+  const int width = std::string(shape).rfind("noise", 0) == 0 ? 128 : 256;  // noise is slow
+  const std::vector<Ray> rays =
+      coherent ? CameraRays(tree.levels(), width) : AimedRays(tree.levels(), width * width, 42);
+  std::vector<std::optional<Hit>> hits(rays.size());
+  const int in_flight = int(state.range(0));
+  const bool yield_in_top = state.range(1) != 0;
+  TraceCounters c;
+  for (auto _ : state) {
+    for (size_t row = 0; row < rays.size(); row += width) {
+      if (in_flight == 0) {
+        for (size_t i = row; i < row + width; ++i) hits[i] = tracer.FirstHit(rays[i], &c).value();
+      } else if (!tracer.FirstHits(&rays[row], width, &hits[row], in_flight, &c, yield_in_top)
+                      .ok()) {
+        std::abort();
+      }
+    }
+    benchmark::DoNotOptimize(hits.data());
+    benchmark::ClobberMemory();
+  }
+  state.counters["rays/s"] = benchmark::Counter(double(c.rays), benchmark::Counter::kIsRate);
+  state.counters["cells/ray"] = double(c.cells_visited) / double(c.rays);
+  state.counters["moves/ray"] = double(c.total_moves()) / double(c.rays);
+  state.counters["steps2/ray"] = double(c.transitions) / double(c.rays);
+  state.counters["hit_rate"] = double(c.hits) / double(c.rays);
+  double cells = tree.view().top_cells;
+  for (uint32_t b = 0; b < tree.num_bricks(); ++b) cells += tree.FetchBrick(b)->num_cells;
+  state.counters["tree_MiB"] = cells * sizeof(CompactCell) / (1 << 20);
+}
+// range(0) rays in flight (0: one-ray FirstHit); range(1) 1 when a ray also
+// hands over before reading a cell of the resident top, 0 when it reads those at once.
+void InFlightArgs(benchmark::internal::Benchmark* b) {
+  b->Args({0, 1})->Unit(benchmark::kMillisecond);
+  for (int top : {1, 0})
+    for (int k : {4, 8, 16}) b->Args({k, top});
+}
+BENCHMARK_CAPTURE(BM_InFlight, sphere1024_coherent, "sphere:1024", true)->Apply(InFlightArgs);
+BENCHMARK_CAPTURE(BM_InFlight, sphere1024_random, "sphere:1024", false)->Apply(InFlightArgs);
+BENCHMARK_CAPTURE(BM_InFlight, noise1024_coherent, "noise:1024", true)->Apply(InFlightArgs);
+BENCHMARK_CAPTURE(BM_InFlight, noise1024_random, "noise:1024", false)->Apply(InFlightArgs);
+// Trees larger than a 32 MiB L3 (tree_MiB: 70 and 73).
+BENCHMARK_CAPTURE(BM_InFlight, noise4096_coherent, "noise:4096", true)->Apply(InFlightArgs);
+BENCHMARK_CAPTURE(BM_InFlight, noise4096_random, "noise:4096", false)->Apply(InFlightArgs);
+BENCHMARK_CAPTURE(BM_InFlight, sphere4096_coherent, "sphere:4096", true)->Apply(InFlightArgs);
+BENCHMARK_CAPTURE(BM_InFlight, sphere4096_random, "sphere:4096", false)->Apply(InFlightArgs);
 
 }  // namespace
 }  // namespace vox
