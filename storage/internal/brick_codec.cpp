@@ -82,7 +82,9 @@ inline void ScatterPlanes(uint8_t* planes, uint32_t count, uint32_t index, int n
   for (int b = 0; b < nbytes; ++b) planes[size_t(b) * count + index] = uint8_t(v >> (8 * b));
 }
 
-// Attribute components (width in bytes) in plane order, for delta coding.
+// Attribute components (width in bytes) in plane order, for delta coding:
+// at most kMaxComponents (normal 2, density 1, colour 3, coverage 1).
+constexpr int kMaxComponents = 7;
 int Components(uint8_t flags, int* widths) {
   int k = 0;
   if (flags & kAttrNormal) widths[k++] = 2, widths[k++] = 2;
@@ -156,7 +158,7 @@ void UndeltaComponent(const uint8_t* src, uint8_t* dst, uint32_t count) {
 }
 
 void DeltaPlanes(uint8_t* planes, uint32_t count, uint8_t flags) {
-  int widths[6];
+  int widths[kMaxComponents];
   int n = Components(flags, widths);
   for (int c = 0; c < n; ++c) {
     if (widths[c] == 2) DeltaComponent<2>(planes, count);
@@ -168,7 +170,7 @@ void DeltaPlanes(uint8_t* planes, uint32_t count, uint8_t flags) {
 // DeltaPlanes undone from `src` into `dst` (all AttrBytesPerVoxel(flags) *
 // count bytes of it are written).
 void UndeltaPlanes(const uint8_t* src, uint8_t* dst, uint32_t count, uint8_t flags) {
-  int widths[6];
+  int widths[kMaxComponents];
   int n = Components(flags, widths);
   for (int c = 0; c < n; ++c) {
     if (widths[c] == 2) UndeltaComponent<2>(src, dst, count);
