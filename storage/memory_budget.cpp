@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <malloc.h>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -195,6 +196,32 @@ StatusOr<MemoryLimit> DetectMemoryLimit(const std::string& root) {
   if (out.mem_available != 0 && (out.bytes == 0 || out.mem_available < out.bytes))
     out.bytes = out.mem_available;
   return out;
+}
+
+ProcessMemory ReadProcessMemory() {
+  ProcessMemory m;
+  if (FILE* f = std::fopen("/proc/self/status", "re")) {
+    char line[256];
+    unsigned long long kb = 0;
+    while (std::fgets(line, sizeof(line), f) != nullptr) {
+      if (std::sscanf(line, "VmHWM: %llu kB", &kb) == 1) m.peak_rss = uint64_t(kb) << 10;
+      if (std::sscanf(line, "RssAnon: %llu kB", &kb) == 1) m.rss_anon = uint64_t(kb) << 10;
+    }
+    std::fclose(f);
+  }
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || __GLIBC_MINOR__ >= 33)
+  const struct mallinfo2 mi = mallinfo2();
+  m.heap_held = uint64_t(mi.arena) + uint64_t(mi.hblkhd);
+  m.heap_in_use = uint64_t(mi.uordblks) + uint64_t(mi.hblkhd);
+#endif
+  return m;
+}
+
+std::string ProcessMemory::ToJson() const {
+  std::ostringstream o;
+  o << "{\"peak_rss\": " << peak_rss << ", \"rss_anon\": " << rss_anon
+    << ", \"heap_held\": " << heap_held << ", \"heap_in_use\": " << heap_in_use << "}";
+  return o.str();
 }
 
 StatusOr<uint64_t> ParseMemorySize(std::string_view flag, std::string_view text) {

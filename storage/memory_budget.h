@@ -1,4 +1,5 @@
-// vox::DetectMemoryLimit, vox::ParseMemorySize and vox::SplitMemoryBudget:
+// vox::DetectMemoryLimit, vox::ParseMemorySize, vox::SplitMemoryBudget and
+// vox::ReadProcessMemory:
 // how much memory a process may really use (its memory cgroup's limit, v1 or
 // v2, and the kernel's MemAvailable; the smaller wins), parsing a
 // `--memory-mb`-style flag, and the split of one process budget between the
@@ -45,6 +46,21 @@ struct MemoryLimit {
 // unlimited. Missing files are not errors (no cgroup, no meminfo: 0); a file
 // that exists but cannot be parsed is a CorruptionError naming it.
 StatusOr<MemoryLimit> DetectMemoryLimit(const std::string& root = "/");
+
+// What the process holds now, to set against its budget: the kernel's view
+// (/proc/self/status: VmHWM, the peak resident set, and RssAnon, the
+// anonymous part now) and the allocator's (glibc mallinfo2: bytes it holds
+// from the system and bytes in live allocations; the difference is free
+// memory it keeps, the fragmentation a churning cache leaves). A field is 0
+// where it cannot be read.
+struct ProcessMemory {
+  uint64_t peak_rss = 0;
+  uint64_t rss_anon = 0;
+  uint64_t heap_held = 0;
+  uint64_t heap_in_use = 0;
+  std::string ToJson() const;
+};
+ProcessMemory ReadProcessMemory();
 
 // Parses a memory size for `flag` (named in errors): a positive number of
 // MiB ("512"), or a number with a binary unit K, M, G or T, optionally

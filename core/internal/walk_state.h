@@ -135,6 +135,16 @@ Resumed Resume(const WalkPlan& plan, WalkState<PerRay>& w, Hit* hit, TraceCounte
     depth = s->depth;
     bit = s->bit;
   };
+  // Makes step n (1 or 2) the current one and loads its scalars.
+  auto enter_step = [&](int n) {
+    w.step = n;
+    s = n == 1 ? &w.s1 : &w.s2;
+    lay = n == 1 ? &plan.l1 : &plan.l2;
+    top_bit = n == 1 ? plan.top1 : plan.top2;
+    wd = lay->w;
+    carry = lay->carry;
+    load();
+  };
   auto finish = [&](Resumed r) {
     if (w.step == 2) w.per_ray->AddMoves(w.s2.dda, &c);
     w.per_ray->AddMoves(w.s1.dda, &c);
@@ -162,13 +172,7 @@ Resumed Resume(const WalkPlan& plan, WalkState<PerRay>& w, Hit* hit, TraceCounte
       Dda d2 = w.per_ray->SecondStep(plan.l1, plan.l2, w.s1.xyz, w.s1.prev, w.s1.dda, &xyz2);
       for (int a = 0; a < 3; ++a) w.base2[a] = plan.l1.Coord(w.s1.xyz, a) << plan.n2;
       w.s2.Start(plan.l2, xyz2, d2, root2);
-      w.step = 2;
-      s = &w.s2;
-      lay = &plan.l2;
-      top_bit = plan.top2;
-      wd = lay->w;
-      carry = lay->carry;
-      load();
+      enter_step(2);
       break;
     }
   }
@@ -241,13 +245,7 @@ Resumed Resume(const WalkPlan& plan, WalkState<PerRay>& w, Hit* hit, TraceCounte
     // The second step found nothing: the first step goes on by its skip
     // loop, with its own state untouched.
     w.per_ray->AddMoves(w.s2.dda, &c);
-    w.step = 1;
-    s = &w.s1;
-    lay = &plan.l1;
-    top_bit = plan.top1;
-    wd = lay->w;
-    carry = lay->carry;
-    load();
+    enter_step(1);
     goto skip;
   }
 }

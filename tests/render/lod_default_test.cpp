@@ -57,8 +57,9 @@ class LodDefault : public ::testing::Test {
   };
   static Frame Render(const std::string& store, const std::string& camera,
                       std::optional<double> lod, int grid = kDefaultSilhouetteGrid, int tile = 64,
-                      const std::string& scene = kBlack) {
+                      const std::string& scene = kBlack, bool prefetch = false) {
     RenderJobOptions o;
+    o.prefetch = prefetch;
     o.store_dir = Path(store);
     o.camera_json = camera;
     o.scene_json = scene;
@@ -182,6 +183,25 @@ TEST_F(LodDefault, TheTilingDoesNotChangeTheImage) {
   ExpectIdentical(a, b);
   ExpectIdentical(a, c);
   EXPECT_GT(b.stats["lod"]["border_rays"].get<uint64_t>(), 0u);
+}
+
+TEST_F(LodDefault, ReadingAheadReadsOnlyTheBricksTheRaysUse) {
+  // --prefetch with the pyramid in effect pages in the base bricks the frame
+  // needs (those of the antialiased silhouettes), as without it: its scout
+  // traces the base store exactly, so it stays off (it read base bricks of
+  // the whole front surface, which the coarse rays never enter).
+  const std::string far = CameraJson(kFarZ, kFarSize);
+  const Frame waiting = Render("store", far, std::nullopt, kDefaultSilhouetteGrid, 16);
+  const Frame ahead = Render("store", far, std::nullopt, kDefaultSilhouetteGrid, 16, kBlack, true);
+  ExpectIdentical(waiting, ahead);
+  EXPECT_EQ(ahead.stats["memory"]["io_threads"].get<int>() > 0, true);
+  EXPECT_EQ(ahead.stats["cache"]["bricks_paged_in"], waiting.stats["cache"]["bricks_paged_in"]);
+  // Exact (--lod 0), the scout reads ahead the same bricks the rays enter.
+  const Frame exact_waiting = Render("store", far, 0.0, kDefaultSilhouetteGrid, 16);
+  const Frame exact_ahead = Render("store", far, 0.0, kDefaultSilhouetteGrid, 16, kBlack, true);
+  ExpectIdentical(exact_waiting, exact_ahead);
+  EXPECT_EQ(exact_ahead.stats["cache"]["bricks_paged_in"],
+            exact_waiting.stats["cache"]["bricks_paged_in"]);
 }
 
 TEST_F(LodDefault, HeaderNamesTheSettingAndMergeRefusesMixedParts) {

@@ -8,7 +8,10 @@
 # read from disk. Camera: (0,0,3) looking at the origin, fov 40, 1024^2 (the
 # full view of a unit-radius sphere); one directional light without shadows;
 # 2 threads. Writes TAG.exr, TAG.json (--stats) and TAG.err in the current
-# directory. Needs root and /sys/fs/cgroup/memory. Used for the out-of-core
+# directory. DISK_MBPS=150 and DISK_IOPS=9300 (either or both) emulate a
+# slower disk: the process then also runs in a cgroup v1 blkio group that
+# throttles reads of the store's disk to that many MB/s and reads/s
+# (tools/bench/disk_throttle.sh). Needs root and /sys/fs/cgroup/memory. Used for the out-of-core
 # tables in docs/benchmarks.md; the machine is shared, so compare runs made
 # side by side, alternating.
 set -euo pipefail
@@ -26,9 +29,17 @@ cg=$cg_root/vox-cold-$$
 mkdir -p "$cg"
 trap 'rmdir "$cg" 2>/dev/null || true' EXIT
 if [ "$lim" -gt 0 ]; then echo $((lim << 20)) > "$cg/memory.limit_in_bytes"; fi
+groups=("$cg")
+if [ -n "${DISK_MBPS:-}${DISK_IOPS:-}" ]; then
+  bg=$(dirname "$0")/disk_throttle.sh
+  blk=$("$bg" create "$store" "vox-cold-$$")
+  trap 'rmdir "$cg" 2>/dev/null || true; rmdir "$blk" 2>/dev/null || true' EXIT
+  groups+=("$blk")
+fi
 start=$(date +%s.%N)
 rc=0
-sh -c 'echo $$ > "$1/cgroup.procs"; shift; exec "$@"' sh "$cg" nice -n "${NICE:--15}" "$bin" "$store" \
+sh -c 'n=$1; shift; for g in "$@"; do [ "$n" -gt 0 ] || break; echo $$ > "$g/cgroup.procs"; shift; n=$((n - 1)); done; exec "$@"' \
+  sh "${#groups[@]}" "${groups[@]}" nice -n "${NICE:--15}" "$bin" "$store" \
   --cam "$tag.cam.json" --scene "$tag.scene.json" --threads 2 -o "$tag.exr" --stats "$tag.json" --quiet "$@" \
   2> "$tag.err" || rc=$?
 end=$(date +%s.%N)
