@@ -516,6 +516,8 @@ std::string JobStatsJson(const JobRun& run, int number, const Renderer& renderer
   memory["io_threads"] = run.io_threads;
   memory["max_brick_bytes"] = stores.base->brick_sizes().max_decoded;
   memory["process"] = nlohmann::json::parse(ReadProcessMemory().ToJson());
+  memory["heap_watch"] = {{"target", HeapWatch::Process().target()},
+                          {"given_up", HeapWatch::Process().given_up()}};
   json["memory"] = memory;
   nlohmann::json lod = {{"factor", stores.lod}, {"default", stores.lod_default},
                         {"setting", LodSetting(stores, renderer)}};
@@ -580,6 +582,9 @@ Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera
   if (say && first)
     fprintf(options.log, "vox-render: memory %s; %s\n", run.process.ToString().c_str(),
             budget.ToString().c_str());
+  // Anonymous memory past what the budget planned (all but its headroom) is
+  // the allocator's: the stores give that much of their caches up.
+  HeapWatch::Process().SetTarget(budget.total - budget.headroom);
   VOX_ASSIGN_OR_RETURN(const RenderOptions render_options,
                        JobRenderOptions(options, run.stores, budget));
   VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(run.stores.base.get(), camera, run.scene,

@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <malloc.h>
+#include <unistd.h>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -215,6 +216,45 @@ ProcessMemory ReadProcessMemory() {
   m.heap_in_use = uint64_t(mi.uordblks) + uint64_t(mi.hblkhd);
 #endif
   return m;
+}
+
+HeapWatch& HeapWatch::Process() {
+  static HeapWatch watch;
+  return watch;
+}
+
+void HeapWatch::SetTarget(uint64_t anon_bytes) {
+  std::lock_guard<std::mutex> lock(mu_);
+  target_.store(anon_bytes, std::memory_order_relaxed);
+  high_ = 0;
+  given_up_.store(0, std::memory_order_relaxed);
+}
+
+uint64_t HeapWatch::Loaded(uint64_t bytes) {
+  if (target_.load(std::memory_order_relaxed) == 0) return 0;
+  const uint64_t before = loaded_.fetch_add(bytes, std::memory_order_relaxed);
+  if ((before + bytes) / kCheckBytes == before / kCheckBytes) return 0;
+  // statm: size resident shared ... in pages; resident - shared is the
+  // anonymous part (RssAnon), read in a few microseconds.
+  FILE* f = std::fopen("/proc/self/statm", "re");
+  if (f == nullptr) return 0;
+  unsigned long long size = 0, resident = 0, shared = 0;
+  const int n = std::fscanf(f, "%llu %llu %llu", &size, &resident, &shared);
+  std::fclose(f);
+  if (n != 3 || shared > resident) return 0;
+  static const uint64_t page = uint64_t(sysconf(_SC_PAGESIZE));
+  return Absorb(uint64_t(resident - shared) * page);
+}
+
+uint64_t HeapWatch::Absorb(uint64_t anon) {
+  std::lock_guard<std::mutex> lock(mu_);
+  const uint64_t target = target_.load(std::memory_order_relaxed);
+  if (target == 0) return 0;
+  const uint64_t floor = std::max(target, high_);
+  if (anon <= floor) return 0;
+  high_ = anon;
+  given_up_.fetch_add(anon - floor, std::memory_order_relaxed);
+  return anon - floor;
 }
 
 std::string ProcessMemory::ToJson() const {

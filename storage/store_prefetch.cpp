@@ -152,6 +152,7 @@ void StoreImpl::ReadRun(const Run& run, uint64_t generation, std::vector<uint8_t
       }
       const size_t charge = (*b)->charge();
       cache_.FinishClaim(id, std::shared_ptr<const DecodedBrick>(std::move(*b)), charge);
+      AbsorbHeapGrowth(charge);
     }
   } catch (const std::exception&) {  // out of memory: the fetches try again
     pf_failed_.fetch_add(claimed.size() - next, std::memory_order_relaxed);

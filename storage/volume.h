@@ -36,6 +36,8 @@ struct CacheStats {
   // Brick table pages read from the index file since open (a table read
   // whole at open counts its pages too), and their bytes.
   uint64_t table_pages_read = 0, table_bytes_read = 0;
+  // Brick cache capacity given up to the heap's growth (HeapWatch).
+  uint64_t given_to_heap = 0;
 };
 
 class Volume {

@@ -25,6 +25,7 @@
 #include "storage/internal/format.h"
 #include "storage/internal/record_windows.h"
 #include "storage/internal/table_pages.h"
+#include "storage/memory_budget.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"
 
@@ -105,6 +106,7 @@ class StoreImpl : public Store {
     s.table_bytes_read = table_ ? table_->bytes_read() : 0;
     s.windows_read = windows_ ? windows_->windows_read() : 0;
     s.window_bytes = windows_ ? windows_->window_bytes() : 0;
+    s.given_to_heap = given_to_heap_.load(std::memory_order_relaxed);
     auto io = ProcessIoBytes();
     s.process_read_bytes = io.ok() ? *io : 0;
     return s;
@@ -157,6 +159,7 @@ class StoreImpl : public Store {
       windows = windows_->capacity();
     }
     cache_.SetCapacity(size_t(bytes - windows));
+    budget_capacity_.store(bytes - windows);
   }
 
   const TablePages& table() const { return *table_; }
@@ -180,8 +183,23 @@ class StoreImpl : public Store {
       }
       if (!b.ok()) return b.status();
       size_t charge = (*b)->charge();
+      AbsorbHeapGrowth(charge);
       return std::make_pair(std::shared_ptr<const DecodedBrick>(std::move(*b)), charge);
     });
+  }
+
+  // Gives up brick cache capacity when the process's anonymous memory has
+  // grown past what its budget planned (HeapWatch: memory the allocator
+  // keeps between live blocks as the cache churns), down to a quarter of
+  // the capacity the budget set. `loaded`: the bytes just decoded.
+  void AbsorbHeapGrowth(uint64_t loaded) {
+    const uint64_t give = HeapWatch::Process().Loaded(loaded);
+    if (give == 0) return;
+    std::lock_guard<std::mutex> lock(give_mu_);  // rare: one shrink at a time
+    const uint64_t now = cache_.capacity(), floor = budget_capacity_.load() / 4;
+    const uint64_t next = now > floor + give ? now - give : std::min(now, floor);
+    cache_.SetCapacity(size_t(next));
+    given_to_heap_.fetch_add(now - next, std::memory_order_relaxed);
   }
 
   // What the cache charges for the brick of entry `e` once decoded
@@ -235,6 +253,9 @@ class StoreImpl : public Store {
   std::unique_ptr<RecordWindows> windows_;  // reads records; set by Load
   ShardedPageCache<DecodedBrick> cache_;
   std::atomic<uint64_t> bytes_decompressed_{0};
+  std::atomic<uint64_t> budget_capacity_{0};  // the brick cache's bytes as SetCacheCapacity set them
+  std::atomic<uint64_t> given_to_heap_{0};    // of those, given up by AbsorbHeapGrowth
+  std::mutex give_mu_;
   std::atomic<uint64_t> bytes_read_{0};
 
   // Prefetch: runs queue under pf_mu_; io_threads threads, started by the

@@ -14,6 +14,7 @@
 #include <thread>
 #include <vector>
 
+#include "storage/memory_budget.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"
 #include "tests/storage/test_util.h"
@@ -304,6 +305,66 @@ TEST_F(StoreCache, BudgetRespectedAndEvictionsCounted) {
   ASSERT_TRUE((*s)->FetchBrick(3).ok());
   ASSERT_TRUE((*s)->FetchBrick(3).ok());
   EXPECT_EQ((*s)->cache_stats().hits, 1u);
+}
+
+TEST(HeapWatch, GivesUpOnlyGrowthPastTheTargetAndTheHighestReadingAnswered) {
+  HeapWatch w;
+  EXPECT_EQ(w.Absorb(100), 0u);  // no target: no watch
+  w.SetTarget(100);
+  EXPECT_EQ(w.Absorb(90), 0u);
+  EXPECT_EQ(w.Absorb(100), 0u);
+  EXPECT_EQ(w.Absorb(130), 30u);  // past the target
+  EXPECT_EQ(w.Absorb(120), 0u);   // the cache given up left holes; not growth
+  EXPECT_EQ(w.Absorb(130), 0u);
+  EXPECT_EQ(w.Absorb(135), 5u);   // growth past the highest reading answered
+  EXPECT_EQ(w.given_up(), 35u);
+  w.SetTarget(200);  // a new target forgets what was answered
+  EXPECT_EQ(w.given_up(), 0u);
+  EXPECT_EQ(w.Absorb(150), 0u);
+  EXPECT_EQ(w.Absorb(210), 10u);
+  w.SetTarget(0);
+  EXPECT_EQ(w.Absorb(1000), 0u);
+}
+
+TEST(HeapWatch, ReadsTheAnonymousMemoryOncePerCheckBytesLoaded) {
+  HeapWatch w;
+  w.SetTarget(1);  // every reading is growth past it: Loaded returns the reading - 1
+  EXPECT_EQ(w.Loaded(HeapWatch::kCheckBytes / 2), 0u);
+  const uint64_t anon = w.Loaded(HeapWatch::kCheckBytes / 2) + 1;
+  EXPECT_GT(anon, uint64_t(1) << 20) << "a test process holds more than 1 MiB of its own";
+  EXPECT_LT(anon, uint64_t(64) << 30);
+  EXPECT_EQ(w.Loaded(1), 0u);  // the next check is kCheckBytes on
+}
+
+TEST_F(StoreCache, GivesCacheUpWhenTheHeapGrowsPastTheTarget) {
+  auto probe = Store::Open(dir_ / "s", {});
+  ASSERT_TRUE(probe.ok());
+  const uint32_t bricks = uint32_t((*probe)->meta().brick_count);
+  for (uint32_t id = 0; id < bricks; ++id) ASSERT_TRUE((*probe)->FetchBrick(id).ok());
+  const uint64_t all = (*probe)->cache_stats().bytes_resident;
+  OpenOptions oo;
+  oo.cache_bytes = all / 2;  // a cyclic scan misses every time: it loads `all` per pass
+  oo.read_windows = false;   // the capacity is the brick cache's alone
+  auto s = Store::Open(dir_ / "s", oo);
+  ASSERT_TRUE(s.ok());
+  // A target of one byte: the first check (kCheckBytes loaded in the
+  // process) finds the heap past it, and the store gives up its cache down
+  // to a quarter of what it was given, never failing a fetch.
+  struct Reset {
+    ~Reset() { HeapWatch::Process().SetTarget(0); }
+  } reset;
+  HeapWatch::Process().SetTarget(1);
+  int passes = 0;
+  while ((*s)->cache_stats().given_to_heap == 0 && passes < 4 * int(HeapWatch::kCheckBytes / all) + 4) {
+    for (uint32_t id = 0; id < bricks; ++id) ASSERT_TRUE((*s)->FetchBrick(id).ok());
+    ++passes;
+  }
+  const CacheStats cs = (*s)->cache_stats();
+  EXPECT_EQ(cs.given_to_heap, oo.cache_bytes - oo.cache_bytes / 4);
+  EXPECT_EQ(cs.capacity, oo.cache_bytes / 4);
+  for (uint32_t id = 0; id < bricks; ++id) ASSERT_TRUE((*s)->FetchBrick(id).ok());
+  EXPECT_LE((*s)->cache_stats().bytes_resident, oo.cache_bytes / 4);
+  EXPECT_GT(HeapWatch::Process().given_up(), 0u);
 }
 
 TEST_F(StoreCache, PinsSurviveEviction) {
