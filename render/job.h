@@ -57,9 +57,10 @@ struct RenderJobOptions {
   // Read bricks in the background on io_threads threads
   // (OpenOptions::io_threads): the next tiles' first bricks
   // (FrameOptions::prefetch) and, instead of waiting, the bricks a pixel
-  // misses (RenderOptions::read_ahead). Same pixels either way. Off by
-  // default: on an idle machine it gained little (docs/benchmarks.md, "Out
-  // of core").
+  // misses (RenderOptions::read_ahead); the scout only without a level of
+  // detail in effect. Same pixels either way. Off by default: cold frames
+  // wait only for the disk without it, and its threads cost CPU
+  // (docs/benchmarks.md, "Cold frames against the disk").
   bool prefetch = false;
   // Read brick records a window of file neighbours at a time
   // (OpenOptions::read_windows); --no-read-windows: each record alone.

@@ -46,5 +46,5 @@ end=$(date +%s.%N)
 peak=$(cat "$cg/memory.max_usage_in_bytes"); fc=$(cat "$cg/memory.failcnt")
 io=$(python3 -c "import json; d = json.load(open('$tag.json')); print(d['io']['read_bytes'], d['cache']['bricks_paged_in'], d['cache']['misses'])" 2>/dev/null || echo "- - -")
 read -r rb paged misses <<< "$io"
-printf "%s limit=%sMiB rc=%s wall=%.1fs peak=%.0fMiB failcnt=%s read_bytes=%s bricks_paged=%s ray_misses=%s\n" \
+printf "%s limit=%sMiB rc=%s wall=%.2fs peak=%.0fMiB failcnt=%s read_bytes=%s bricks_paged=%s ray_misses=%s\n" \
   "$tag" "$lim" "$rc" "$(echo "$end - $start" | bc)" "$(echo "$peak/1048576" | bc)" "$fc" "$rb" "$paged" "$misses"

@@ -184,9 +184,9 @@ constexpr OptionSpec kRenderOptions[] = {
     {"--cache-mb", kValue, "M", kRenderMemoryGroup,
      "decompressed brick cache, inside the memory budget (default: what the budget leaves)"},
     {"--prefetch", kSwitch, "", kRenderMemoryGroup,
-     "read bricks in the background: the next tiles' first bricks, and a pixel's missing brick "
-     "while other pixels are shaded (same image; helps on busy machines, reads more bytes under "
-     "tight memory limits)"},
+     "read bricks in the background: the next tiles' first bricks (exact frames only), and a "
+     "pixel's missing brick while other pixels are shaded (same image; off by default: cold frames "
+     "wait only for the disk without it, and its threads cost CPU)"},
     {"--io-threads", kValue, "N", kRenderMemoryGroup,
      "background reader threads of --prefetch (default 8; refused without --prefetch, where the "
      "render threads read)"},
