@@ -680,6 +680,11 @@ StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<do
 }
 
 Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
+  // Each frame sets the heap watch's target from its budget; once the job
+  // ends, stores opened outside a job (the Python module's) are not watched.
+  struct UnwatchHeap {
+    ~UnwatchHeap() { HeapWatch::Process().SetTarget(0); }
+  } unwatch_heap;
   // The options, the frames and every frame's outputs, before any work.
   const Stopwatch open_time;
   VOX_RETURN_IF_ERROR(CheckJobOptions(options));

@@ -15,6 +15,7 @@
 #include "render/exr.h"
 #include "render/job.h"
 #include "storage/lod.h"
+#include "storage/memory_budget.h"
 #include "tests/common/run_command.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"
@@ -202,6 +203,18 @@ TEST_F(LodDefault, ReadingAheadReadsOnlyTheBricksTheRaysUse) {
   ExpectIdentical(exact_waiting, exact_ahead);
   EXPECT_EQ(exact_ahead.stats["cache"]["bricks_paged_in"],
             exact_waiting.stats["cache"]["bricks_paged_in"]);
+}
+
+TEST_F(LodDefault, TheHeapIsWatchedDuringTheJobOnly) {
+  // The frame's budget sets the heap watch's target (all but the headroom);
+  // the job's end clears it, so stores opened later are not watched.
+  const Frame f = Render("store", CameraJson(kFarZ, kFarSize), std::nullopt);
+  const nlohmann::json& m = f.stats["memory"];
+  EXPECT_EQ(m["heap_watch"]["target"].get<uint64_t>(),
+            m["total"].get<uint64_t>() - m["headroom"].get<uint64_t>());
+  EXPECT_GT(m["process"]["rss_anon"].get<uint64_t>(), 0u);
+  EXPECT_GE(m["process"]["peak_rss"].get<uint64_t>(), m["process"]["rss_anon"].get<uint64_t>());
+  EXPECT_EQ(HeapWatch::Process().target(), 0u);
 }
 
 TEST_F(LodDefault, HeaderNamesTheSettingAndMergeRefusesMixedParts) {

@@ -6,7 +6,7 @@
 # store's level of detail) and each reading strategy (wait = the render
 # threads read what they need, prefetch = --prefetch):
 #   cold: page cache dropped, unlimited memory (tools/bench/cold_frame.sh);
-#   warm: the same process right after, page cache warm, brick cache cold;
+#   warm: a new process right after, page cache warm, brick cache cold;
 # and once, the disk's sequential bandwidth (dd of the store's bricks file,
 # page cache dropped). Prints one row per run and, per mode and strategy, the
 # medians and the goal's ratio cold / max(warm, bytes read / bandwidth)
