@@ -496,7 +496,20 @@ struct JobRun {
   int threads = 1, io_threads = 0;
   bool keep = false;  // the image goes into `out` (one frame)
   RenderJobOutput* out = nullptr;
+  uint64_t anon_at_start = 0;  // the process's anonymous memory before the stores opened
 };
+
+// The heap watch's target for a frame with `budget`: the budget less its
+// headroom, plus what the process held before the job beyond the budget's
+// estimate of a bare process (a Python session's arrays, a test harness),
+// which the budget did not plan for either: the watch guards the budget's
+// own lines against the allocator's growth, not against the host process.
+uint64_t HeapTarget(const JobRun& run, const MemoryBudget& budget) {
+  const uint64_t before = run.anon_at_start > budget.process_base
+                              ? run.anon_at_start - budget.process_base
+                              : 0;
+  return budget.total - budget.headroom + before;
+}
 
 // The --stats document: the frame's (StatsJson), its number in the
 // sequence, the memory budget, the level of detail in effect and the camera.
@@ -517,7 +530,8 @@ std::string JobStatsJson(const JobRun& run, int number, const Renderer& renderer
   memory["max_brick_bytes"] = stores.base->brick_sizes().max_decoded;
   memory["process"] = nlohmann::json::parse(ReadProcessMemory().ToJson());
   memory["heap_watch"] = {{"target", HeapWatch::Process().target()},
-                          {"given_up", HeapWatch::Process().given_up()}};
+                          {"given_up", HeapWatch::Process().given_up()},
+                          {"anon_at_start", run.anon_at_start}};
   json["memory"] = memory;
   nlohmann::json lod = {{"factor", stores.lod}, {"default", stores.lod_default},
                         {"setting", LodSetting(stores, renderer)}};
@@ -584,7 +598,7 @@ Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera
             budget.ToString().c_str());
   // Anonymous memory past what the budget planned (all but its headroom) is
   // the allocator's: the stores give that much of their caches up.
-  HeapWatch::Process().SetTarget(budget.total - budget.headroom);
+  HeapWatch::Process().SetTarget(HeapTarget(run, budget));
   VOX_ASSIGN_OR_RETURN(const RenderOptions render_options,
                        JobRenderOptions(options, run.stores, budget));
   VOX_ASSIGN_OR_RETURN(auto renderer, Renderer::Create(run.stores.base.get(), camera, run.scene,
@@ -700,6 +714,7 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   }
 
   // The store and its pyramid, opened once for every frame.
+  const uint64_t anon_at_start = ReadProcessMemory().rss_anon;
   VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(options.memory_bytes));
   const int io_threads = IoThreadsFor(options, process);
   OpenOptions open;
@@ -722,6 +737,7 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   run.io_threads = io_threads;
   run.keep = keep;
   run.out = out;
+  run.anon_at_start = anon_at_start;
   for (const FrameOutputs& files : frames) {
     const bool first = files.number == sequence.range.first;
     VOX_RETURN_IF_ERROR(RenderJobFrame(run, files, cameras[size_t(files.number - 1)], first,
