@@ -153,6 +153,16 @@ Resumed Resume(const WalkPlan& plan, WalkState<PerRay>& w, Hit* hit, TraceCounte
     c.brick_fetches += w.pinner.fetches;
     return r;
   };
+  // Hands the thread over until cell `p` (null: a fetch error) is read,
+  // resuming in phase `next`.
+  auto hand_over = [&](const CompactCell* p, typename WalkState<PerRay>::Phase next) {
+    if (p == nullptr) return finish(Resumed::kError);
+    __builtin_prefetch(p);
+    save();
+    w.pending = p;
+    w.phase = next;
+    return Resumed::kPending;
+  };
 
   switch (w.phase) {
     case WalkState<PerRay>::Phase::kWalk:
@@ -197,13 +207,7 @@ Resumed Resume(const WalkPlan& plan, WalkState<PerRay>& w, Hit* hit, TraceCounte
             return finish(Resumed::kHit);
           }
           // An occupied first-step voxel: its second step's root, read on resuming.
-          const CompactCell* p = w.pinner.Locate(child, 0, plan.top1);
-          if (p == nullptr) return finish(Resumed::kError);
-          __builtin_prefetch(p);
-          save();
-          w.pending = p;
-          w.phase = WalkState<PerRay>::Phase::kRoot2;
-          return Resumed::kPending;
+          return hand_over(w.pinner.Locate(child, 0, plan.top1), WalkState<PerRay>::Phase::kRoot2);
         }
         if (bit > top_bit && !plan.yield_in_top) {  // the top pool: read it at once
           cell = plan.tree.top[child];
@@ -213,13 +217,7 @@ Resumed Resume(const WalkPlan& plan, WalkState<PerRay>& w, Hit* hit, TraceCounte
           mask >>= 1;
           continue;
         }
-        const CompactCell* p = w.pinner.Locate(child, bit, top_bit);
-        if (p == nullptr) return finish(Resumed::kError);
-        __builtin_prefetch(p);
-        save();
-        w.pending = p;
-        w.phase = WalkState<PerRay>::Phase::kCell;
-        return Resumed::kPending;
+        return hand_over(w.pinner.Locate(child, bit, top_bit), WalkState<PerRay>::Phase::kCell);
       }
     skip:
       // Skip: DDA moves until the octant's bit flips; no octree access.
