@@ -8,7 +8,7 @@
 #include <string_view>
 
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "core/octree.h"
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 

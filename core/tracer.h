@@ -30,10 +30,9 @@
 #include "core/fixed_point.h"
 #include "core/internal/octree_walk.h"
 #include "core/internal/two_step_walk.h"
-#include "core/internal/walk_state.h"
 #include "core/octree.h"
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 
@@ -144,25 +143,6 @@ class Tracer {
   // The first occupied voxel along the ray, or nullopt on a miss.
   StatusOr<std::optional<Hit>> FirstHit(const Ray& ray, TraceCounters* counters = nullptr) const {
     return internal::FirstHitOf(*this, ray, counters);
-  }
-
-  // The first hits of rays[0, n) into hits[0, n) (nullopt: a miss), with
-  // `in_flight` rays (1 to 16) walked in turn on this thread, each handing
-  // over at its next cell read after prefetching it (internal/walk_state.h).
-  // The same hits and counters as FirstHit on each ray. Returns the first
-  // error met (an invalid ray, a brick that cannot be fetched); the hits are
-  // then partial. A lending BrickSource keeps one ray in flight.
-  // `yield_in_top`: a ray hands over before reading a cell of the resident
-  // top pool too (else it reads those at once, and hands over before brick cells only).
-  Status FirstHits(const Ray* rays, size_t n, std::optional<Hit>* hits, int in_flight,
-                   TraceCounters* counters = nullptr, bool yield_in_top = true) const {
-    internal::WalkPlan plan(tree_, n1_, n2_);
-    plan.yield_in_top = yield_in_top;
-    auto make = [this](void* where, const Ray& ray) {
-      return new (where) PerRay{*this, ScaledRay{ray}, nullptr};
-    };
-    return internal::InterleavedFirstHits<PerRay>(plan, rays, n, hits, in_flight, make,
-                                                  counters);
   }
 
  private:

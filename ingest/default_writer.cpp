@@ -3,7 +3,7 @@
 // that substitute a writer do not need the storage library's writer.
 #include <string>
 
-#include "core/progress.h"
+#include "core/util/progress.h"
 #include "ingest/ingest.h"
 #include "ingest/limits.h"
 

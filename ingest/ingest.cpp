@@ -11,7 +11,7 @@
 //   internal/leaf_values.h  colour-grid leaf values read without loading them into the tree;
 //   internal/color.h        colour sampling from a vec3 grid;
 //   placement.h             levels and origin.
-#include "core/stopwatch.h"
+#include "core/util/stopwatch.h"
 #include "ingest/ingest.h"
 #include "ingest/limits.h"
 
@@ -33,8 +33,8 @@
 #include "ingest/internal/color.h"
 #include "ingest/internal/grid_ingest.h"
 #include "ingest/internal/vdb_layout.h"
-#include "storage/memory_budget.h"
-#include "storage/path_identity.h"
+#include "core/util/memory_budget.h"
+#include "core/util/path_identity.h"
 
 namespace vox {
 namespace {

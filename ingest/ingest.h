@@ -30,7 +30,7 @@
 #include <string>
 #include <string_view>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "ingest/placement.h"
 #include "storage/store.h"
 #include "storage/store_writer.h"
@@ -49,7 +49,7 @@ struct IngestOptions {
   int normal_bits = 16;     // per octahedral normal component, 8..16 (WriteOptions::normal_bits)
   int threads = 0;          // 0: all cores
   // Bytes the ingest may hold; 0: the process's limit (its memory cgroup's,
-  // or MemAvailable: storage/memory_budget.h). Bricks in flight are sized
+  // or MemAvailable: core/util/memory_budget.h). Bricks in flight are sized
   // to it; a grid whose tables alone exceed half of it is refused.
   uint64_t memory_bytes = 0;
   bool force = false;       // replace an existing store

@@ -6,7 +6,7 @@
 
 #include <cstdint>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "ingest/ingest.h"
 
 namespace vox {

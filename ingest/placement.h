@@ -13,7 +13,7 @@
 #include <cstdint>
 #include <string_view>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 

@@ -12,8 +12,8 @@
 #include <nlohmann/json.hpp>
 #include <vector>
 
-#include "storage/file.h"
-#include "storage/json_fields.h"
+#include "core/util/file.h"
+#include "render/json_fields.h"
 
 namespace vox {
 namespace {

@@ -34,7 +34,7 @@
 #include <string>
 #include <string_view>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "render/limits.h"
 
 namespace vox {

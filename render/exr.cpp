@@ -28,7 +28,7 @@
 
 #include "render/camera.h"
 #include "render/internal/exr_header.h"
-#include "storage/atomic_file.h"
+#include "core/util/atomic_file.h"
 
 namespace vox {
 namespace {

@@ -45,7 +45,7 @@
 // again from the parts' vox:camera.
 //
 // Every file is written to a temporary beside its target and renamed over it
-// only when complete (storage/atomic_file.h): a failed render or
+// only when complete (core/util/atomic_file.h): a failed render or
 // merge never replaces an earlier output with a partial one.
 //
 // Thread safety: TiledExrWriter::WriteTile is thread-safe; everything else is
@@ -62,7 +62,7 @@
 #include <string>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "render/tiles.h"
 
 namespace vox {
@@ -152,7 +152,7 @@ class TiledExrWriter {
   // Finishes the file (tiles not written are left missing: a partial image),
   // records the timings (JSON, at most 1000 bytes) and renames it to `path`;
   // given a `group`, leaves it in its temporary and adds it to the group,
-  // published with the run's other outputs (storage/atomic_file.h).
+  // published with the run's other outputs (core/util/atomic_file.h).
   Status Finish(double render_seconds, const std::string& timings_json,
                 OutputGroup* group = nullptr);
   // Finish without timings.

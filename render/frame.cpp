@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
-#include "core/stopwatch.h"
+#include "core/util/stopwatch.h"
 
 namespace vox {
 namespace {

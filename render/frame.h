@@ -18,8 +18,8 @@
 #include <span>
 #include <string>
 
-#include "core/progress.h"
-#include "core/status.h"
+#include "core/util/progress.h"
+#include "core/util/status.h"
 #include "render/exr.h"
 #include "render/limits.h"
 #include "render/renderer.h"
@@ -69,7 +69,7 @@ struct FrameOptions {
   // removed.
   std::function<Status()> interrupted;
   // Set: the finished EXR stays in its temporary and joins this group, to be
-  // published with the run's other outputs (storage/atomic_file.h).
+  // published with the run's other outputs (core/util/atomic_file.h).
   OutputGroup* outputs = nullptr;
   int prefetch_stride = 2;  // trace every n-th pixel's primary ray in x and y
 };

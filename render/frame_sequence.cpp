@@ -4,8 +4,8 @@
 #include <cstdio>
 #include <glm/geometric.hpp>
 
-#include "storage/file.h"
-#include "storage/json_fields.h"
+#include "core/util/file.h"
+#include "render/json_fields.h"
 
 namespace vox {
 namespace {

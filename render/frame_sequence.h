@@ -16,7 +16,7 @@
 #include <string_view>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "render/camera.h"
 
 namespace vox {

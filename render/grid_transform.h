@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "core/octree.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "storage/volume.h"
 
 namespace vox {

@@ -10,7 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
-#include "core/stopwatch.h"
+#include "core/util/stopwatch.h"
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "render/frame.h"
@@ -18,11 +18,11 @@
 #include "render/lod.h"
 #include "render/renderer.h"
 #include "render/scene.h"
-#include "storage/atomic_file.h"
-#include "storage/file.h"
+#include "core/util/atomic_file.h"
+#include "core/util/file.h"
 #include "storage/lod.h"
-#include "storage/memory_budget.h"
-#include "storage/path_identity.h"
+#include "core/util/memory_budget.h"
+#include "core/util/path_identity.h"
 #include "storage/store.h"
 #include "storage/store_budget.h"
 

@@ -22,7 +22,7 @@
 #include <utility>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "render/exr.h"
 #include "render/frame_sequence.h"
 #include "render/lod.h"

@@ -31,7 +31,7 @@
 #include <vector>
 
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "storage/brick_table.h"

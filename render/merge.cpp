@@ -12,8 +12,8 @@
 #include "render/exr.h"
 #include "render/frame.h"
 #include "render/tiles.h"
-#include "storage/atomic_file.h"
-#include "storage/path_identity.h"
+#include "core/util/atomic_file.h"
+#include "core/util/path_identity.h"
 
 namespace vox {
 

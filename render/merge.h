@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 
@@ -26,7 +26,7 @@ struct MergeResult {
 // With a `preview_path`, also the PNG preview (render/exr.h); the EXR and
 // the preview are published together once both are written. Before reading
 // anything, refuses an output that is a part or the other output
-// (storage/path_identity.h), a bad directory, and a name whose extension is
+// (core/util/path_identity.h), a bad directory, and a name whose extension is
 // not .exr (.png for the preview).
 Status MergeParts(const std::vector<std::string>& parts, const std::string& out_path,
                   MergeResult* result = nullptr, const std::string& preview_path = "");

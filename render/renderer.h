@@ -57,7 +57,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "core/tracer.h"
 #include "render/beam.h"
 #include "render/camera.h"

@@ -3,8 +3,8 @@
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
-#include "storage/file.h"
-#include "storage/json_fields.h"
+#include "core/util/file.h"
+#include "render/json_fields.h"
 
 namespace vox {
 namespace {

@@ -13,7 +13,7 @@
 #include <string_view>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "render/limits.h"
 
 namespace vox {

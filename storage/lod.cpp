@@ -19,7 +19,7 @@
 #include <glm/gtc/packing.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/store_writer.h"

@@ -42,7 +42,7 @@
 #include <string>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "storage/store.h"
 #include "storage/store_writer.h"
 

@@ -14,7 +14,7 @@
 #include <string>
 
 #include "core/octree.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "storage/meta.h"
 
 namespace vox {

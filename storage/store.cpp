@@ -15,7 +15,7 @@
 #include "storage/internal/record_windows.h"
 #include "storage/internal/store_impl.h"
 #include "storage/internal/store_reader.h"
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 #include "storage/meta_check.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"

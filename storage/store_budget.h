@@ -3,7 +3,7 @@
 // the brick cache sized from it once the store's resident top is known.
 //
 // The budget is --memory-mb when given; otherwise the memory cgroup's limit
-// (Slurm --mem, a container; storage/memory_budget.h finds it), or 3/4 of
+// (Slurm --mem, a container; core/util/memory_budget.h finds it), or 3/4 of
 // MemAvailable when that is smaller or there is no cgroup limit (the rest is
 // left to other processes and the kernel); 4 GiB when neither is known.
 // SplitMemoryBudget keeps 1/16 of it as headroom and 24 MiB for the process
@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
-#include "core/status.h"
-#include "storage/memory_budget.h"
+#include "core/util/status.h"
+#include "core/util/memory_budget.h"
 #include "storage/store.h"
 
 namespace vox {

@@ -9,7 +9,7 @@
 #include <glm/common.hpp>
 #include <limits>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "storage/lod.h"
 #include "storage/internal/coding.h"
 #include "storage/internal/format.h"

@@ -5,7 +5,7 @@
 #include <vector>
 
 #include "storage/internal/store_reader.h"
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 
 namespace vox::storage_internal {
 

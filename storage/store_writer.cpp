@@ -15,7 +15,7 @@
 #include <random>
 #include <unordered_set>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/store.h"

@@ -17,7 +17,7 @@
 
 #include <glm/vec3.hpp>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "storage/meta.h"
 
 namespace vox {

@@ -14,7 +14,7 @@
 
 #include "core/octree.h"
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "storage/meta.h"
 
 namespace vox {

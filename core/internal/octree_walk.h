@@ -22,7 +22,7 @@
 
 #include "core/octree.h"
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox::internal {
 
@@ -95,18 +95,6 @@ struct BrickPinner {
     if (index != id && !Fetch(index)) return false;
     cell = cells[0];
     return true;
-  }
-
-  // Resolve without the load: where child `index` of a cell at step bit
-  // `bit` lies (fetching its brick at the top pool's last level), for a
-  // walk that prefetches it and reads it later (walk_state.h). Null on a
-  // fetch error (kept in `error`).
-  const CompactCell* Locate(uint32_t index, int bit, int top_bit) {
-    if (bit < top_bit) [[likely]]
-      return cells + index;
-    if (bit > top_bit) return top + index;
-    if (index != id && !Fetch(index)) return nullptr;
-    return cells;
   }
 
  private:

@@ -16,7 +16,7 @@
 #include "core/internal/octree_walk.h"
 #include "core/octree.h"
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox::internal {
 

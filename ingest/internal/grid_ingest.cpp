@@ -23,7 +23,7 @@
 //     store. Bricks in flight are bounded by the memory
 //     budget (at most 2 per thread). Leaves on a brick's faces are decoded by
 //     both bricks (a few % of CPU).
-#include "core/stopwatch.h"
+#include "core/util/stopwatch.h"
 #include "ingest/internal/grid_ingest.h"
 
 #include <algorithm>

@@ -14,7 +14,7 @@
 #include <cstdint>
 #include <string>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "ingest/ingest.h"
 #include "ingest/internal/color.h"
 #include "ingest/internal/vdb_layout.h"

@@ -29,7 +29,7 @@
 
 #include <openvdb/openvdb.h>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "ingest/internal/vdb_layout.h"
 
 namespace vox::ingest_internal {

@@ -19,7 +19,7 @@
 
 #include <string>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "storage/brick_table.h"

@@ -19,7 +19,7 @@
 #include <glm/vec3.hpp>
 
 #include "core/octree.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "storage/internal/format.h"
 #include "storage/meta.h"
 

@@ -12,7 +12,7 @@
 
 #include <glm/gtc/packing.hpp>
 
-#include "storage/crc32c.h"
+#include "core/util/crc32c.h"
 #include "storage/internal/coding.h"
 #include "storage/meta_check.h"
 

@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "core/octree.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "storage/meta.h"
 
 namespace vox::storage_internal {

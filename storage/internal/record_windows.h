@@ -24,11 +24,11 @@
 #include <span>
 #include <vector>
 
-#include "core/status.h"
-#include "storage/file.h"
+#include "core/util/status.h"
+#include "core/util/file.h"
 #include "storage/internal/format.h"
 #include "storage/internal/table_pages.h"
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 #include "storage/page_cache.h"
 
 namespace vox::storage_internal {

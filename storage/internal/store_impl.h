@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "storage/internal/format.h"
 #include "storage/store.h"
 

@@ -20,12 +20,12 @@
 #include <thread>
 #include <vector>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/internal/record_windows.h"
 #include "storage/internal/table_pages.h"
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"
 

@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <new>
 
-#include "storage/crc32c.h"
+#include "core/util/crc32c.h"
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/coding.h"
 

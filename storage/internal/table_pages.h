@@ -29,8 +29,8 @@
 #include <string>
 #include <vector>
 
-#include "core/status.h"
-#include "storage/file.h"
+#include "core/util/status.h"
+#include "core/util/file.h"
 #include "storage/internal/format.h"
 #include "storage/page_cache.h"
 

@@ -32,7 +32,7 @@
 #include <thread>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox::testing {
 

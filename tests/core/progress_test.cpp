@@ -1,6 +1,6 @@
-// Tests of the shared progress display (core/progress.h) in the modes a test
+// Tests of the shared progress display (core/util/progress.h) in the modes a test
 // can capture: plain lines at each 10% step, the bar's drawing, quiet.
-#include "core/progress.h"
+#include "core/util/progress.h"
 
 #include <gtest/gtest.h>
 

@@ -12,7 +12,7 @@
 #include <cstring>
 #include <string>
 
-#include "storage/crc32c.h"
+#include "core/util/crc32c.h"
 #include "storage/internal/coding.h"
 #include "storage/internal/format.h"
 

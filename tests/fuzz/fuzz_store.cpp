@@ -9,7 +9,7 @@
 #include <string>
 
 #include "core/tracer.h"
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "storage/internal/store_impl.h"
 #include "tests/fuzz/fuzz_input.h"
 

@@ -23,7 +23,7 @@
 #include <openvdb/openvdb.h>
 
 #include "core/octree.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "ingest/ingest.h"
 #include "storage/store.h"
 #include "storage/store_writer.h"

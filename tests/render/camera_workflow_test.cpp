@@ -19,7 +19,7 @@
 #include "render/exr.h"
 #include "render/grid_transform.h"
 #include "render/job.h"
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "tests/render/store_suite.h"
 #include "tests/render/store_util.h"
 #include "tools/common/options.h"

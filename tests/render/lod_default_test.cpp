@@ -15,7 +15,7 @@
 #include "render/exr.h"
 #include "render/job.h"
 #include "storage/lod.h"
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 #include "tests/common/run_command.h"
 #include "tests/render/store_util.h"
 #include "tests/render/test_volumes.h"

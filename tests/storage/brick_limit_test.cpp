@@ -11,7 +11,7 @@
 #include <cstdio>
 #include <string>
 
-#include "storage/crc32c.h"
+#include "core/util/crc32c.h"
 #include "storage/internal/coding.h"
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"

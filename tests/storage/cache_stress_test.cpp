@@ -10,7 +10,7 @@
 #include <thread>
 #include <vector>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "storage/internal/store_impl.h"
 #include "tests/storage/test_util.h"
 

@@ -14,7 +14,7 @@
 #include <thread>
 #include <vector>
 
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"
 #include "tests/storage/test_util.h"

@@ -7,8 +7,8 @@
 #include <unistd.h>
 
 #include "core/tracer.h"
-#include "storage/crc32c.h"
-#include "storage/file.h"
+#include "core/util/crc32c.h"
+#include "core/util/file.h"
 #include "storage/internal/coding.h"
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"

@@ -1,7 +1,7 @@
 // DetectMemoryLimit against fake /proc and /sys trees (cgroup v1, v2, nested,
 // none), ParseMemorySize's accepted forms and errors, and the arithmetic of
 // SplitMemoryBudget.
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>

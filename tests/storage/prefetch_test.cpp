@@ -14,7 +14,7 @@
 #include <random>
 #include <thread>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/internal/store_impl.h"

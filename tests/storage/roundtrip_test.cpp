@@ -10,7 +10,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/tracer.h"
-#include "storage/crc32c.h"
+#include "core/util/crc32c.h"
 #include "storage/internal/brick_codec.h"
 #include "storage/internal/format.h"
 #include "storage/store.h"

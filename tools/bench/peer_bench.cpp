@@ -62,7 +62,7 @@
 #include <string>
 #include <vector>
 
-#include "core/stopwatch.h"
+#include "core/util/stopwatch.h"
 #include "ingest/ingest.h"
 #include "render/camera.h"
 #include "render/frame.h"

@@ -26,7 +26,7 @@
 #include <unistd.h>
 
 #include "core/shapes.h"
-#include "core/stopwatch.h"
+#include "core/util/stopwatch.h"
 #include "core/tracer.h"
 #include "storage/store.h"
 #include "storage/store_info.h"

@@ -9,7 +9,7 @@
 #include <memory>
 #include <string>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "render/camera.h"
 #include "render/frame.h"
 #include "render/renderer.h"

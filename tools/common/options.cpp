@@ -9,7 +9,7 @@
 #include "render/frame_sequence.h"
 #include "render/lod.h"
 #include "storage/lod.h"
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 #include "storage/store.h"
 #include "storage/store_budget.h"
 #include "tools/common/flags.h"

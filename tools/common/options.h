@@ -18,7 +18,7 @@
 #include <string_view>
 
 #include "core/core.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "ingest/ingest.h"
 #include "ingest/limits.h"
 #include "render/job.h"

@@ -8,7 +8,7 @@
 #include "render/camera.h"
 #include "render/lod.h"
 #include "storage/lod.h"
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 #include "storage/store.h"
 #include "storage/store_budget.h"
 

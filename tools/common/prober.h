@@ -11,7 +11,7 @@
 #include <optional>
 
 #include "core/core.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "render/lod.h"
 #include "tools/common/options.h"
 

@@ -14,7 +14,7 @@
 #include <set>
 #include <thread>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 
 namespace vox {
 

@@ -19,7 +19,7 @@ namespace vox {
 std::string SignalName(int sig);
 
 // Removes the temporaries `.NAME.tmp-PID-*` (files or directories) of
-// process `pid` beside `output` (storage/file.h).
+// process `pid` beside `output` (core/util/file.h).
 void RemoveOwnTemporaries(const std::string& output, pid_t pid);
 
 // The same for many outputs at once: one listing of each directory.

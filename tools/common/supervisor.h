@@ -31,7 +31,7 @@ namespace vox {
 // and exits. So everything before the call must do the same in both
 // processes: parse `argv`, no output. A child that
 // ends otherwise than by returning from `work` has its temporary store
-// (`.NAME.tmp-PID-*` beside `output`, storage/file.h) removed and is
+// (`.NAME.tmp-PID-*` beside `output`, core/util/file.h) removed and is
 // reported as a crash of the child process, naming `input`:
 //   - killed by SIGKILL, SIGINT, SIGTERM or SIGHUP: "killed", exit 128 + N;
 //   - killed by another signal (SIGSEGV, SIGBUS, SIGABRT...): a crash of

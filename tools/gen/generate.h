@@ -28,7 +28,7 @@
 #include <string>
 #include <string_view>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "storage/store.h"
 #include "storage/store_writer.h"
 

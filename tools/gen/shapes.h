@@ -23,7 +23,7 @@
 
 #include <glm/vec3.hpp>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox::gen {
 

@@ -19,7 +19,7 @@
 #include "ingest/ingest.h"
 #include "ingest/limits.h"
 #include "storage/lod.h"
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 #include "tools/common/cli.h"
 #include "tools/common/options.h"
 #include "tools/common/signals.h"

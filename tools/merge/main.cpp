@@ -7,7 +7,7 @@
 
 #include "render/exr.h"
 #include "render/merge.h"
-#include "storage/atomic_file.h"
+#include "core/util/atomic_file.h"
 #include "tools/common/cli.h"
 #include "tools/common/signals.h"
 #include "tools/common/tool_main.h"

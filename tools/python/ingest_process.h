@@ -29,7 +29,7 @@
 #include <string>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "ingest/ingest.h"
 
 namespace vox {

@@ -23,7 +23,7 @@
 #include "core/internal/two_step_walk.h"
 #include "core/octree.h"
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 #include "core/tracer.h"
 
 namespace vox {

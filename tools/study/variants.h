@@ -19,7 +19,7 @@
 
 #include "core/octree.h"
 #include "core/ray.h"
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 

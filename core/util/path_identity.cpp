@@ -1,4 +1,4 @@
-#include "storage/path_identity.h"
+#include "core/util/path_identity.h"
 
 #include <sys/stat.h>
 
@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <optional>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 
 namespace vox {
 namespace {

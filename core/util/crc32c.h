@@ -3,8 +3,8 @@
 // tables otherwise; plus LevelDB's mask for CRCs stored next to the data
 // they cover.
 // Stateless functions; thread-safe.
-#ifndef VOX_STORAGE_CRC32C_H_
-#define VOX_STORAGE_CRC32C_H_
+#ifndef VOX_CORE_UTIL_CRC32C_H_
+#define VOX_CORE_UTIL_CRC32C_H_
 
 #include <cstddef>
 #include <cstdint>
@@ -29,4 +29,4 @@ inline uint32_t Unmask(uint32_t masked) {
 
 }  // namespace vox::crc32c
 
-#endif  // VOX_STORAGE_CRC32C_H_
+#endif  // VOX_CORE_UTIL_CRC32C_H_

@@ -8,8 +8,8 @@
 //
 // Thread safety: free functions without shared state; thread-safe. The
 // structs are plain values; HeapWatch is thread-safe.
-#ifndef VOX_STORAGE_MEMORY_BUDGET_H_
-#define VOX_STORAGE_MEMORY_BUDGET_H_
+#ifndef VOX_CORE_UTIL_MEMORY_BUDGET_H_
+#define VOX_CORE_UTIL_MEMORY_BUDGET_H_
 
 #include <atomic>
 #include <cstdint>
@@ -17,7 +17,7 @@
 #include <string>
 #include <string_view>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 
@@ -173,4 +173,4 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
 
 }  // namespace vox
 
-#endif  // VOX_STORAGE_MEMORY_BUDGET_H_
+#endif  // VOX_CORE_UTIL_MEMORY_BUDGET_H_

@@ -1,4 +1,4 @@
-#include "storage/memory_budget.h"
+#include "core/util/memory_budget.h"
 
 #include <algorithm>
 #include <cctype>

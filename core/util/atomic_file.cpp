@@ -1,4 +1,4 @@
-#include "storage/atomic_file.h"
+#include "core/util/atomic_file.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -10,7 +10,7 @@
 #include <optional>
 #include <utility>
 
-#include "storage/file.h"
+#include "core/util/file.h"
 
 namespace vox {
 namespace {

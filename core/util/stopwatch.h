@@ -4,8 +4,8 @@
 //
 // Thread safety: reading (Seconds) is safe from any thread; Restart and Lap
 // need external synchronisation.
-#ifndef VOX_CORE_STOPWATCH_H_
-#define VOX_CORE_STOPWATCH_H_
+#ifndef VOX_CORE_UTIL_STOPWATCH_H_
+#define VOX_CORE_UTIL_STOPWATCH_H_
 
 #include <chrono>
 
@@ -36,4 +36,4 @@ class Stopwatch {
 
 }  // namespace vox
 
-#endif  // VOX_CORE_STOPWATCH_H_
+#endif  // VOX_CORE_UTIL_STOPWATCH_H_

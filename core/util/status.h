@@ -3,8 +3,8 @@
 // A Status is a code plus a message that names the problem and, where there is
 // one, the file. Libraries never throw across their boundary and never exit;
 // only tools/ turn a Status into an exit code. Thread-compatible value types.
-#ifndef VOX_CORE_STATUS_H_
-#define VOX_CORE_STATUS_H_
+#ifndef VOX_CORE_UTIL_STATUS_H_
+#define VOX_CORE_UTIL_STATUS_H_
 
 #include <cassert>
 #include <optional>
@@ -111,4 +111,4 @@ class [[nodiscard]] StatusOr {
 #define VOX_DCHECK(cond) assert(cond)
 #endif
 
-#endif  // VOX_CORE_STATUS_H_
+#endif  // VOX_CORE_UTIL_STATUS_H_

@@ -1,6 +1,6 @@
 // Atomic output files for vox-render and vox-merge: every output (EXR, PNG
 // preview, --stats JSON) is written to a temporary file in the target's
-// directory (storage/file.h's CreateTemporary: `.NAME.tmp-PID-XXXXXX`), then
+// directory (core/util/file.h's CreateTemporary: `.NAME.tmp-PID-XXXXXX`), then
 // fsynced and published over the target (PublishAtomically). A failed or
 // interrupted write removes the temporary and leaves any earlier file at the
 // target untouched. A process killed outright (SIGKILL, a node lost) cannot
@@ -8,14 +8,14 @@
 // temporaries whose process is gone.
 //
 // Thread safety: thread-compatible (one AtomicFile per output).
-#ifndef VOX_STORAGE_ATOMIC_FILE_H_
-#define VOX_STORAGE_ATOMIC_FILE_H_
+#ifndef VOX_CORE_UTIL_ATOMIC_FILE_H_
+#define VOX_CORE_UTIL_ATOMIC_FILE_H_
 
 #include <string>
 #include <utility>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 
@@ -88,4 +88,4 @@ class OutputGroup {
 
 }  // namespace vox
 
-#endif  // VOX_STORAGE_ATOMIC_FILE_H_
+#endif  // VOX_CORE_UTIL_ATOMIC_FILE_H_

@@ -8,8 +8,8 @@
 // Thread safety: Update may be called from any thread and never blocks the
 // caller (a report that finds another being drawn is dropped); Message and
 // Finish wait for the display.
-#ifndef VOX_CORE_PROGRESS_H_
-#define VOX_CORE_PROGRESS_H_
+#ifndef VOX_CORE_UTIL_PROGRESS_H_
+#define VOX_CORE_UTIL_PROGRESS_H_
 
 #include <cstdint>
 #include <cstdio>
@@ -18,7 +18,7 @@
 #include <string>
 #include <string_view>
 
-#include "core/stopwatch.h"
+#include "core/util/stopwatch.h"
 
 namespace vox {
 
@@ -77,4 +77,4 @@ class Progress {
 
 }  // namespace vox
 
-#endif  // VOX_CORE_PROGRESS_H_
+#endif  // VOX_CORE_UTIL_PROGRESS_H_

@@ -8,13 +8,13 @@
 // reading anything.
 //
 // Thread safety: thread-compatible (stat calls only).
-#ifndef VOX_STORAGE_PATH_IDENTITY_H_
-#define VOX_STORAGE_PATH_IDENTITY_H_
+#ifndef VOX_CORE_UTIL_PATH_IDENTITY_H_
+#define VOX_CORE_UTIL_PATH_IDENTITY_H_
 
 #include <string>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 
@@ -45,4 +45,4 @@ Status CheckExtension(const std::string& role, const std::string& path,
 
 }  // namespace vox
 
-#endif  // VOX_STORAGE_PATH_IDENTITY_H_
+#endif  // VOX_CORE_UTIL_PATH_IDENTITY_H_

@@ -1,4 +1,4 @@
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 

@@ -7,8 +7,8 @@
 // Thread safety: RandomAccessFile::Read and CurrentSize are thread-safe.
 // A WritableFile is used by one thread at a time. FaultInjectionFile's
 // setters must not race with reads.
-#ifndef VOX_STORAGE_FILE_H_
-#define VOX_STORAGE_FILE_H_
+#ifndef VOX_CORE_UTIL_FILE_H_
+#define VOX_CORE_UTIL_FILE_H_
 
 #include <atomic>
 #include <cstdint>
@@ -16,7 +16,7 @@
 #include <mutex>
 #include <string>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace vox {
 
@@ -162,7 +162,7 @@ StatusOr<std::string> ReadTextFile(const std::string& path,
 void RemoveStaleTemporaries(const std::string& dir, const std::string& name);
 
 // Held while CreateTemporary makes a temporary and while an OutputGroup
-// publishes (storage/atomic_file.h). A tool's signal thread takes it for
+// publishes (core/util/atomic_file.h). A tool's signal thread takes it for
 // good before removing the process's temporaries, so that none is created,
 // and no group half-published, after that.
 std::mutex& TemporaryMutex();
@@ -188,4 +188,4 @@ Status ErrnoError(const std::string& what, const std::string& path, int err);
 
 }  // namespace vox
 
-#endif  // VOX_STORAGE_FILE_H_
+#endif  // VOX_CORE_UTIL_FILE_H_

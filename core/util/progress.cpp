@@ -1,4 +1,4 @@
-#include "core/progress.h"
+#include "core/util/progress.h"
 
 #include <unistd.h>
 

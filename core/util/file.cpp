@@ -1,4 +1,4 @@
-#include "storage/file.h"
+#include "core/util/file.h"
 
 #include <dirent.h>
 #include <fcntl.h>
