@@ -85,8 +85,41 @@ struct FixedPoint {
     static_assert(kIntBits - 2 < 64);
     constexpr double kLimit = double(uint64_t(1) << (kIntBits - 2));
     // num/den may overflow to inf for subnormal den: saturate.
-    if (den == 0.0 || !(num / den < kLimit)) return sat;
+    const double quotient = num / den;
+    if (den == 0.0 || !(quotient < kLimit)) return sat;
     if (num == 0.0) return 0;
+    if constexpr (kBits <= 64) {
+      // The common case without a division of integers: c = floor(x + 1/2),
+      // x = num / den * 2^Frac, from the double quotient (off by less than
+      // 1/2 while x < 2^52, so c by at most 1), checked and corrected
+      // exactly: (2c - 1) md <= 2x md < (2c + 1) md, all below 2^106
+      // (num = mn 2^(en - 53), den = md 2^(ed - 53), both normal here).
+      const double y = quotient * double(uint64_t(1) << kFrac);
+      uint64_t bn, bd;
+      std::memcpy(&bn, &num, sizeof bn);
+      std::memcpy(&bd, &den, sizeof bd);
+      const int en = int(bn >> 52), ed = int(bd >> 52);  // biased exponents (sign is 0)
+      const int shift = kFrac + 1 + (en - ed);
+      if (y < 0x1p52 && en != 0 && ed != 0 && shift >= 0 && shift <= 127 - 53) {
+        using U = unsigned __int128;
+        constexpr uint64_t kHidden = uint64_t(1) << 52;
+        const uint64_t mn = (bn & (kHidden - 1)) | kHidden, md = (bd & (kHidden - 1)) | kHidden;
+        uint64_t c = uint64_t(y + 0.5);
+        const U two_x = U(mn) << shift;  // 2x md
+        if (c > 0 && two_x < U(2 * c - 1) * md)
+          --c;
+        else if (two_x >= U(2 * c + 1) * md)
+          ++c;
+        const Word w = Word(c);
+        return w >= sat ? sat : w;
+      }
+    }
+    return RatioByDivision(num, den, sat);
+  }
+
+ private:
+  // Ratio's exact quotient by division (num, den > 0 and finite).
+  [[gnu::noinline]] static Word RatioByDivision(double num, double den, Word sat) {
     int en = 0, ed = 0;
     // num = mn * 2^(en - 53), den = md * 2^(ed - 53), mn, md 53-bit integers.
     uint64_t mn = Mantissa53(num, &en);
@@ -121,7 +154,6 @@ struct FixedPoint {
     return w >= sat ? sat : w;
   }
 
- private:
   // x = m * 2^(e - 53) with m in [2^52, 2^53), for finite x > 0 (as
   // frexp(x, &e) * 2^53, by the bits for normal x, without libm calls).
   static uint64_t Mantissa53(double x, int* e) {

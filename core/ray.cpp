@@ -51,20 +51,6 @@ std::string TraceCounters::ToString() const {
   return s.str();
 }
 
-namespace {
-double SlabT(const Ray& ray, const glm::i64vec3& v, bool entry) {
-  double best = entry ? 0.0 : std::numeric_limits<double>::infinity();
-  for (int a = 0; a < 3; ++a) {
-    double dir = ray.dir[a];
-    if (dir == 0) continue;
-    bool pos = dir > 0;
-    double face = double(v[a]) + ((pos == entry) ? 0.0 : 1.0);
-    double t = (face - ray.origin[a]) / dir;
-    best = entry ? std::max(best, t) : std::min(best, t);
-  }
-  return best;
-}
-}  // namespace
 
 namespace {
 
@@ -150,7 +136,5 @@ bool ClipFarRay(const glm::dvec3& o, const double D[3], const int s[3], double G
   return true;
 }
 
-double VoxelEntryT(const Ray& ray, const glm::i64vec3& v) { return SlabT(ray, v, true); }
-double VoxelExitT(const Ray& ray, const glm::i64vec3& v) { return SlabT(ray, v, false); }
 
 }  // namespace vox

@@ -3,6 +3,7 @@
 #ifndef VOX_CORE_RAY_H_
 #define VOX_CORE_RAY_H_
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -82,11 +83,32 @@ struct TraceCounters {
   std::string ToString() const;
 };
 
+namespace internal {
+// The ray parameter where the ray enters (entry) or leaves the closed voxel
+// `v`: the last slab entry (at least 0) or the first slab exit.
+inline double SlabT(const Ray& ray, const glm::i64vec3& v, bool entry) {
+  double best = entry ? 0.0 : std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    const double dir = ray.dir[a];
+    if (dir == 0) continue;
+    const bool pos = dir > 0;
+    const double face = double(v[a]) + ((pos == entry) ? 0.0 : 1.0);
+    const double t = (face - ray.origin[a]) / dir;
+    best = entry ? std::max(best, t) : std::min(best, t);
+  }
+  return best;
+}
+}  // namespace internal
+
 // Ray parameter where the ray enters the closed voxel `v` (clamped to >= 0),
 // computed in double from the unscaled ray.
-double VoxelEntryT(const Ray& ray, const glm::i64vec3& v);
+inline double VoxelEntryT(const Ray& ray, const glm::i64vec3& v) {
+  return internal::SlabT(ray, v, true);
+}
 // Ray parameter where the ray leaves voxel `v`.
-double VoxelExitT(const Ray& ray, const glm::i64vec3& v);
+inline double VoxelExitT(const Ray& ray, const glm::i64vec3& v) {
+  return internal::SlabT(ray, v, false);
+}
 
 }  // namespace vox
 

@@ -109,7 +109,7 @@ class Tracer {
   // that meet no occupied voxel: every hit stays as the walk finds it (rays
   // from far origins, IsFarOrigin, are always walked). And each step's DDA
   // starts at the box: it jumps over the driving slabs before the box's
-  // first layer (JumpToBox), in both steps, in exact integers, so the walk
+  // first layer (BoxSlab, JumpToSlab), in both steps, in exact integers, so the walk
   // meets the same voxels with the same hits and t.
   void SetOccupiedBox(const int64_t lo[3], const int64_t hi[3]) {
     has_box_ = true;
@@ -210,23 +210,30 @@ class Tracer {
     ScaledRay cx;
     const StartPlane* start = nullptr;
 
-    bool Setup(const Ray& ray) {
+    VOX_ALWAYS_INLINE bool Setup(const Ray& ray) {
       if (start != nullptr && start->s_min == std::numeric_limits<double>::infinity())
         return false;  // the ray's whole beam meets no occupied cell
       return t.Setup(ray, &cx);
     }
-    Dda FirstStep(const internal::StepLayout& l1, uint64_t* xyz) {
+    VOX_ALWAYS_INLINE Dda FirstStep(const internal::StepLayout& l1, uint64_t* xyz) {
       Real p1[3];
       for (int a = 0; a < 3; ++a) p1[a] = cx.p[a] * t.down2_;
       Dda st = t.InitStep(cx, l1, p1, xyz);
-      if (start != nullptr) t.JumpToPlane(cx, l1, p1, *start, &st, xyz);
-      if (t.has_box_) t.JumpToBox(cx, l1, t.n2_, 0, &st, xyz);
+      // One jump to the later of the beam plane's and the box's slabs (a
+      // jump to slab A, then to slab B >= A, is the jump to B).
+      int64_t target = std::numeric_limits<int64_t>::min();
+      if (start != nullptr && !t.PlaneSlab(cx, l1, p1, *start, &target)) {
+        *xyz = l1.carry;  // the ray leaves the grid before the plane: a miss
+        return st;
+      }
+      if (t.has_box_) target = std::max(target, t.BoxSlab(cx, t.n2_, 0));
+      JumpToSlab(cx, l1, target, &st, xyz);
       return st;
     }
-    Dda SecondStep(const internal::StepLayout& l1, const internal::StepLayout& l2, uint64_t xyz,
+    VOX_ALWAYS_INLINE Dda SecondStep(const internal::StepLayout& l1, const internal::StepLayout& l2, uint64_t xyz,
                    uint64_t prev, const Dda& first, uint64_t* xyz2) {
       Dda st = t.Transition(cx, l1, l2, xyz, prev, first, xyz2);
-      if (t.has_box_) t.JumpToBox(cx, l2, 0, l1.Coord(xyz, cx.d) << t.n2_, &st, xyz2);
+      if (t.has_box_) JumpToSlab(cx, l2, t.BoxSlab(cx, 0, l1.Coord(xyz, cx.d) << t.n2_), &st, xyz2);
       return st;
     }
     void AddMoves(const Dda& dda, TraceCounters* c) const { dda.AddTo(cx, c); }
@@ -234,7 +241,7 @@ class Tracer {
 
   // Scales the direction, picks the axes, computes the slopes and clips the
   // ray to the grid. Returns false when the ray misses the grid.
-  bool Setup(const Ray& ray, ScaledRay* cx) const {
+  VOX_ALWAYS_INLINE bool Setup(const Ray& ray, ScaledRay* cx) const {
     using std::fabs;
     double D[3];
     internal::ScaleDirection(ray.dir, D);
@@ -267,7 +274,7 @@ class Tracer {
   // Whether the ray from `o` along D meets the widened occupied box (t >= 0).
   // Far origins (IsFarOrigin) are not tested: their slabs lose the box's
   // extent next to |o| in double. A NaN slab (0 * inf) constrains nothing.
-  bool MeetsBox(const glm::dvec3& o, const double D[3]) const {
+  VOX_ALWAYS_INLINE bool MeetsBox(const glm::dvec3& o, const double D[3]) const {
     if (IsFarOrigin(o, double(grid_size_))) return true;
     double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
     for (int a = 0; a < 3; ++a) {
@@ -285,14 +292,14 @@ class Tracer {
   }
 
   // Distance from p to the next boundary of voxel v in the direction of travel.
-  static Real H(Real p, int64_t v, int s) {
+  VOX_ALWAYS_INLINE static Real H(Real p, int64_t v, int s) {
     Real h = s > 0 ? Real(v + 1) - p : p - Real(v);
     return std::clamp(h, Real(0), Real(1));
   }
 
   // ud + h * q in fixed point, saturated.
   // `qr` is the unsaturated slope; h * qr may be NaN (0 * inf): saturated.
-  Word LValue(Real ud, Real h, Real qr) const {
+  VOX_ALWAYS_INLINE Word LValue(Real ud, Real h, Real qr) const {
     Real l = ud + h * qr;
     if (!(l < sat_real_)) return sat_;
     return Fixed::FromReal(l);
@@ -301,7 +308,7 @@ class Tracer {
   // docs/algorithm.md, section 3: a step's DDA state from a start point in
   // the step's units, and its start voxel packed per `lay`. Axes in the bit
   // mask `before` take BeforeVoxel instead of StartVoxel.
-  Dda InitStep(const ScaledRay& cx, const internal::StepLayout& lay, const Real p[3], uint64_t* xyz,
+  VOX_ALWAYS_INLINE Dda InitStep(const ScaledRay& cx, const internal::StepLayout& lay, const Real p[3], uint64_t* xyz,
                unsigned before = 0) const {
     int64_t size = int64_t(1) << lay.n;
     int64_t v[3];
@@ -318,43 +325,40 @@ class Tracer {
     return st;
   }
 
-  // Beam start (StartPlane): moves the first step's DDA `st` (start voxel
-  // *xyz, start point p1 in first-step units) to the state it has on
-  // entering driving slab D, one slab before the slab where the ray meets the
-  // plane, if that lies ahead. With l_i0 and q_i a passive axis's first
-  // crossing and slope, the DDA enters slab D (a driving move) once it has
-  // made exactly the k_i crossings with l_i0 + k q_i < D: all integers, so
-  // the state is exact. Every first-step voxel the walk meets before it lies
-  // before the plane, so is empty, and the walk from there visits the same
-  // voxels as from the start. A ray that leaves the grid before slab D meets
-  // nothing: *xyz gets the carry bits (the walk ends at once).
-  void JumpToPlane(const ScaledRay& cx, const internal::StepLayout& lay, const Real p1[3],
-                   const StartPlane& sp, Dda* st, uint64_t* xyz) const {
+  // Beam start (StartPlane): the oriented driving slab of the first step
+  // (units of `lay`, start point p1) one before the slab where the ray
+  // meets the plane, into *target when the plane lies ahead. With l_i0 and
+  // q_i a passive axis's first crossing and slope, the DDA enters slab D (a
+  // driving move) once it has made exactly the k_i crossings with l_i0 +
+  // k q_i < D: all integers, so JumpToSlab's state is exact. Every
+  // first-step voxel the walk meets before it lies before the plane, so is
+  // empty, and the walk from there visits the same voxels as from the
+  // start. False when the ray leaves the grid before the plane (a miss).
+  VOX_ALWAYS_INLINE bool PlaneSlab(const ScaledRay& cx, const internal::StepLayout& lay, const Real p1[3],
+                 const StartPlane& sp, int64_t* target) const {
     double s0 = 0, gd = 0;
     for (int a = 0; a < 3; ++a) {
       s0 += sp.g[a] * double(cx.p[a]);
       gd += sp.g[a] * double(cx.D[a]);
     }
-    if (!(sp.s_min > s0) || !(gd > 0)) return;
+    if (!(sp.s_min > s0) || !(gd > 0)) return true;
     const int d = cx.d, sd = cx.s[d];
     const int64_t size = int64_t(1) << lay.n;
     // The plane's driving coordinate, oriented, in first-step units.
     const double tau = (sp.s_min - s0) / gd;
     const double ud = sd * (double(p1[d]) + tau * double(cx.D[d]) * double(down2_));
     const double end = sd > 0 ? double(size) : 0.0;  // the grid's far face, oriented
-    if (!(ud < end + 2.0)) {  // the ray leaves the grid before the plane (or NaN)
-      if (ud >= end + 2.0) *xyz = lay.carry;
-      return;
-    }
-    JumpToSlab(cx, lay, int64_t(std::floor(ud)) - 1, st, xyz);
+    if (!(ud < end + 2.0)) return !(ud >= end + 2.0);  // leaves the grid first (or NaN)
+    *target = std::max(*target, int64_t(std::floor(ud)) - 1);
+    return true;
   }
 
   // Moves a step's DDA `st` (voxel *xyz, per `lay`) to the state it has on
   // entering oriented driving slab `target`, if that lies ahead, in exact
-  // integer arithmetic (see JumpToPlane); the moves it stands for are
+  // integer arithmetic (see PlaneSlab); the moves it stands for are
   // counted. A ray that leaves the step's grid before that slab: *xyz gets
   // the carry bits (the walk ends at once).
-  static void JumpToSlab(const ScaledRay& cx, const internal::StepLayout& lay, int64_t target,
+  VOX_ALWAYS_INLINE static void JumpToSlab(const ScaledRay& cx, const internal::StepLayout& lay, int64_t target,
                          Dda* st, uint64_t* xyz) {
     if (target <= st->dprime || (*xyz & lay.carry)) return;  // (carry: the walk has ended)
     const int d = cx.d, sd = cx.s[d];
@@ -391,21 +395,19 @@ class Tracer {
   }
 
   // The box jump (SetOccupiedBox): every voxel outside the occupied box is
-  // empty, so a step's DDA may jump to the driving slab just before the
-  // box's first layer along its travel (JumpToSlab; the slab it lands in
-  // is empty, so the walk meets the same voxels from there). A step voxel
-  // is 2^shift grid voxels, and its voxel 0 lies at grid coordinate `base`
-  // along the driving axis.
-  void JumpToBox(const ScaledRay& cx, const internal::StepLayout& lay, int shift, int64_t base,
-                 Dda* st, uint64_t* xyz) const {
+  // empty, so a step's DDA may jump (JumpToSlab) to the driving slab just
+  // before the box's first layer along its travel (the slab it lands in is
+  // empty, so the walk meets the same voxels from there). A step voxel is
+  // 2^shift grid voxels, and its voxel 0 lies at grid coordinate `base`
+  // along the driving axis. Returns that oriented slab.
+  VOX_ALWAYS_INLINE int64_t BoxSlab(const ScaledRay& cx, int shift, int64_t base) const {
     const int d = cx.d;
-    const int64_t target = cx.s[d] > 0 ? (box_lo_i_[d] >> shift) - base - 1
-                                       : -((box_hi_i_[d] >> shift) - base + 1) - 1;
-    JumpToSlab(cx, lay, target, st, xyz);
+    return cx.s[d] > 0 ? (box_lo_i_[d] >> shift) - base - 1
+                       : -((box_hi_i_[d] >> shift) - base + 1) - 1;
   }
 
   // A step's DDA with the ray's slopes and the step's increments.
-  static Dda NewDda(const ScaledRay& cx, const internal::StepLayout& lay) {
+  VOX_ALWAYS_INLINE static Dda NewDda(const ScaledRay& cx, const internal::StepLayout& lay) {
     Dda st;
     st.q1 = cx.q1;
     st.q2 = cx.q2;
@@ -420,7 +422,7 @@ class Tracer {
   // follow section 6).
   // `prev` is XYZ before the last first-step move (== xyz when none). Sets
   // *xyz2 to the second step's start voxel.
-  Dda Transition(ScaledRay& cx, const internal::StepLayout& lay1, const internal::StepLayout& lay2,
+  VOX_ALWAYS_INLINE Dda Transition(ScaledRay& cx, const internal::StepLayout& lay1, const internal::StepLayout& lay2,
                  uint64_t xyz, uint64_t prev, const Dda& first, uint64_t* xyz2) const {
     const int n2 = n2_;
     const int64_t size2 = int64_t(1) << n2;

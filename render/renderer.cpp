@@ -192,6 +192,20 @@ void Renderer::ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* out,
   Hit h;
   VoxelAttributes a;
   int level = 0;
+  if (options_.first_hits_only) {
+    if (!(lod ? FindHitLod(gr, *cone, /*skip_start_run=*/false, cx, &h, &level, nullptr, start)
+              : FindHit(gr, /*skip_start_run=*/false, cx, &h, nullptr, start)))
+      return;
+    out->hit = true;
+    out->level = level;
+    out->alpha = 1.0;
+    out->z = h.t;
+    out->depth = h.t * glm::dot(wr.dir, camera_.forward());
+    out->position = glm::dvec3(0.0);
+    out->normal = glm::dvec3(0.0);
+    out->voxel = (h.voxel << int64_t(level)) + volume_->meta().origin;
+    return;
+  }
   if (!(lod ? FindHitLod(gr, *cone, /*skip_start_run=*/false, cx, &h, &level, SurfaceAttrs(&a),
                         start)
             : FindHit(gr, /*skip_start_run=*/false, cx, &h, SurfaceAttrs(&a), start))) {

@@ -136,6 +136,10 @@ struct RenderOptions {
   // covered instead of a whole dilated cell; 0: off. Surfaces only: fog
   // already integrates the cells' optical depth.
   int silhouette_grid = kDefaultSilhouetteGrid;
+  // The bare loop, for comparisons with peers' first-hit loops: each
+  // primary ray's first hit only (alpha 1 on a hit, Z its depth, the voxel
+  // layer its voxel), no shading, no attributes, no secondary rays.
+  bool first_hits_only = false;
 };
 
 // The tracer the renderer uses: fixed point for the DDA (64-bit words up to

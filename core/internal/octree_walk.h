@@ -273,7 +273,7 @@ inline int TravelSign(double unscaled) { return unscaled >= 0 ? 1 : -1; }
 // sets the start point p (the origin, or the entry point set exactly onto the
 // entry face) and the entry parameter. False when the ray misses the grid.
 template <class Real>
-bool ClipToGrid(const glm::dvec3& origin, const Real D[3], const int s[3], Real G, Real p[3],
+VOX_ALWAYS_INLINE bool ClipToGrid(const glm::dvec3& origin, const Real D[3], const int s[3], Real G, Real p[3],
                 Real* t_start) {
   if constexpr (std::is_floating_point_v<Real>) {  // exact Reals need no help
     if (IsFarOrigin(origin, double(G))) {           // exact entry point (core/ray.h)
@@ -320,7 +320,7 @@ bool ClipToGrid(const glm::dvec3& origin, const Real D[3], const int s[3], Real 
 
 // Start voxel on one axis: the voxel the ray is in just after leaving p.
 template <class Real>
-int64_t StartVoxel(Real p, int s, int64_t size) {
+VOX_ALWAYS_INLINE int64_t StartVoxel(Real p, int s, int64_t size) {
   if (!(p > Real(0))) return 0;  // also clamps p < 0 and catches NaN
   if (!(p < Real(size))) return size - 1;
   int64_t f = int64_t(p);  // floor, as p > 0
@@ -332,7 +332,7 @@ int64_t StartVoxel(Real p, int s, int64_t size) {
 // StartVoxel only when p lies exactly on a voxel boundary. The transition
 // starts there on the axes of docs/algorithm.md, section 6.
 template <class Real>
-int64_t BeforeVoxel(Real p, int s, int64_t size) {
+VOX_ALWAYS_INLINE int64_t BeforeVoxel(Real p, int s, int64_t size) {
   if (!(p > Real(0))) return 0;
   if (!(p < Real(size))) return size - 1;
   int64_t f = int64_t(p);  // floor, as p > 0

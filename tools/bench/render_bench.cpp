@@ -4,7 +4,12 @@
 // runs it side by side with vdb_render.
 //   vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N]
 //                    [--threads N] [--split N1+N2|N1] [--exr out.exr] [--cache-mb M]
-//                    [--tile-size T]
+//                    [--tile-size T] [--bare] [--mask out.pgm]
+// --bare: the bare loop (RenderOptions::first_hits_only): the same ray
+// generation and tile loop as vox-render, each primary ray's first hit
+// only, no shading; the comparison with a peer's first-hit loop (NanoVDB's
+// HDDA + ZeroCrossing). --mask writes the last frame's hit mask (alpha > 0)
+// as a binary PGM, row 0 on top.
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -26,7 +31,8 @@
 #include "tools/common/flags.h"
 
 int main(int argc, char** argv) {
-  std::string store, cam_path, scene_path, split, exr;
+  std::string store, cam_path, scene_path, split, exr, mask_path;
+  bool bare = false;
   std::optional<double> lod;  // unset: vox-render's default (OpenRenderStores)
   int runs = 5, threads = 2, tile_size = 64;
   size_t cache_mb = 2048;
@@ -35,6 +41,7 @@ int main(int argc, char** argv) {
     fprintf(stderr,
             "usage: vox-render-bench STORE --cam cam.json [--scene s.json] [--runs N] "
             "[--threads N] [--split S] [--exr out.exr] [--cache-mb M] [--tile-size T] [--lod F]\n"
+            "       [--bare] [--mask out.pgm]\n"
             "  --lod F: as vox-render's (default: 1 when the store has a pyramid, else 0;\n"
             "           --lod 0 is the exact frame, for comparisons with peers)\n");
     return 2;
@@ -46,7 +53,11 @@ int main(int argc, char** argv) {
       store = a;
       continue;
     }
-    if (a != "--cam" && a != "--scene" && a != "--split" && a != "--exr" && a != "--runs" &&
+    if (a == "--bare") {
+      bare = true;
+      continue;
+    }
+    if (a != "--mask" && a != "--cam" && a != "--scene" && a != "--split" && a != "--exr" && a != "--runs" &&
         a != "--threads" && a != "--tile-size" && a != "--cache-mb" && a != "--lod")
       return usage();
     const std::optional<std::string> v = flags.Value();
@@ -56,7 +67,9 @@ int main(int argc, char** argv) {
     }
     bool ok = true;
     int64_t mb = 0;
-    if (a == "--cam")
+    if (a == "--mask")
+      mask_path = *v;
+    else if (a == "--cam")
       cam_path = *v;
     else if (a == "--scene")
       scene_path = *v;
@@ -110,6 +123,7 @@ int main(int argc, char** argv) {
   }
   vox::RenderOptions ro;
   ro.lod = stores->lod;
+  ro.first_hits_only = bare;
   for (vox::Store* level : stores->levels) ro.lod_levels.push_back(level);
   if (!split.empty()) {
     auto n1 = vox::ParseSplit(split, vol->meta().levels);
@@ -126,11 +140,21 @@ int main(int argc, char** argv) {
   };
   std::vector<double> secs, cpu;
   vox::FrameStats last;
+  std::vector<uint8_t> mask;
+  if (!mask_path.empty()) mask.assign(size_t(cam->width) * size_t(cam->height), 0);
   for (int r = 0; r < runs; ++r) {
     vox::FrameOptions fo;
     fo.exr_path = exr;
     fo.threads = threads;
     fo.tile_size = tile_size;
+    if (!mask.empty() && r + 1 == runs)
+      fo.on_tile = [&](const vox::TileRect& t, const vox::TileBuffer& b) {
+        for (int y = 0; y < t.h; ++y)
+          for (int x = 0; x < t.w; ++x)
+            mask[size_t(t.y0 + y) * size_t(cam->width) + size_t(t.x0 + x)] =
+                b.ch[vox::kChA][size_t(y) * size_t(b.size) + size_t(x)] > 0 ? 255 : 0;
+        return vox::OkStatus();
+      };
     vox::FrameStats st;
     const double c0 = cpu_now();
     vox::Status s = vox::RenderFrame(**renderer, fo, &st);
@@ -138,6 +162,14 @@ int main(int argc, char** argv) {
     secs.push_back(st.render_seconds);
     cpu.push_back(cpu_now() - c0);
     last = st;
+  }
+  if (!mask.empty()) {
+    FILE* m = fopen(mask_path.c_str(), "wb");
+    if (m == nullptr || fprintf(m, "P5\n%d %d\n255\n", cam->width, cam->height) < 0 ||
+        fwrite(mask.data(), 1, mask.size(), m) != mask.size() || fclose(m) != 0) {
+      fprintf(stderr, "vox-render-bench: cannot write %s\n", mask_path.c_str());
+      return 1;
+    }
   }
   std::vector<double> warm(secs.begin() + 1, secs.end());
   std::sort(warm.begin(), warm.end());
@@ -161,6 +193,9 @@ int main(int argc, char** argv) {
   j["lod"] = stores->lod;
   j["lod_default"] = stores->lod_default;
   j["write_exr"] = !exr.empty();
+  j["bare"] = bare;
+  j["hits"] = last.counters.hit_pixels;
+  j["warm_best_seconds"] = warm.front();
   j["cold_seconds"] = secs[0];
   j["warm_seconds"] = warm;
   j["warm_median_seconds"] = median;
