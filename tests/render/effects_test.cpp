@@ -398,6 +398,42 @@ TEST(EffectsTest, SplitDoesNotChangeTheImage) {
   EXPECT_EQ(single.counters.trace.transitions, 0u);
 }
 
+// The bare loop (first_hits_only, vox-render-bench --bare) finds the
+// shaded frame's hits: the same coverage, depth and voxels, with no
+// attribute read and no secondary ray, whatever the lights ask for.
+TEST(EffectsTest, FirstHitsOnlyFindsTheShadedFramesHits) {
+  auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet),
+                        {Sphere({15, 17, 16}, 11), Box({2, 2, 2}, {9, 30, 6})});
+  ASSERT_TRUE(vol);
+  Camera cam = Persp({40, 30, 50}, {16, 16, 16}, 40, 48, 48);
+  Scene scene = ParseOrDie(
+      R"({"lights":[{"type":"directional","direction":[-1,-1,-1],"shadows":true}]})");
+  ImageLayers layers;
+  layers.voxel = true;
+  Rendered shaded = Render(vol.get(), cam, scene, 0, layers);
+  RenderOptions o;
+  o.layers = layers;
+  o.first_hits_only = true;
+  auto bare = Renderer::Create(vol.get(), cam, scene, o);
+  ASSERT_TRUE(bare.ok()) << bare.status().ToString();
+  Image img;
+  RenderCounters c;
+  ASSERT_TRUE(RenderToMemory(**bare, &img, &c).ok());
+  EXPECT_GT(shaded.counters.hit_pixels, 500u);
+  EXPECT_EQ(c.hit_pixels, shaded.counters.hit_pixels);
+  for (const char* ch : {"A", "Z", "voxel.i", "voxel.j", "voxel.k"})
+    for (int y = 0; y < 48; ++y)
+      for (int x = 0; x < 48; ++x) {
+        const float a = img.at(ch, x, y), b = shaded.img.at(ch, x, y);
+        ASSERT_TRUE(a == b || (std::isnan(a) && std::isnan(b))) << ch << " " << x << "," << y;
+      }
+  EXPECT_GT(shaded.counters.rays[kRayShadow], 0u);
+  EXPECT_EQ(c.rays[kRayShadow], 0u);
+  EXPECT_EQ(c.attribute_lookups, 0u);
+  EXPECT_EQ(c.trace.rays, c.rays[kRayPrimary]);
+  EXPECT_EQ(img.at("R", 24, 24), 0.0f);  // no shading
+}
+
 TEST(EffectsTest, NormalAndVoxelLayers) {
   auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet), {Box({8, 8, 8}, {24, 24, 24})});
   ASSERT_TRUE(vol);
