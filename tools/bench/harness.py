@@ -327,7 +327,7 @@ class Report:
     def table(self, header, rows):
         self.add("| " + " | ".join(header) + " |", "|" + " --- |" * len(header))
         for r in rows:
-            self.add("| " + " | ".join(str(c) for c in r) + " |")
+            self.add("| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |")
         self.add("")
 
     def write(self):
