@@ -8,6 +8,7 @@ machine's. Standard library only.
 import json
 import os
 import platform
+import re
 import shlex
 import shutil
 import signal
@@ -243,6 +244,7 @@ class Harness:
                                    os.path.join(self.scratch, "reports"))
         self.threads = args.threads
         self.no_build = args.no_build
+        self.built = set()  # the programs built by this run
         os.makedirs(self.scratch, exist_ok=True)
         os.makedirs(self.out, exist_ok=True)
         self.command = "tools/bench/vbench.py " + shlex.join(self.rel(a) for a in sys.argv[1:])
@@ -261,7 +263,8 @@ class Harness:
     def tool(self, name):
         """The built program `name`, built first (cmake --build) unless --no-build."""
         path = os.path.join(self.build, PROGRAMS[name])
-        if not self.no_build:
+        if not self.no_build and name not in self.built:
+            self.built.add(name)
             if not os.path.exists(os.path.join(self.build, "build.ninja")):
                 check(["cmake", "-S", REPO, "-B", self.build, "-G", "Ninja",
                        "-DCMAKE_BUILD_TYPE=Release"], "cmake")
@@ -274,7 +277,7 @@ class Harness:
 
     def has_flag(self, name, flag):
         p = subprocess.run([self.tool(name), "--help"], capture_output=True, text=True)
-        return flag in p.stdout + p.stderr
+        return re.search(re.escape(flag) + r"\b", p.stdout + p.stderr) is not None
 
     def path(self, *parts):
         return os.path.join(self.scratch, *parts)
