@@ -9,7 +9,7 @@
 //          oriented coordinates and saturated slopes of a 20-level step fit.
 //   Real:  float, double, long double, or an exact type with the same
 //          operators, fabs, floor and ldexp (the accuracy study's ExactReal,
-//          tools/study/exact_real.h): the type of the per-ray set-up
+//          tests/study/exact_real.h): the type of the per-ray set-up
 //          (clipping, first h and l) and of the transition's entry point.
 //
 // A Tracer is immutable once created: Traverse and FirstHit are const and may

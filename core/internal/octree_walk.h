@@ -3,7 +3,7 @@
 // (loop 3), the skip loop that leaves an empty octant by one bit test, and
 // the ascent by XOR (loop 2), over a packed XYZ register with carry bits.
 // Tracer (the paper's fixed-point DDA) and AwTracer (Amanatides-Woo, in the
-// accuracy study's tools/study/aw_tracer.h) both run on it, through
+// accuracy study's tests/study/aw_tracer.h) both run on it, through
 // two_step_walk.h, so the two differ only in their arithmetic. Also the per-ray helpers they share:
 // clipping to the grid, start voxels, brick pinning.
 //

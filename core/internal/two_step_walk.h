@@ -3,7 +3,7 @@
 // grid, and in each occupied first-step voxel run the transition and walk the
 // second step's grid, then report the hits and counters. vox::Tracer (the
 // paper's fixed-point DDA) and the accuracy study's Amanatides-Woo tracer
-// (tools/study/aw_tracer.h) both instantiate it and supply only their set-up,
+// (tests/study/aw_tracer.h) both instantiate it and supply only their set-up,
 // their step initialisation and their transition.
 //
 // Internal to core. Stateless function; thread-safe when the tree's

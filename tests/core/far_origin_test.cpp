@@ -1,5 +1,5 @@
 // Rays from far origins (10^6 .. 10^300 voxels away) against the exact
-// Reference (tools/study/reference.h): axis-parallel rays, diagonals and rays
+// Reference (tests/study/reference.h): axis-parallel rays, diagonals and rays
 // whose direction components are tiny ratios that bring them back onto the
 // grid, on a dense 2^6 grid and a sparse 2^20 one; origins beyond the
 // documented range (core/ray.h, kMaxOriginMagnitude) are refused.
@@ -9,7 +9,7 @@
 #include <limits>
 
 #include "tests/core/test_util.h"
-#include "tools/study/reference.h"
+#include "tests/study/reference.h"
 
 namespace vox::testing {
 namespace {

@@ -6,7 +6,7 @@
 
 #include <optional>
 
-#include "tools/study/reference.h"
+#include "tests/study/reference.h"
 #include "tests/core/test_util.h"
 
 namespace vox::testing {

@@ -14,7 +14,7 @@
 #include "core/octree.h"
 #include "core/ray.h"
 #include "core/tracer.h"
-#include "tools/study/reference.h"
+#include "tests/study/reference.h"
 
 namespace vox::testing {
 

@@ -1,5 +1,5 @@
 // Named hard cases of the tracer, each checked against the exact Reference
-// with the acceptance rule of tools/study/reference.h (CheckFirstHit):
+// with the acceptance rule of tests/study/reference.h (CheckFirstHit):
 // axis-parallel rays on lattice lines, rays through lattice edges and
 // corners, rays in face planes, tiny / subnormal / -0.0 components, far
 // origins, second-step grids entered at their edges and corners, a 2^40 grid
@@ -12,7 +12,7 @@
 #include <limits>
 
 #include "core/shapes.h"
-#include "tools/study/reference.h"
+#include "tests/study/reference.h"
 #include "tests/core/test_util.h"
 
 namespace vox::testing {

@@ -12,7 +12,7 @@
 #include <cstdio>
 #include <functional>
 
-#include "tools/study/reference.h"
+#include "tests/study/reference.h"
 #include "tests/core/test_util.h"
 
 namespace vox::testing {

@@ -1,11 +1,11 @@
-// The accuracy study's traversal variants (tools/study/variants.h): every variant
+// The accuracy study's traversal variants (tests/study/variants.h): every variant
 // traces; the exact and wide ones agree with the exact reference on random
 // rays; Amanatides-Woo walks the same octree (same hits on generic rays at
 // coarse resolution).
 #include <gtest/gtest.h>
 
-#include "tools/study/variants.h"
-#include "tools/study/reference.h"
+#include "tests/study/variants.h"
+#include "tests/study/reference.h"
 #include "tests/core/test_util.h"
 
 namespace vox::testing {

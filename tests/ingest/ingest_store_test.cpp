@@ -27,7 +27,7 @@
 #include "storage/store_writer.h"
 #include "tests/core/test_util.h"
 #include "tests/ingest/ingest_test_util.h"
-#include "tools/study/reference.h"
+#include "tests/study/reference.h"
 
 namespace vox {
 namespace {
