@@ -13,6 +13,15 @@
 namespace vox::ingest_internal {
 
 template <class ValueT>
+bool GridIngest<ValueT>::InOccupiedTile(const Coord& c) const {
+  for (const int log2 : tile_log2_) {
+    const int mask = ~((1 << log2) - 1);
+    if (tile_set_.count({c.x() & mask, c.y() & mask, c.z() & mask, log2})) return true;
+  }
+  return false;
+}
+
+template <class ValueT>
 Status GridIngest<ValueT>::BuildBrickMap(const CoordBBox& occ) {
   // Brick coordinate range of a box, clipped to the occupied bbox.
   auto range = [&](const CoordBBox& box, int64_t lo[3], int64_t hi[3]) {
@@ -329,8 +338,11 @@ size_t GridIngest<ValueT>::BricksInFlight() const {
   return std::max<size_t>(tokens, 1);
 }
 
-// The members defined here, for both value types (the others are in grid_ingest.cpp).
-template class GridIngest<float>;
-template class GridIngest<double>;
+// The members Run (grid_ingest.cpp) calls, for both value types; the rest
+// are instantiated through them.
+template Status GridIngest<float>::BuildBrickMap(const openvdb::CoordBBox& occ);
+template Status GridIngest<double>::BuildBrickMap(const openvdb::CoordBBox& occ);
+template Status GridIngest<float>::WriteBricks(StoreWriter* writer);
+template Status GridIngest<double>::WriteBricks(StoreWriter* writer);
 
 }  // namespace vox::ingest_internal

@@ -1,5 +1,6 @@
 // Brick extraction: the ingest of one float or double grid. See grid_ingest.h;
-// steps 1 and 2 and the placement are here, the bricks (3) in grid_bricks.cpp.
+// the topology, the bbox (1), the placement and the writer (2) are here, the
+// brick map (2) and the bricks (3) in grid_bricks.cpp.
 //
 // How it streams. The grid's topology is read by CompactTopology
 // (vdb_topology.h): one pass over the file keeps a 24-byte record per leaf
@@ -204,15 +205,6 @@ uint64_t GridIngest<ValueT>::NewStoreId() {
 }
 
 template <class ValueT>
-bool GridIngest<ValueT>::InOccupiedTile(const Coord& c) const {
-  for (const int log2 : tile_log2_) {
-    const int mask = ~((1 << log2) - 1);
-    if (tile_set_.count({c.x() & mask, c.y() & mask, c.z() & mask, log2})) return true;
-  }
-  return false;
-}
-
-template <class ValueT>
 const openvdb::CoordBBox& GridIngest<ValueT>::DecodeOccupied(uint32_t i) {
   auto [it, inserted] = occupied_.try_emplace(i);
   if (!inserted) return it->second;
@@ -259,10 +251,6 @@ openvdb::CoordBBox GridIngest<ValueT>::OccupiedBBox() {
   return CoordBBox(Coord(int(lo[0]), int(lo[1]), int(lo[2])),
                    Coord(int(hi[0]), int(hi[1]), int(hi[2])));
 }
-
-// The members defined here, for both value types (the others are in grid_bricks.cpp).
-template class GridIngest<float>;
-template class GridIngest<double>;
 
 Status IngestGrid(const VdbLayout& layout, const VdbLayout::Grid& grid, bool double_values,
                   Context& cx) {

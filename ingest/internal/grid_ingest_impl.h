@@ -50,6 +50,10 @@ class GridIngest {
   // grid_ingest.cpp.
   // 1. The topology, the occupied tiles, and the limits they must keep.
   Status ReadTopology();
+  // 2. The exact occupied bbox.
+  CoordBBox OccupiedBBox();
+  // The occupied voxels' box of leaf i, decoded once.
+  const CoordBBox& DecodeOccupied(uint32_t i);
   // 3. The placement of the occupied bbox `occ` into cx_.meta, origin_ and B_.
   Status Place(const CoordBBox& occ);
   // The store's writer (and the pyramid built with its bricks).
@@ -57,22 +61,18 @@ class GridIngest {
   LodBuildOptions LodOptions();
   // A random store id (never 0, which asks the writer for one).
   static uint64_t NewStoreId();
+
+  // grid_bricks.cpp: 4. the bricks.
+  Status BuildBrickMap(const CoordBBox& occ);
+  Status WriteBricks(StoreWriter* writer);
+  BrickWork NextBrick(size_t* li, size_t* ti) const;
   // Whether index voxel c lies in an occupied active tile.
   bool InOccupiedTile(const Coord& c) const;
-  // The occupied voxels' box of leaf i, decoded once.
-  const CoordBBox& DecodeOccupied(uint32_t i);
-  // 2. The exact occupied bbox.
-  CoordBBox OccupiedBBox();
-
-  // grid_bricks.cpp.
-  Status BuildBrickMap(const CoordBBox& occ);
-  BrickWork NextBrick(size_t* li, size_t* ti) const;
   StatusOr<std::vector<BrickVoxel>> ExtractBrick(const BrickWork& bw,
                                                  std::shared_ptr<LodReducedBrick>* reduced);
   std::vector<BrickVoxel> BrickVoxels(const BrickWork& bw, const int64_t rmin[3],
                                       Builder& builder);
   static const std::array<uint16_t, 512>& MortonLeafOrder();
-  Status WriteBricks(StoreWriter* writer);
   size_t BricksInFlight() const;
 
   bool Occupied(ValueT v) const { return level_set_ ? !(v > iso_) : v > threshold_; }
