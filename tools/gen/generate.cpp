@@ -176,7 +176,7 @@ class StoreOccupancy {
 StatusOr<Levels> ChooseLevels(std::string_view text, int n) {
   Levels l;
   // The syntax and the limits are vox-ingest's (ingest/placement.h).
-  VOX_ASSIGN_OR_RETURN(const LevelsChoice choice, ParseLevels(text));
+  VOX_ASSIGN_OR_RETURN(const LevelsChoice choice, ParseLevels(text, /*min_brick_depth=*/0));
   if (choice.automatic) {
     l.brick_depth = std::min(5, n - 1);
     l.brick_level = n - l.brick_depth;
