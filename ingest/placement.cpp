@@ -20,7 +20,7 @@ int64_t AlignDown(int64_t v, int b) { return (v >> b) << b; }  // arithmetic shi
 
 }  // namespace
 
-StatusOr<LevelsChoice> ParseLevels(std::string_view text) {
+StatusOr<LevelsChoice> ParseLevels(std::string_view text, int min_brick_depth) {
   LevelsChoice c;
   if (text == "auto") return c;
   auto bad = [&](const std::string& why) {
@@ -42,7 +42,11 @@ StatusOr<LevelsChoice> ParseLevels(std::string_view text) {
   int n1 = 0, n2 = 0;
   if (!num(text.substr(0, plus), &n1) || !num(text.substr(plus + 1), &n2))
     return bad("N1 and N2 must be whole numbers");
-  if (n1 < 1 || n2 < 1) return bad("each step needs at least one level");
+  if (n1 < 1) return bad("each step needs at least one level");
+  if (n2 < min_brick_depth)
+    return bad(min_brick_depth == 1 ? "each step needs at least one level"
+                                    : "a brick holds at least " + std::to_string(min_brick_depth) +
+                                          " levels");
   if (n1 > kMaxStepLevels || n2 > kMaxStepLevels) return bad("each step holds at most 20 levels");
   if (n1 + n2 > kMaxLevels) return bad("at most 40 levels in all");
   c.automatic = false;

@@ -23,7 +23,10 @@ struct LevelsChoice {
   int brick_level = 0;  // N1 when !automatic
   int brick_depth = 0;  // N2 when !automatic: levels inside a brick
 };
-StatusOr<LevelsChoice> ParseLevels(std::string_view text);
+// The one parser of --levels (vox-ingest's and vox-gen's). A brick holds
+// at least `min_brick_depth` levels: 1 for vox-ingest; vox-gen also writes
+// stores without bricks (N2 = 0).
+StatusOr<LevelsChoice> ParseLevels(std::string_view text, int min_brick_depth = 1);
 
 // Integer placement of an occupied index bbox (inclusive) under a choice.
 // For an empty bbox (min > max) gives origin 0.

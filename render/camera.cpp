@@ -63,6 +63,8 @@ Status Camera::ComputeFrame(std::string_view source) {
       axis[c] = glm::dvec3(m[c], m[4 + c], m[8 + c]);
       const double len = glm::length(axis[c]);
       if (!(len > 1e-12)) return err("camera_to_world", "has a zero axis");
+      if (!std::isfinite(len))
+        return err("camera_to_world", "has an axis too long to normalise (its length overflows)");
       // Unit columns are taken as they are (bit for bit the look_at frame
       // they were written from); scaled ones are normalised.
       if (std::abs(len - 1.0) > 1e-12) axis[c] /= len;

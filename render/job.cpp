@@ -130,6 +130,10 @@ Status CheckFrameSize(const RenderJobOptions& options, const std::string& exr_pa
   // The layout's own limit first (the most tiles an image may have).
   VOX_RETURN_IF_ERROR(CheckTileCount(camera.width, camera.height,
                                      std::clamp(options.tile_size, kMinTileSize, kMaxTileSize)));
+  if (const std::string w = PartCountWarning(camera.width, camera.height, options.tile_size,
+                                              options.part);
+      say && !w.empty())
+    fprintf(options.log, "vox-render: warning: %s\n", w.c_str());
   const int64_t pixels = int64_t(camera.width) * int64_t(camera.height);
   const std::string size = std::to_string(camera.width) + "x" + std::to_string(camera.height);
   if (pixels > kMaxPixelsUnlessAllowed && !options.allow_huge)
@@ -206,11 +210,13 @@ struct FrameOutputs {
 
 // "out.exr" -> "out.%04d.exr", for the message asking for a pattern.
 std::string SuggestPattern(const std::string& path) {
-  const size_t slash = path.find_last_of('/');
-  const size_t dot = path.find_last_of('.');
+  std::string escaped;  // a '%' of the name is written %% in a pattern
+  for (const char c : path) escaped += c == '%' ? std::string("%%") : std::string(1, c);
+  const size_t slash = escaped.find_last_of('/');
+  const size_t dot = escaped.find_last_of('.');
   if (dot == std::string::npos || (slash != std::string::npos && dot < slash))
-    return path + ".%04d";
-  return path.substr(0, dot) + ".%04d" + path.substr(dot);
+    return escaped + ".%04d";
+  return escaped.substr(0, dot) + ".%04d" + escaped.substr(dot);
 }
 
 // Every frame's outputs: patterns where a sequence needs them, each path

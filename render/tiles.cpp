@@ -50,6 +50,18 @@ StatusOr<PartSpec> ParsePartSpec(std::string_view text) {
   return p;
 }
 
+std::string PartCountWarning(int width, int height, int tile, const PartSpec& part) {
+  if (width < 1 || height < 1 || tile < 1) return "";
+  const int64_t tiles = ((int64_t(width) + tile - 1) / tile) * ((int64_t(height) + tile - 1) / tile);
+  if (part.count <= tiles) return "";
+  const int64_t begin = tiles * (part.index - 1) / part.count, end = tiles * part.index / part.count;
+  return "--tiles " + part.ToString() + ": the " + std::to_string(width) + "x" +
+         std::to_string(height) + " image has only " + std::to_string(tiles) + " tiles of " +
+         std::to_string(tile) + " pixels, fewer than the " + std::to_string(part.count) +
+         " parts, so some parts are empty; this part renders " + std::to_string(end - begin) +
+         (end - begin == 1 ? " tile" : " tiles");
+}
+
 TileLayout::TileLayout(int width, int height, int tile)
     : width_(width), height_(height), tile_(tile) {
   nx_ = (width + tile - 1) / tile;

@@ -38,6 +38,11 @@ Status CheckTileCount(int width, int height, int tile);
 // Parses "I/N" with 1 <= I <= N.
 StatusOr<PartSpec> ParsePartSpec(std::string_view text);
 
+// A warning when `part` cuts a width x height image of tile x tile tiles
+// into more parts than it has tiles (some parts, maybe this one, are
+// empty), saying how many tiles it has and which this part renders; "" otherwise.
+std::string PartCountWarning(int width, int height, int tile, const PartSpec& part);
+
 class TileLayout {
  public:
   // REQUIRES: width, height, tile >= 1 and CheckTileCount(width, height, tile).

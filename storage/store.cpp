@@ -124,80 +124,107 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id, con
   return b;
 }
 
-Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
-                       std::unique_ptr<RandomAccessFile> bricks) {
-  const std::string& ipath = index->path();
-  const uint64_t isize = index->size();
+namespace {
+
+// The index file's header and footer, checked to belong to one store.
+struct IndexEnds {
+  FileHeader header;
+  Footer footer;
+};
+
+StatusOr<IndexEnds> ReadIndexEnds(RandomAccessFile& index) {
+  const std::string& ipath = index.path();
+  const uint64_t isize = index.size();
   if (isize < kFileHeaderSize + kFooterSize)
     return CorruptionError("'" + ipath + "' is " + std::to_string(isize) +
                            " bytes: truncated (a store index has at least " +
                            std::to_string(kFileHeaderSize + kFooterSize) + ")");
   uint8_t head[kFileHeaderSize], foot[kFooterSize];
-  VOX_RETURN_IF_ERROR(index->Read(0, kFileHeaderSize, head));
-  VOX_ASSIGN_OR_RETURN(FileHeader ih, DecodeFileHeader(head, kIndexMagic, ipath));
-  VOX_RETURN_IF_ERROR(index->Read(isize - kFooterSize, kFooterSize, foot));
-  auto footer_or = DecodeFooter(foot, ipath);
-  if (!footer_or.ok()) return footer_or.status();
-  const Footer f = *footer_or;
-  if (f.store_id != ih.store_id)
+  VOX_RETURN_IF_ERROR(index.Read(0, kFileHeaderSize, head));
+  IndexEnds e;
+  VOX_ASSIGN_OR_RETURN(e.header, DecodeFileHeader(head, kIndexMagic, ipath));
+  VOX_RETURN_IF_ERROR(index.Read(isize - kFooterSize, kFooterSize, foot));
+  VOX_ASSIGN_OR_RETURN(e.footer, DecodeFooter(foot, ipath));
+  if (e.footer.store_id != e.header.store_id)
     return CorruptionError("'" + ipath + "': header and footer belong to different stores");
-  store_id_ = ih.store_id;
+  return e;
+}
 
-  // Each block: in bounds, checksum, raw codec.
+// Whether block `h` (with its trailer) lies between the index's header and footer.
+bool BlockInFile(const BlockHandle& h, uint64_t isize) {
   const uint64_t blocks_end = isize - kFooterSize;
-  auto in_file = [&](const BlockHandle& h) {
-    return h.offset >= kFileHeaderSize && h.offset <= blocks_end && h.size <= blocks_end - h.offset &&
-           kTrailerSize <= blocks_end - h.offset - h.size;
-  };
-  auto read_block = [&](const BlockHandle& h, const char* what,
-                        std::vector<uint8_t>* out) -> Status {
-    if (!in_file(h))
-      return CorruptionError("'" + ipath + "': " + what + " block [" + std::to_string(h.offset) +
-                             ", +" + std::to_string(h.size) + ") lies outside the file (" +
-                             std::to_string(isize) + " bytes)");
-    out->resize(h.size + kTrailerSize);
-    VOX_RETURN_IF_ERROR(index->Read(h.offset, out->size(), out->data()));
-    {  // the index is small: always verified
-      VOX_ASSIGN_OR_RETURN(uint8_t codec, CheckTrailer(out->data(), h.size, what, ipath, h.offset));
-      if (codec != kCodecRaw)
-        return CorruptionError("'" + ipath + "': " + what + " block has unknown codec " +
-                               std::to_string(codec));
-    }
-    out->resize(h.size);
-    return OkStatus();
-  };
-  // What reading the index takes at its peak: the top's block and its
-  // copy as cells, its traversal form, the top attributes, and a table
-  // read whole (its bytes and rows).
-  if (options_.budget_bytes != 0) {
-    const uint64_t cells = f.top.size / sizeof(Cell);
-    const uint64_t need = f.meta.size + 2 * f.top.size + cells * sizeof(CompactCell) +
-                          2 * f.top_attr.size +
-                          (f.table.size <= options_.whole_table_bytes
-                               ? f.table.size + f.table.size / kTableEntrySize * sizeof(BrickEntry)
-                               : 0);
-    if (need > options_.budget_bytes)
-      return ResourceExhaustedError(
-          "store '" + dir_ + "' needs about " + std::to_string((need >> 20) + 1) +
-          " MiB to open (its resident top of " + std::to_string(cells) +
-          " cells), more than the memory budget of " + std::to_string(options_.budget_bytes >> 20) +
-          " MiB: give the job more memory (--memory-mb, or the job's limit)");
-  }
-  std::vector<uint8_t> meta_b, top_b, attr_b;
-  VOX_RETURN_IF_ERROR(read_block(f.meta, "metadata", &meta_b));
-  VOX_RETURN_IF_ERROR(read_block(f.top, "top octree", &top_b));
-  VOX_RETURN_IF_ERROR(read_block(f.top_attr, "top attributes", &attr_b));
-  if (!in_file(f.table))  // read by TablePages, whole or a page at a time
-    return CorruptionError("'" + ipath + "': brick table block [" + std::to_string(f.table.offset) +
-                           ", +" + std::to_string(f.table.size) + ") lies outside the file (" +
-                           std::to_string(isize) + " bytes)");
-  TableSummary summary;
-  VOX_ASSIGN_OR_RETURN(meta_, DecodeMeta(meta_b.data(), meta_b.size(), ipath, &summary));
-  depth_ = meta_.levels - meta_.brick_level;
-  flags_ = AttrFlags(meta_);
-  auto bad = [&](const std::string& m) { return CorruptionError("'" + ipath + "': " + m); };
+  return h.offset >= kFileHeaderSize && h.offset <= blocks_end && h.size <= blocks_end - h.offset &&
+         kTrailerSize <= blocks_end - h.offset - h.size;
+}
 
-  // The top: size, then structure (every ref in range, bricks only at the brick level).
+Status BlockOutsideFile(const RandomAccessFile& index, const BlockHandle& h, const char* what) {
+  return CorruptionError("'" + index.path() + "': " + what + " block [" +
+                         std::to_string(h.offset) + ", +" + std::to_string(h.size) +
+                         ") lies outside the file (" + std::to_string(index.size()) + " bytes)");
+}
+
+// An index block into *out: in bounds, checksum, raw codec (the index is
+// small: always verified).
+Status ReadIndexBlock(RandomAccessFile& index, const BlockHandle& h, const char* what,
+                      std::vector<uint8_t>* out) {
+  const std::string& ipath = index.path();
+  if (!BlockInFile(h, index.size())) return BlockOutsideFile(index, h, what);
+  out->resize(h.size + kTrailerSize);
+  VOX_RETURN_IF_ERROR(index.Read(h.offset, out->size(), out->data()));
+  VOX_ASSIGN_OR_RETURN(uint8_t codec, CheckTrailer(out->data(), h.size, what, ipath, h.offset));
+  if (codec != kCodecRaw)
+    return CorruptionError("'" + ipath + "': " + what + " block has unknown codec " +
+                           std::to_string(codec));
+  out->resize(h.size);
+  return OkStatus();
+}
+
+// What reading the index takes at its peak: the top's block and its copy
+// as cells, its traversal form, the top attributes, and a table read whole
+// (its bytes and rows); refused beyond the budget.
+Status CheckOpenBudget(const Footer& f, const OpenOptions& options, const std::string& dir) {
+  if (options.budget_bytes == 0) return OkStatus();
+  const uint64_t cells = f.top.size / sizeof(Cell);
+  const uint64_t need = f.meta.size + 2 * f.top.size + cells * sizeof(CompactCell) +
+                        2 * f.top_attr.size +
+                        (f.table.size <= options.whole_table_bytes
+                             ? f.table.size + f.table.size / kTableEntrySize * sizeof(BrickEntry)
+                             : 0);
+  if (need <= options.budget_bytes) return OkStatus();
+  return ResourceExhaustedError(
+      "store '" + dir + "' needs about " + std::to_string((need >> 20) + 1) +
+      " MiB to open (its resident top of " + std::to_string(cells) +
+      " cells), more than the memory budget of " + std::to_string(options.budget_bytes >> 20) +
+      " MiB: give the job more memory (--memory-mb, or the job's limit)");
+}
+
+// The bricks file: header, size, same store as the index.
+Status CheckBrickFile(RandomAccessFile& bricks, const IndexEnds& ends, const std::string& ipath) {
+  const std::string& bpath = bricks.path();
+  const Footer& f = ends.footer;
+  if (bricks.size() < kFileHeaderSize)
+    return CorruptionError("'" + bpath + "' is " + std::to_string(bricks.size()) +
+                           " bytes: truncated (the index expects " +
+                           std::to_string(f.brick_file_size) + ")");
+  uint8_t head[kFileHeaderSize];
+  VOX_RETURN_IF_ERROR(bricks.Read(0, kFileHeaderSize, head));
+  VOX_ASSIGN_OR_RETURN(FileHeader bh, DecodeFileHeader(head, kBrickMagic, bpath));
+  if (bh.store_id != ends.header.store_id)
+    return CorruptionError("'" + bpath + "' belongs to a different store than '" + ipath + "'");
+  if (bricks.size() != f.brick_file_size)
+    return CorruptionError("'" + bpath + "' is " + std::to_string(bricks.size()) +
+                           " bytes; the index expects " + std::to_string(f.brick_file_size) +
+                           (bricks.size() < f.brick_file_size ? " (truncated)" : ""));
+  return OkStatus();
+}
+
+}  // namespace
+
+// The top: size, then structure (every ref in range, bricks only at the
+// brick level); a top-only store's attributes.
+Status StoreImpl::LoadTop(const std::vector<uint8_t>& top_b, std::vector<uint8_t> attr_b,
+                          uint64_t table_size, const std::string& ipath) {
+  auto bad = [&](const std::string& m) { return CorruptionError("'" + ipath + "': " + m); };
   if (top_b.size() != meta_.top_cells * sizeof(Cell))
     return bad("top octree block is " + std::to_string(top_b.size()) + " bytes for " +
                std::to_string(meta_.top_cells) + " cells");
@@ -205,7 +232,7 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   std::memcpy(top_cells.data(), top_b.data(), top_b.size());
   const bool top_only = depth_ == 0;
   if (top_only) {
-    if (meta_.brick_count != 0 || f.table.size != 0) return bad("a top-only store has bricks");
+    if (meta_.brick_count != 0 || table_size != 0) return bad("a top-only store has bricks");
     if (meta_.voxel_count >= kBrickBit) return bad("too many voxels for a top-only store");
     if (attr_b.size() != meta_.voxel_count * AttrBytesPerVoxel(flags_))
       return bad("top attribute block is " + std::to_string(attr_b.size()) + " bytes for " +
@@ -222,25 +249,31 @@ Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
   auto compact = LevelOrderPool(top_cells, meta_.brick_level, !top_only);
   if (!compact.ok()) return compact.status().WithContext("'" + ipath + "': top");
   top_ = std::move(*compact);
-  VOX_RETURN_IF_ERROR(CheckMetaAgainstTop(meta_, top_, ipath));  // bbox vs occupied bricks
+  return CheckMetaAgainstTop(meta_, top_, ipath);  // bbox vs occupied bricks
+}
 
-  // The bricks file: header, size, same store.
-  const std::string& bpath = bricks->path();
-  if (bricks->size() < kFileHeaderSize)
-    return CorruptionError("'" + bpath + "' is " + std::to_string(bricks->size()) +
-                           " bytes: truncated (the index expects " +
-                           std::to_string(f.brick_file_size) + ")");
-  VOX_RETURN_IF_ERROR(bricks->Read(0, kFileHeaderSize, head));
-  VOX_ASSIGN_OR_RETURN(FileHeader bh, DecodeFileHeader(head, kBrickMagic, bpath));
-  if (bh.store_id != ih.store_id)
-    return CorruptionError("'" + bpath + "' belongs to a different store than '" + ipath + "'");
-  if (bricks->size() != f.brick_file_size)
-    return CorruptionError("'" + bpath + "' is " + std::to_string(bricks->size()) +
-                           " bytes; the index expects " + std::to_string(f.brick_file_size) +
-                           (bricks->size() < f.brick_file_size ? " (truncated)" : ""));
+Status StoreImpl::Load(std::unique_ptr<RandomAccessFile> index,
+                       std::unique_ptr<RandomAccessFile> bricks) {
+  const std::string& ipath = index->path();
+  VOX_ASSIGN_OR_RETURN(IndexEnds ends, ReadIndexEnds(*index));
+  const Footer& f = ends.footer;
+  store_id_ = ends.header.store_id;
+  VOX_RETURN_IF_ERROR(CheckOpenBudget(f, options_, dir_));
+  std::vector<uint8_t> meta_b, top_b, attr_b;
+  VOX_RETURN_IF_ERROR(ReadIndexBlock(*index, f.meta, "metadata", &meta_b));
+  VOX_RETURN_IF_ERROR(ReadIndexBlock(*index, f.top, "top octree", &top_b));
+  VOX_RETURN_IF_ERROR(ReadIndexBlock(*index, f.top_attr, "top attributes", &attr_b));
+  if (!BlockInFile(f.table, index->size()))  // read by TablePages, whole or a page at a time
+    return BlockOutsideFile(*index, f.table, "brick table");
+  TableSummary summary;
+  VOX_ASSIGN_OR_RETURN(meta_, DecodeMeta(meta_b.data(), meta_b.size(), ipath, &summary));
+  depth_ = meta_.levels - meta_.brick_level;
+  flags_ = AttrFlags(meta_);
+  VOX_RETURN_IF_ERROR(LoadTop(top_b, std::move(attr_b), f.table.size, ipath));
+  VOX_RETURN_IF_ERROR(CheckBrickFile(*bricks, ends, ipath));
 
   // The brick table: read whole now if small, else a page at a time when used.
-  TablePages::Bounds bounds{&meta_, depth_, f.brick_file_size, ipath, bpath};
+  TablePages::Bounds bounds{&meta_, depth_, f.brick_file_size, ipath, bricks->path()};
   VOX_ASSIGN_OR_RETURN(table_, TablePages::Open(index.get(), f.table, std::move(summary),
                                                 std::move(bounds), options_.whole_table_bytes));
   index_ = std::move(index);

@@ -165,6 +165,11 @@ class StoreImpl : public Store {
   const TablePages& table() const { return *table_; }
 
  private:
+  // Load's check of the top octree (`top_b`) and the top attributes
+  // (`attr_b`) against meta_, into top_ and top_attr_.
+  Status LoadTop(const std::vector<uint8_t>& top_b, std::vector<uint8_t> attr_b,
+                 uint64_t table_size, const std::string& ipath);
+
   StatusOr<std::shared_ptr<const DecodedBrick>> Get(uint32_t id) {
     if (id >= table_->size())
       return InvalidArgumentError("brick " + std::to_string(id) + " does not exist (store '" +

@@ -249,6 +249,15 @@ def test_unknown_option_is_a_type_error(store):
         vox.render(store, threads=True)
 
 
+def test_quiet_takes_a_bool(store, vdb, workdir):
+    # The message a switch's keyword gets, not a cast error.
+    with pytest.raises(TypeError, match=r"^render\(\): quiet takes True or False$"):
+        vox.render(store, quiet="no")
+    with pytest.raises(TypeError, match=r"^ingest\(\): quiet takes True or False$"):
+        vox.ingest(vdb, workdir / "quiet.store", quiet="no")
+    assert not (workdir / "quiet.store").exists()
+
+
 # Issue 28: the keywords are the tools' flags. Each tool's command line and
 # its Python function read one option table (tools/common/options.h); every
 # flag its --help lists is a keyword of the function (None: not given).

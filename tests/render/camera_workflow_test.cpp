@@ -210,6 +210,21 @@ TEST_F(CameraWorkflowTest, CameraJsonRefusals) {
   refuse(R"({"camera_to_world":[1,0,0,0, 0,1,0,0, 0,0,1,0], )" + rest, "camera_to_world");
   refuse(R"({"camera_to_world":[1,0.5,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], )" + rest, "orthogonal");
   refuse(R"({"camera_to_world":[-1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], )" + rest, "mirrors");
+  // A rotation scaled by 1e200: its axes' lengths overflow, which is said
+  // (not "mirrors", which it does not).
+  {
+    auto c = ParseCamera(R"({"camera_to_world":[1e200,0,0,0, 0,1e200,0,0, 0,0,1e200,0, 0,0,0,1], )" +
+                             rest, "c.json");
+    ASSERT_FALSE(c.ok());
+    EXPECT_NE(c.status().message().find(
+                  "field 'camera_to_world' has an axis too long to normalise (its length "
+                  "overflows)"),
+              std::string::npos) << c.status().ToString();
+    EXPECT_EQ(c.status().message().find("mirrors"), std::string::npos) << c.status().ToString();
+  }
+  // Scaled within range, it is the rotation.
+  EXPECT_TRUE(ParseCamera(R"({"camera_to_world":[1e100,0,0,0, 0,1e100,0,0, 0,0,1e100,0, 0,0,0,1], )" +
+                              rest, "c.json").ok());
   refuse(R"({"camera_to_world":[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,1,1], )" + rest, "last row");
   refuse(R"({"position":[0,0,1], "look_at":[0,0,0], "fov_axis":"z", )" + rest, "fov_axis");
   refuse(R"({"position":[0,0,1], "look_at":[0,0,0], "projection":"orthographic", "ortho_width":2,

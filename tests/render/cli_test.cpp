@@ -225,12 +225,56 @@ TEST_F(CliTest, FogStoreTransmittanceIsExponential) {
   EXPECT_EQ(stats["rays"]["volume"], 0);
 }
 
+// More parts than the image has tiles: legal (a part may be empty) but
+// surely a mistake, so the render warns, saying how many tiles there are.
+TEST_F(CliTest, TilesBeyondTheTileCountWarn) {
+  std::string cam = Write("cam.json", kCam);  // 64x48: 4x3 tiles of 16 pixels
+  RunResult empty = testing::RunCommand(
+      Render("--cam " + cam + " -o " + Path("e.exr") + " --tile-size 16 --tiles 2/100"));
+  ASSERT_EQ(empty.code, 0) << empty.output;
+  EXPECT_NE(empty.output.find("vox-render: warning: --tiles 2/100: the 64x48 image has only 12 "
+                              "tiles of 16 pixels, fewer than the 100 parts, so some parts are "
+                              "empty; this part renders 0 tiles\n"),
+            std::string::npos) << empty.output;
+  RunResult last = testing::RunCommand(
+      Render("--cam " + cam + " -o " + Path("l.exr") + " --tile-size 16 --tiles 100/100"));
+  ASSERT_EQ(last.code, 0) << last.output;
+  EXPECT_NE(last.output.find("this part renders 1 tile\n"), std::string::npos) << last.output;
+  // As many parts as tiles: no warning.
+  RunResult fits = testing::RunCommand(
+      Render("--cam " + cam + " -o " + Path("f.exr") + " --tile-size 16 --tiles 12/12"));
+  ASSERT_EQ(fits.code, 0) << fits.output;
+  EXPECT_EQ(fits.output.find("warning"), std::string::npos) << fits.output;
+}
+
+// A sequence's output must be a frame pattern; the one suggested for a name
+// holding a '%' is one the render then takes.
+TEST_F(CliTest, SuggestedFramePatternIsAccepted) {
+  std::string cam = Write("cam.json", kCam);
+  RunResult r = testing::RunCommand(
+      Render("--cam " + cam + " --turntable 2 --quiet -o '" + Path("tt.%s.exr") + "'"));
+  EXPECT_EQ(r.code, 1) << r.output;
+  const std::string suggested = Path("tt.%%s.%04d.exr");
+  EXPECT_NE(r.output.find("give a frame pattern such as " + suggested + " "), std::string::npos)
+      << r.output;
+  RunResult ok = testing::RunCommand(
+      Render("--cam " + cam + " --turntable 2 --quiet -o '" + suggested + "'"));
+  ASSERT_EQ(ok.code, 0) << ok.output;
+  EXPECT_TRUE(fs::exists(Path("tt.%s.0001.exr")));
+  EXPECT_TRUE(fs::exists(Path("tt.%s.0002.exr")));
+}
+
 TEST_F(CliTest, BadFlagsAndMissingStore) {
   EXPECT_EQ(testing::RunCommand(Render("--tiles 4/3")).code, 2);
   EXPECT_EQ(testing::RunCommand(Render("--tile-size x")).code, 2);
   RunResult tile = testing::RunCommand(Render("--tile-size 0 --quiet -o " + Path("t.exr")));
-  EXPECT_EQ(tile.code, 1);
-  EXPECT_NE(tile.output.find("tile size 0"), std::string::npos) << tile.output;
+  EXPECT_EQ(tile.code, 2);  // a bad value (docs/usage.md)
+  EXPECT_NE(tile.output.find("--tile-size '0': expected a tile side in pixels, 8..4096"),
+            std::string::npos) << tile.output;
+  EXPECT_FALSE(fs::exists(Path("t.exr")));
+  RunResult split_syntax = testing::RunCommand(Render("--split abc --quiet -o " + Path("t.exr")));
+  EXPECT_EQ(split_syntax.code, 2);
+  EXPECT_FALSE(fs::exists(Path("t.exr")));
   EXPECT_EQ(testing::RunCommand(Render("--bogus")).code, 2);
   RunResult split = testing::RunCommand(Render("--split 4+4 --quiet -o " + Path("s.exr")));
   EXPECT_EQ(split.code, 1);

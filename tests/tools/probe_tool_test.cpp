@@ -69,6 +69,31 @@ TEST(ProbeTool, MalformedLinesAreNamedAndKeepTheOutputAligned) {
   EXPECT_NE(r.err.find("stdin line 4: ray direction is zero"), std::string::npos) << r.err;
 }
 
+// A ray the tracer refuses is described as it was given (index
+// coordinates), not shifted into the store's grid.
+TEST(ProbeTool, RefusedRaysAreNamedInIndexCoordinates) {
+  auto dir = std::filesystem::temp_directory_path() / ("vox_probe_nan_" + std::to_string(getpid()));
+  std::filesystem::remove_all(dir);
+  StoreMeta meta;
+  meta.levels = 6;
+  meta.brick_level = 3;
+  meta.origin = {-64, 10, 1000};
+  meta.source_file = "one voxel";
+  auto w = StoreWriter::Create(dir.string(), meta, WriteOptions{});
+  ASSERT_TRUE(w.ok()) << w.status().ToString();
+  BrickVoxel v;
+  ASSERT_TRUE((*w)->AddBrick({1, 1, 1}, {v}).ok());
+  ASSERT_TRUE((*w)->Finish().ok());
+  Result r = RunProbe(dir.string(), "1 2 3 nan 0 0\n1 2 3 0 0 0\n");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.out, "error\nerror\n");
+  EXPECT_NE(r.err.find("stdin line 1: ray has a non-finite component: origin (1, 2, 3) "
+                       "direction (nan, 0, 0)"),
+            std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("stdin line 2: ray direction is zero"), std::string::npos) << r.err;
+  std::filesystem::remove_all(dir);
+}
+
 TEST(ProbeTool, BadFlagsAndMissingStore) {
   EXPECT_EQ(RunProbe("--generate blob:64", "").exit_code, 2);
   EXPECT_EQ(RunProbe("--generate sphere:64 --split 3+4", "").exit_code, 2);

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -29,10 +30,11 @@ const std::vector<Tool>& Tools() {
        "--zstd-level", "--quiet"},
       {"vox-render", VOX_RENDER_BIN,
        {"Camera and scene", "Frame sequences", "Output", "Level of detail", "Memory and I/O",
-        "Tracing and parallel runs", "General"},
+        "Tracing", "Parallel runs", "General"},
        "--threads", "--quiet"},
-      {"vox-probe", VOX_PROBE_BIN, {"Source", "Tracing", "Level of detail", "Memory", "General"},
-       "--cache-mb", "--stats"},
+      {"vox-probe", VOX_PROBE_BIN,
+       {"Source", "Tracing", "Level of detail", "Memory and I/O", "General"}, "--cache-mb",
+       "--stats"},
       {"vox-gen", VOX_GEN_BIN, {"Shape and size", "Store", "Run", "General"}, "--size", "--quiet"},
       {"vox-info", VOX_INFO_BIN, {"Verification", "General"}, "--cache-mb", "--verify"},
       {"vox-merge", VOX_MERGE_BIN, {"Output", "General"}, "--preview", "--quiet"},
@@ -100,6 +102,83 @@ TEST(ToolCommandLine, BadCommandLinesPrintOneLineAndExit2) {
     ExpectUsageError(t, "x " + t.switch_flag + "=1",
                      t.switch_flag + " is a switch and takes no value");
   }
+}
+
+// An empty value is refused naming its flag, in both spellings: "--stats="
+// never takes the next argument as its value.
+TEST(ToolCommandLine, EmptyValuesAreRefusedNamingTheFlag) {
+  const std::pair<std::string, OptionTable> tables[] = {
+      {"vox-ingest", IngestOptionTable()},
+      {"vox-render", RenderOptionTable()},
+      {"vox-probe", ProbeOptionTable()},
+  };
+  for (const auto& [name, table] : tables) {
+    const Tool& t = *std::find_if(Tools().begin(), Tools().end(),
+                                  [&](const Tool& x) { return x.name == name; });
+    for (const OptionSpec& o : table) {
+      if (o.arity != FlagArity::kValue) continue;
+      const std::string message =
+          std::string(o.name) + ": an empty value; expected " + o.value_name;
+      if (std::string(o.name).rfind("--", 0) == 0)
+        ExpectUsageError(t, std::string("x ") + o.name + "= --quiet", message);
+      ExpectUsageError(t, std::string("x ") + o.name + " '' --quiet", message);
+    }
+  }
+  // The reports' cases: no file named after the next argument, no
+  // misleading message about the stores.
+  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) /
+                                    ("tool_cli_empty_" + std::to_string(getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  for (const auto& [args, message] : std::vector<std::pair<std::string, std::string>>{
+           {"s --save-cam= --quiet", "--save-cam: an empty value; expected cam.json"},
+           {"s --stats= -o b.exr", "--stats: an empty value; expected stats.json"}}) {
+    const testing::CommandResult r = testing::RunCommand(
+        "cd " + dir.string() + " && " + VOX_RENDER_BIN + " " + args + " </dev/null");
+    EXPECT_EQ(r.code, 2) << args << "\n" << r.output;
+    EXPECT_EQ(r.output, "vox-render: " + message + "\nsee vox-render --help\n") << args;
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(dir));
+  std::filesystem::remove_all(dir);
+}
+
+// Absurd values are refused with the valid range (exit 2, before any work).
+TEST(ToolCommandLine, AbsurdValuesAreRefusedWithTheirRange) {
+  const Tool& ingest = Tools()[0];
+  const Tool& render = Tools()[1];
+  const Tool& probe = Tools()[2];
+  ExpectUsageError(ingest, "in.vdb out --isovalue 1e308",
+                   "--isovalue 1e308: outside a grid value's range, -3.4e38..3.4e38 (a float's)");
+  ExpectUsageError(ingest, "in.vdb out --threshold -1e39",
+                   "--threshold -1e39: outside a grid value's range, -3.4e38..3.4e38 (a float's)");
+  ExpectUsageError(render, "s --tiles 1/1000000000",
+                   "--tiles '1/1000000000': N must be in 1..4194304, the most tiles an image has");
+  for (const Tool* t : {&render, &probe})
+    ExpectUsageError(*t, "s --cache-mb 99999999",
+                     "--cache-mb '99999999': expected a whole number of MiB in 1..4194304 (4 TiB)");
+  // More memory than the machine has, RAM and swap together: the range is this machine's.
+  for (const Tool* t : {&ingest, &render, &probe}) {
+    const ToolRun r = RunTool(*t, "s --memory-mb 99999999999");
+    EXPECT_EQ(r.code, 2) << t->name << "\n" << r.err;
+    const std::string head = t->name + ": --memory-mb '99999999999': 99999999999 MiB is more "
+                             "memory than this machine has (";
+    EXPECT_EQ(r.err.rfind(head, 0), 0u) << r.err;
+    EXPECT_NE(r.err.find(" MiB of RAM and swap); expected 1.."), std::string::npos) << r.err;
+  }
+}
+
+// The values docs/usage.md calls bad flags exit 2, saying what is expected.
+TEST(ToolCommandLine, BadTileSizeAndSplitAreUsageErrors) {
+  const Tool& render = Tools()[1];
+  const Tool& probe = Tools()[2];
+  for (const char* size : {"0", "4", "5000"})
+    ExpectUsageError(render, std::string("s --tile-size ") + size,
+                     std::string("--tile-size '") + size + "': expected a tile side in pixels, 8..4096");
+  for (const Tool* t : {&render, &probe})
+    for (const char* split : {"abc", "3+", "+3", "3+x", "1234"})
+      ExpectUsageError(*t, std::string("s --split ") + split,
+                       std::string("--split '") + split +
+                           "': expected N1+N2 or N1, whole numbers of levels (e.g. 6+5)");
 }
 
 // --flag=value is --flag value: the same value checks, the same message.

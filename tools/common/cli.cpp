@@ -142,6 +142,21 @@ FlagArity ArityOf(OptionTable table, std::string_view flag) {
 std::optional<int> ParseCommandLine(const CommandLineSpec& spec, int argc,
                                     const char* const* argv, const ApplyOption& apply,
                                     std::vector<std::string>* positional) {
+  // An empty value ("--stats=", or "--stats ''") names no value: refused
+  // here, before CLI11, which would take the next argument for "--stats=".
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view arg = argv[i];
+    if (arg == "--") break;
+    const size_t eq = arg.find('=');
+    const bool empty_inline = arg.rfind("--", 0) == 0 && eq != std::string_view::npos &&
+                              eq + 1 == arg.size();
+    const std::string_view flag = empty_inline ? arg.substr(0, eq) : arg;
+    if (ArityOf(spec.options, flag) != FlagArity::kValue) continue;
+    if (empty_inline || (i + 1 < argc && argv[i + 1][0] == '\0'))
+      return UsageError(spec.program, std::string(flag) + ": an empty value; expected " +
+                                          FindOption(spec.options, flag)->value_name);
+    ++i;  // the value, whatever it looks like
+  }
   const std::unique_ptr<CLI::App> app = BuildApp(spec, apply, positional);
   try {
     app->parse(argc, argv);

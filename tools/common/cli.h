@@ -9,7 +9,8 @@
 // What every tool's command line does:
 //   --flag value, --flag=value, -o value; repeated flags are applied in order
 //   (the last value wins unless the apply function says otherwise);
-//   a switch takes no value (--quiet=1 is refused);
+//   a switch takes no value (--quiet=1 is refused); a value is never empty
+//   (--stats= and --stats "" are refused, naming the flag);
 //   -h, --help: the help, grouped by topic, on stdout; exit 0;
 //   --version: ToolMain's (tool_main.h), wherever it stands;
 //   a bad command line: one line "vox-x: MESSAGE" and "see vox-x --help" on

@@ -1,5 +1,8 @@
 #include "tools/common/options.h"
 
+#include <sys/sysinfo.h>
+
+#include <cfloat>
 #include <climits>
 #include <cmath>
 #include <variant>
@@ -7,7 +10,9 @@
 #include "core/shapes.h"
 #include "render/camera.h"
 #include "render/frame_sequence.h"
+#include "render/limits.h"
 #include "render/lod.h"
+#include "render/tiles.h"
 #include "storage/lod.h"
 #include "core/util/memory_budget.h"
 #include "storage/store.h"
@@ -30,6 +35,86 @@ constexpr FlagArity kSwitch = FlagArity::kSwitch, kValue = FlagArity::kValue;
 constexpr const char* kLodGroup = "Level of detail";
 constexpr const char* kOutputGroup = "Output";
 constexpr const char* kHidden = "";
+
+// The flags vox-render and vox-probe share: one entry each, in both tables,
+// applied by ApplySharedFlag.
+constexpr const char* kTracingGroup = "Tracing";
+constexpr const char* kMemoryGroup = "Memory and I/O";
+constexpr OptionSpec kSplitOption{"--split", FlagArity::kValue, "N1+N2|N1", kTracingGroup,
+                                  "first-step levels of the two-step traversal (N1, or N1+N2 = "
+                                  "levels)"};
+constexpr OptionSpec kSingleStepOption{"--single-step", FlagArity::kSwitch, "", kTracingGroup,
+                                       "one DDA step over the whole grid (grids of at most 2^20)"};
+constexpr OptionSpec kMemoryOption{
+    "--memory-mb", FlagArity::kValue, "M", kMemoryGroup,
+    "memory the whole process may use, in MiB (or with a unit: 2G); default: the memory "
+    "cgroup's limit (Slurm --mem, a container), or 3/4 of MemAvailable if smaller; the brick "
+    "cache, pinned bricks and buffers are sized within it (1/8 kept as headroom)"};
+constexpr OptionSpec kCacheOption{
+    "--cache-mb", FlagArity::kValue, "M", kMemoryGroup,
+    "decompressed brick cache, inside the memory budget (default: what the budget leaves)"};
+
+// A --memory-mb value (ParseMemorySize) that the machine can hold: at most
+// its RAM and swap together, the most any budget could use.
+StatusOr<uint64_t> ParseMemoryFlag(const std::string& flag, const std::string& v) {
+  VOX_ASSIGN_OR_RETURN(const uint64_t bytes, ParseMemorySize(flag, v));
+  struct sysinfo si;
+  if (sysinfo(&si) != 0) return bytes;
+  const uint64_t machine = (uint64_t(si.totalram) + uint64_t(si.totalswap)) * si.mem_unit;
+  if (machine == 0 || bytes <= machine) return bytes;
+  return InvalidArgumentError(flag + " '" + v + "': " + std::to_string(bytes >> 20) +
+                              " MiB is more memory than this machine has (" +
+                              std::to_string(machine >> 20) +
+                              " MiB of RAM and swap); expected 1.." +
+                              std::to_string(machine >> 20) + " MiB");
+}
+
+// The largest brick cache --cache-mb takes, in MiB (4 TiB).
+constexpr int64_t kMaxCacheMb = int64_t(1) << 22;
+
+// The fields of vox-render's and vox-probe's options the shared flags set.
+struct SharedFields {
+  std::string* split;
+  bool* single_step;
+  uint64_t* memory_bytes;
+  size_t* cache_mb;
+};
+
+// "N1" or "N1+N2", whole numbers: the form ParseSplit (core/tracer.h) reads
+// once the store's levels are known.
+bool SplitSyntaxOk(const std::string& v) {
+  const size_t plus = v.find('+');
+  auto number = [](const std::string& s) {
+    return !s.empty() && s.size() <= 3 && s.find_first_not_of("0123456789") == std::string::npos;
+  };
+  return number(v.substr(0, plus)) && (plus == std::string::npos || number(v.substr(plus + 1)));
+}
+
+// Applies a flag of both tools; nullopt for any other flag.
+std::optional<Status> ApplySharedFlag(const SharedFields& f, const std::string& a,
+                                      const std::string& v) {
+  if (a == "--single-step") {
+    *f.single_step = true;
+  } else if (a == "--split") {
+    if (!SplitSyntaxOk(v))
+      return InvalidArgumentError("--split '" + v + "': expected N1+N2 or N1, whole numbers of "
+                                  "levels (e.g. 6+5)");
+    *f.split = v;
+  } else if (a == "--memory-mb") {
+    StatusOr<uint64_t> bytes = ParseMemoryFlag(a, v);
+    if (!bytes.ok()) return bytes.status();
+    *f.memory_bytes = *bytes;
+  } else if (a == "--cache-mb") {
+    int64_t mb = 0;
+    if (!ParseInt(v, 1, kMaxCacheMb, &mb))
+      return InvalidArgumentError("--cache-mb '" + v + "': expected a whole number of MiB in 1.." +
+                                  std::to_string(kMaxCacheMb) + " (4 TiB)");
+    *f.cache_mb = size_t(mb);
+  } else {
+    return std::nullopt;
+  }
+  return OkStatus();
+}
 
 constexpr const char* kInputGroup = "Input grid";
 constexpr const char* kStoreGroup = "Store";
@@ -84,7 +169,7 @@ Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::str
       return InvalidArgumentError("--max-voxels " + v + ": must be a whole number of voxels (1e10 is fine)");
     c->limits.max_tile_voxels = uint64_t(d);
   } else if (flag == "--memory-mb") {
-    VOX_ASSIGN_OR_RETURN(o.memory_bytes, ParseMemorySize("--memory-mb", v));
+    VOX_ASSIGN_OR_RETURN(o.memory_bytes, ParseMemoryFlag(flag, v));
   } else if (flag == "--grid") {
     o.grid_name = v;
   } else if (flag == "--levels") {
@@ -98,6 +183,11 @@ Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::str
   } else if (flag == "--isovalue" || flag == "--threshold") {
     double d;
     if (!ParseDouble(v, &d)) return InvalidArgumentError(flag + " " + v + ": not a finite number");
+    // Grid values are floats (or doubles read as such): beyond a float's
+    // range every active voxel, or none, would be occupied.
+    if (std::fabs(d) > FLT_MAX)
+      return InvalidArgumentError(flag + " " + v + ": outside a grid value's range, -3.4e38.." +
+                                  "3.4e38 (a float's)");
     (flag == "--isovalue" ? o.isovalue : o.threshold) = d;
   } else if (flag == "--threads" || flag == "--zstd-level") {
     if (!ParseInt(v, -1000000, 1000000, flag == "--threads" ? &o.threads : &o.zstd_level))
@@ -123,8 +213,7 @@ namespace {
 
 constexpr const char* kCameraGroup = "Camera and scene";
 constexpr const char* kFramesGroup = "Frame sequences";
-constexpr const char* kRenderMemoryGroup = "Memory and I/O";
-constexpr const char* kTracingGroup = "Tracing and parallel runs";
+constexpr const char* kPartsGroup = "Parallel runs";
 
 constexpr OptionSpec kRenderOptions[] = {
     {"--cam", kValue, "cam.json", kCameraGroup,
@@ -177,35 +266,29 @@ constexpr OptionSpec kRenderOptions[] = {
      "with level of detail, a coarse stop next to a miss is shaded again from GxG sub-pixel rays "
      "with cones G times narrower, so its alpha is the covered fraction (default 4; 0: coarse "
      "silhouettes stay whole cells)"},
-    {"--memory-mb", kValue, "M", kRenderMemoryGroup,
-     "memory the whole process may use, in MiB (or with a unit: 2G); default: the memory "
-     "cgroup's limit (Slurm --mem, a container), or 3/4 of MemAvailable if smaller; the brick "
-     "cache, pinned bricks and buffers are sized within it (1/8 kept as headroom)"},
-    {"--cache-mb", kValue, "M", kRenderMemoryGroup,
-     "decompressed brick cache, inside the memory budget (default: what the budget leaves)"},
-    {"--prefetch", kSwitch, "", kRenderMemoryGroup,
+    kMemoryOption,
+    kCacheOption,
+    {"--prefetch", kSwitch, "", kMemoryGroup,
      "read bricks in the background: the next tiles' first bricks (exact frames only), and a "
      "pixel's missing brick while other pixels are shaded (same image; off by default: cold frames "
      "wait only for the disk without it, and its threads cost CPU)"},
-    {"--io-threads", kValue, "N", kRenderMemoryGroup,
+    {"--io-threads", kValue, "N", kMemoryGroup,
      "background reader threads of --prefetch (default 8; refused without --prefetch, where the "
      "render threads read)"},
-    {"--no-read-windows", kSwitch, "", kRenderMemoryGroup,
+    {"--no-read-windows", kSwitch, "", kMemoryGroup,
      "read each brick record alone, not with its file neighbours (by default a miss reads the "
      "window of records around it, up to 1 MiB, kept compressed in 1/8 of the brick cache, at "
      "most 64 MiB)"},
     {"--read-windows", kSwitch, "", kHidden, "the default: read windows of records"},
     {"--no-prefetch", kSwitch, "", kHidden, "removed: refused with a message"},
-    {"--split", kValue, "N1+N2|N1", kTracingGroup,
-     "first-step levels of the two-step traversal (N1, or N1+N2 = levels)"},
-    {"--single-step", kSwitch, "", kTracingGroup,
-     "one DDA step over the whole grid (grids of at most 2^20)"},
+    kSplitOption,
+    kSingleStepOption,
     {"--no-beam", kSwitch, "", kTracingGroup,
      "trace every primary ray from its start (no beam start distances; the same image, slower)"},
     {"--beam", kSwitch, "", kHidden, "the default: beam start distances"},
-    {"--threads", kValue, "N", kTracingGroup, "render threads (default: all cores)"},
-    {"--tile-size", kValue, "T", kTracingGroup, "tile side in pixels (default 64)"},
-    {"--tiles", kValue, "I/N", kTracingGroup,
+    {"--threads", kValue, "N", kPartsGroup, "render threads (default: all cores)"},
+    {"--tile-size", kValue, "T", kPartsGroup, "tile side in pixels, 8..4096 (default 64)"},
+    {"--tiles", kValue, "I/N", kPartsGroup,
      "render only part I (1-based) of N; assemble the parts with vox-merge (a part holds only "
      "its tiles: it is for vox-merge, not other EXR tools)"},
 };
@@ -215,11 +298,12 @@ constexpr OptionSpec kRenderOptions[] = {
 OptionTable RenderOptionTable() { return kRenderOptions; }
 
 Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::string& v) {
-  if (v.empty() && OneOf(a, {"--cam", "--scene", "-o", "--preview", "--stats"}))
+  if (v.empty() && OneOf(a, {"--cam", "--scene", "-o", "--preview", "--stats", "--save-cam"}))
     return InvalidArgumentError(a + " '': an empty path names no file");
-  if (a == "--single-step") {
-    o->single_step = true;
-  } else if (a == "--quiet") {
+  if (auto shared = ApplySharedFlag({&o->split, &o->single_step, &o->memory_bytes, &o->cache_mb},
+                                    a, v))
+    return *shared;
+  if (a == "--quiet") {
     o->quiet = true;
   } else if (a == "--prefetch") {
     o->prefetch = true;
@@ -253,25 +337,21 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->exr_path = v;
   } else if (a == "--preview") {
     o->preview_path = v;
-  } else if (a == "--split") {
-    o->split = v;
   } else if (a == "--stats") {
     o->stats_path = v;
-  } else if (a == "--cache-mb") {
-    int mb = 0;
-    if (!ParseInt(v, 1, 1 << 22, &mb))
-      return InvalidArgumentError("--cache-mb '" + v + "': expected a positive integer");
-    o->cache_mb = size_t(mb);
-  } else if (a == "--memory-mb") {
-    VOX_ASSIGN_OR_RETURN(o->memory_bytes, ParseMemorySize("--memory-mb", v));
   } else if (a == "--threads") {
     if (!ParseInt(v, 0, kMaxThreads, &o->threads))
       return InvalidArgumentError("--threads '" + v + "': expected 0.." + std::to_string(kMaxThreads));
   } else if (a == "--tile-size") {
-    if (!ParseInt(v, INT_MIN, INT_MAX, &o->tile_size))
-      return InvalidArgumentError("--tile-size '" + v + "': expected an integer");
+    if (!ParseInt(v, kMinTileSize, kMaxTileSize, &o->tile_size))
+      return InvalidArgumentError("--tile-size '" + v + "': expected a tile side in pixels, " +
+                                  std::to_string(kMinTileSize) + ".." +
+                                  std::to_string(kMaxTileSize));
   } else if (a == "--tiles") {
     VOX_ASSIGN_OR_RETURN(o->part, ParsePartSpec(v));
+    if (o->part.count > kMaxTiles)  // more parts than any image has tiles
+      return InvalidArgumentError("--tiles '" + v + "': N must be in 1.." +
+                                  std::to_string(kMaxTiles) + ", the most tiles an image has");
   } else if (a == "--layers") {
     for (const std::string& item : SplitList(v)) {
       if (item == "normal")
@@ -317,8 +397,6 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
 namespace {
 
 constexpr const char* kSourceGroup = "Source";
-constexpr const char* kProbeTracingGroup = "Tracing";
-constexpr const char* kProbeMemoryGroup = "Memory";
 
 constexpr OptionSpec kProbeOptions[] = {
     {"--generate", kValue, "SHAPE", kSourceGroup,
@@ -326,15 +404,14 @@ constexpr OptionSpec kProbeOptions[] = {
      "per axis), corner:L (2^L grid)"},
     {"--brick-level", kValue, "L", kSourceGroup,
      "the generated shape's brick level (levels per brick; default: its levels - 5, at least 1)"},
-    {"--tracer", kValue, "render|long-double", kProbeTracingGroup,
+    {"--tracer", kValue, "render|long-double", kTracingGroup,
      "render (default) answers as vox-render traces (double set-up, the store's occupied box); "
      "long-double with a long-double set-up (docs/accuracy.md)"},
-    {"--split", kValue, "N1+N2|N1", kProbeTracingGroup,
-     "first-step levels of the two-step traversal (N1, or N1+N2 = levels)"},
-    {"--single-step", kSwitch, "", kProbeTracingGroup, "one DDA step over the whole grid"},
-    {"--fixed", kValue, "auto|64|128", kProbeTracingGroup,
+    kSplitOption,
+    kSingleStepOption,
+    {"--fixed", kValue, "auto|64|128", kTracingGroup,
      "fixed-point word (auto: 64 up to 2^26 grids, else 128)"},
-    {"--stats", kSwitch, "", kProbeTracingGroup, "print the traversal counters on stderr"},
+    {"--stats", kSwitch, "", kTracingGroup, "print the traversal counters on stderr"},
     {"--lod", kValue, "F", kLodGroup,
      "stop at the first occupied cell of the store's level-of-detail pyramid whose size is at "
      "most F times the ray's cone width (W + R t |dir| voxels at t); prints 'lod L i j k t' for "
@@ -343,11 +420,8 @@ constexpr OptionSpec kProbeOptions[] = {
      "the cone's spread in radians: its width grows by R t |dir| voxels (required by --lod)"},
     {"--cone-width", kValue, "W", kLodGroup,
      "the cone's width at the ray's origin, in voxels (default 0; with --lod)"},
-    {"--memory-mb", kValue, "M", kProbeMemoryGroup,
-     "memory the process may use, in MiB (or 2G); default: the memory cgroup's limit, or 3/4 of "
-     "MemAvailable"},
-    {"--cache-mb", kValue, "M", kProbeMemoryGroup,
-     "the brick cache inside the memory budget (default: what the budget leaves)"},
+    kMemoryOption,
+    kCacheOption,
 };
 
 }  // namespace
@@ -355,9 +429,10 @@ constexpr OptionSpec kProbeOptions[] = {
 OptionTable ProbeOptionTable() { return kProbeOptions; }
 
 Status ApplyProbeFlag(ProbeOptions* o, const std::string& a, const std::string& v) {
-  if (a == "--single-step") {
-    o->single_step = true;
-  } else if (a == "--stats") {
+  if (auto shared = ApplySharedFlag({&o->split, &o->single_step, &o->memory_bytes, &o->cache_mb},
+                                    a, v))
+    return *shared;
+  if (a == "--stats") {
     o->stats = true;
   } else if (a == "--generate") {
     o->generate = v;
@@ -365,10 +440,6 @@ Status ApplyProbeFlag(ProbeOptions* o, const std::string& a, const std::string& 
     if (v != "render" && v != "long-double")
       return InvalidArgumentError("--tracer '" + v + "': expected render or long-double");
     o->tracer = v;
-  } else if (a == "--split") {
-    o->split = v;
-  } else if (a == "--memory-mb") {
-    VOX_ASSIGN_OR_RETURN(o->memory_bytes, ParseMemorySize("--memory-mb", v));
   } else if (a == "--lod") {
     VOX_ASSIGN_OR_RETURN(o->lod, ParseLodFactor(a, v));
   } else if (a == "--cone-rad" || a == "--cone-width") {
@@ -376,16 +447,14 @@ Status ApplyProbeFlag(ProbeOptions* o, const std::string& a, const std::string& 
     if (!ParseDouble(v, &d) || d < 0)
       return InvalidArgumentError(a + " '" + v + "': expected a finite number >= 0");
     (a == "--cone-rad" ? o->cone_rad : o->cone_width) = d;
-  } else if (a == "--brick-level" || a == "--cache-mb" || a == "--fixed") {
+  } else if (a == "--brick-level" || a == "--fixed") {
     int64_t n = 0;
     if (a == "--fixed" && v == "auto") {
       o->fixed = 0;
-    } else if (!ParseInt(v, 0, a == "--cache-mb" ? INT64_MAX >> 20 : INT32_MAX, &n)) {
+    } else if (!ParseInt(v, 0, INT32_MAX, &n)) {
       return InvalidArgumentError(a + ": '" + v + "' is not a non-negative integer");
     } else if (a == "--brick-level") {
       o->brick_level = int(n);
-    } else if (a == "--cache-mb") {
-      o->cache_mb = size_t(n);
     } else {
       o->fixed = int(n);
     }

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <variant>
 
+#include "core/ray.h"
 #include "core/shapes.h"
 #include "render/camera.h"
 #include "render/lod.h"
@@ -134,6 +135,7 @@ StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
 }
 
 StatusOr<std::optional<Hit>> Prober::Trace(const Ray& index_ray, TraceCounters* counters) const {
+  VOX_RETURN_IF_ERROR(ValidateRay(index_ray));  // refused in the caller's coordinates
   Ray r = index_ray;
   r.origin -= glm::dvec3(impl_->origin);  // index space -> grid space
   auto hit = std::visit([&](const auto& t) { return t.FirstHit(r, counters); }, impl_->tracer);
@@ -146,6 +148,7 @@ bool Prober::lod() const { return impl_->lod.has_value(); }
 StatusOr<std::optional<Hit>> Prober::TraceLod(const Ray& index_ray, TraceCounters* counters,
                                               LodCounters* lc, int* level) const {
   *level = 0;
+  VOX_RETURN_IF_ERROR(ValidateRay(index_ray));  // refused in the caller's coordinates
   Ray r = index_ray;
   r.origin -= glm::dvec3(impl_->origin);
   const Cone cone{impl_->cone_width, impl_->cone_rad * std::sqrt(glm::dot(r.dir, r.dir))};

@@ -12,6 +12,7 @@
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
 
+#include "ingest/placement.h"
 #include "storage/lod.h"
 #include "tools/gen/shapes.h"
 
@@ -174,30 +175,18 @@ class StoreOccupancy {
 
 StatusOr<Levels> ChooseLevels(std::string_view text, int n) {
   Levels l;
-  if (text == "auto") {
+  // The syntax and the limits are vox-ingest's (ingest/placement.h).
+  VOX_ASSIGN_OR_RETURN(const LevelsChoice choice, ParseLevels(text, /*min_brick_depth=*/0));
+  if (choice.automatic) {
     l.brick_depth = std::min(5, n - 1);
     l.brick_level = n - l.brick_depth;
     return l;
   }
+  l.brick_level = choice.brick_level;
+  l.brick_depth = choice.brick_depth;
   auto bad = [&](const std::string& why) {
     return InvalidArgumentError("--levels " + std::string(text) + ": " + why);
   };
-  size_t plus = text.find('+');
-  if (plus == std::string_view::npos)
-    return bad("expected auto or N1+N2 (resident levels + brick levels), e.g. 8+5");
-  auto num = [](std::string_view s, int* out) {
-    if (s.empty() || s.size() > 2) return false;
-    int v = 0;
-    for (char ch : s) {
-      if (ch < '0' || ch > '9') return false;
-      v = v * 10 + (ch - '0');
-    }
-    *out = v;
-    return true;
-  };
-  if (!num(text.substr(0, plus), &l.brick_level) || !num(text.substr(plus + 1), &l.brick_depth))
-    return bad("expected auto or N1+N2 with whole numbers, e.g. 8+5");
-  if (l.brick_level < 1) return bad("N1 must be at least 1");
   if (l.brick_depth > kMaxBrickDepth)
     return bad("bricks of more than " + std::to_string(kMaxBrickDepth) +
                " levels would not keep memory bounded");
@@ -237,15 +226,12 @@ std::string CanonicalOptions(const GenerateOptions& o) {
          " --normal-bits " + std::to_string(o.normal_bits);
 }
 
-StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgress& progress) {
-  const double t0 = Now();
-  VOX_RETURN_IF_ERROR(ValidateOptions(o));
-  const int n = Log2Exact(o.size);
-  VOX_ASSIGN_OR_RETURN(Levels lv, ChooseLevels(o.levels, n));
-  VOX_ASSIGN_OR_RETURN(std::unique_ptr<Shape> shape, MakeShape(o.shape, o.size));
+namespace {
 
-  GenerateStats stats;
-  StoreMeta& meta = stats.meta;
+// The store's meta for the shape: a level set of 2^n voxels per axis
+// centred on index 0, before its counts are known.
+StoreMeta ShapeMeta(const GenerateOptions& o, const Shape& shape, int n, const Levels& lv) {
+  StoreMeta meta;
   meta.source_file = "vox-gen:" + o.shape;
   meta.grid_name = o.shape;
   meta.grid_class = GridClass::kLevelSet;
@@ -257,9 +243,24 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   meta.index_to_world[3][3] = 1.0;
   meta.voxel_size = vs;
   meta.has_normal = true;
-  meta.has_color = shape->HasColor();
+  meta.has_color = shape.HasColor();
   meta.isovalue = 0.0;
   meta.build_options = CanonicalOptions(o);
+  return meta;
+}
+
+}  // namespace
+
+StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgress& progress) {
+  const double t0 = Now();
+  VOX_RETURN_IF_ERROR(ValidateOptions(o));
+  const int n = Log2Exact(o.size);
+  VOX_ASSIGN_OR_RETURN(Levels lv, ChooseLevels(o.levels, n));
+  VOX_ASSIGN_OR_RETURN(std::unique_ptr<Shape> shape, MakeShape(o.shape, o.size));
+
+  GenerateStats stats;
+  StoreMeta& meta = stats.meta;
+  meta = ShapeMeta(o, *shape, n, lv);
 
   WriteOptions wo;
   wo.zstd_level = o.zstd_level;

@@ -128,6 +128,12 @@ KwFlag ToFlag(const std::string& key, const py::handle& v) {
   return f;
 }
 
+// quiet=: True or False, else the TypeError ApplyKwargs gives a switch.
+bool QuietKwarg(const char* fn, const py::handle& v) {
+  if (py::isinstance<py::bool_>(v)) return v.cast<bool>();
+  throw py::type_error(std::string(fn) + "(): quiet takes True or False");
+}
+
 // Applies keyword arguments through a tool's option table (tools/common/options.h,
 // the one its command line is built from).
 template <class Apply>
@@ -285,7 +291,7 @@ py::dict Ingest(const py::object& vdb, const py::object& store, const py::object
   vox::IngestCommand c;
   c.quiet = true;  // Python: no stderr output unless quiet=False
   if (kwargs.contains("quiet") && !kwargs["quiet"].is_none())
-    c.quiet = kwargs["quiet"].cast<bool>();
+    c.quiet = QuietKwarg("ingest", kwargs["quiet"]);
   py::kwargs rest;
   for (const auto& [k, v] : kwargs)
     if (py::str(k).cast<std::string>() != "quiet") rest[k] = v;
@@ -457,7 +463,7 @@ py::dict Render(const py::object& store, const py::object& camera, const py::obj
   py::kwargs rest;
   for (const auto& [k, v] : kwargs) {
     if (py::str(k).cast<std::string>() == "quiet" && !v.is_none())
-      o.quiet = v.cast<bool>();
+      o.quiet = QuietKwarg("render", v);
     else
       rest[k] = v;
   }
