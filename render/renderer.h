@@ -299,6 +299,9 @@ class Renderer {
                  const Cone* cone = nullptr) const;
   bool Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume = nullptr) const;
   double Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone = nullptr) const;
+  // The light reaching fog at ray parameter t of primary ray gr (cone:
+  // with LOD), through transmittance rays to the shadowing lights.
+  glm::dvec3 LightInFog(const Ray& gr, double t, TraceContext& cx, const Cone* cone) const;
 
   // tracer_'s occupied box (options_.clip_to_occupied), on `t` too.
   void ApplyOccupiedBox(RenderTracer* t) const;

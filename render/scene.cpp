@@ -153,7 +153,9 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
   if (auto it = j.find("volume"); it != j.end()) {
     if (!it->is_object()) return jf::FieldError(file, "volume", "must be an object");
     VOX_RETURN_IF_ERROR(
-        jf::CheckKnownKeys(*it, {"absorption", "scattering", "color"}, file, "volume"));
+        jf::CheckKnownKeys(*it, {"absorption", "scattering", "color", "light_step", "light_optical_depth",
+                            "shadow_lod"},
+                           file, "volume"));
     VOX_RETURN_IF_ERROR(
         jf::GetNumber(*it, "absorption", file, "volume", false, &s.volume.absorption));
     VOX_RETURN_IF_ERROR(NonNegative(file, "volume.absorption", s.volume.absorption));
@@ -161,6 +163,18 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
         jf::GetNumber(*it, "scattering", file, "volume", false, &s.volume.scattering));
     VOX_RETURN_IF_ERROR(NonNegative(file, "volume.scattering", s.volume.scattering));
     VOX_RETURN_IF_ERROR(ReadColor(*it, "color", file, "volume", &s.volume.color));
+    VOX_RETURN_IF_ERROR(
+        jf::GetNumber(*it, "light_step", file, "volume", false, &s.volume.light_step));
+    if (!(s.volume.light_step > 0 && s.volume.light_step <= 1e6))
+      return jf::FieldError(file, "volume.light_step", "must be in (0, 1e6] voxels");
+    VOX_RETURN_IF_ERROR(jf::GetNumber(*it, "light_optical_depth", file, "volume", false,
+                                      &s.volume.light_optical_depth));
+    if (!(s.volume.light_optical_depth > 0 && s.volume.light_optical_depth <= 1e6))
+      return jf::FieldError(file, "volume.light_optical_depth", "must be in (0, 1e6]");
+    VOX_RETURN_IF_ERROR(
+        jf::GetNumber(*it, "shadow_lod", file, "volume", false, &s.volume.shadow_lod));
+    if (!(s.volume.shadow_lod >= 0 && s.volume.shadow_lod <= 1e6))
+      return jf::FieldError(file, "volume.shadow_lod", "must be in [0, 1e6] voxels");
   }
   VOX_RETURN_IF_ERROR(jf::GetInt(j, "max_depth", file, "", false, 0, 16, &s.max_depth));
   VOX_RETURN_IF_ERROR(
@@ -217,7 +231,10 @@ std::string Scene::ToJson() const {
   if (!regions.empty()) j["materials"] = regs;
   j["volume"] = {{"absorption", volume.absorption},
                  {"scattering", volume.scattering},
-                 {"color", v(volume.color)}};
+                 {"color", v(volume.color)},
+                 {"light_step", volume.light_step},
+                 {"light_optical_depth", volume.light_optical_depth},
+                 {"shadow_lod", volume.shadow_lod}};
   j["max_depth"] = max_depth;
   j["samples_per_pixel"] = samples_per_pixel;
   return j.dump();

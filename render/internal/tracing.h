@@ -60,8 +60,9 @@ namespace render_internal {
 inline constexpr double kInf = std::numeric_limits<double>::infinity();
 // Fog integration stops below this transmittance.
 inline constexpr double kMinTransmittance = 1e-6;
-// Fog re-evaluates the light reaching the ray at most every this many voxels.
-inline constexpr double kScatterStepVoxels = 3.0;
+// The optical depth of kMinTransmittance: -ln(1e-6) (compared per cell
+// instead of the transmittance, which would cost an exp per cell).
+inline constexpr double kMaxOpticalDepth = 13.815510557964274;
 // Secondary rays leaving a surface start this many voxels out along its
 // normal: a hit point lies within 1.9 voxels below and 0.9 above the true
 // surface, and the voxels of the surface within 0.9 above it, so a ray
