@@ -62,7 +62,7 @@ Status ParseMaterial(const json& m, std::string_view file, const std::string& pr
 Status ParseLight(const json& l, std::string_view file, const std::string& prefix, Light* out) {
   if (!l.is_object()) return jf::FieldError(file, prefix, "must be an object");
   VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(
-      l, {"type", "direction", "position", "color", "intensity", "shadows"}, file, prefix));
+      l, {"type", "direction", "position", "color", "intensity", "shadows", "falloff"}, file, prefix));
   std::string type;
   VOX_RETURN_IF_ERROR(jf::GetString(l, "type", file, prefix, true, &type));
   if (type == "directional") {
@@ -70,14 +70,20 @@ Status ParseLight(const json& l, std::string_view file, const std::string& prefi
     VOX_RETURN_IF_ERROR(jf::GetVec3(l, "direction", file, prefix, true, &out->direction));
     if (!jf::UnitVector(out->direction, &out->direction))
       return jf::FieldError(file, jf::Join(prefix, "direction"), "is the zero vector");
-    if (l.contains("position"))
-      return jf::FieldError(file, jf::Join(prefix, "position"),
-                            "does not apply to a directional light");
+    for (const char* key : {"position", "falloff"})
+      if (l.contains(key))
+        return jf::FieldError(file, jf::Join(prefix, key), "does not apply to a directional light");
   } else if (type == "point") {
     out->type = Light::Type::kPoint;
     VOX_RETURN_IF_ERROR(jf::GetVec3(l, "position", file, prefix, true, &out->position));
     if (l.contains("direction"))
       return jf::FieldError(file, jf::Join(prefix, "direction"), "does not apply to a point light");
+    std::string falloff = "inverse_square";
+    VOX_RETURN_IF_ERROR(jf::GetString(l, "falloff", file, prefix, false, &falloff));
+    if (falloff != "inverse_square" && falloff != "none")
+      return jf::FieldError(file, jf::Join(prefix, "falloff"),
+                            "is '" + falloff + "'; it must be 'inverse_square' or 'none'");
+    out->falloff = falloff == "inverse_square";
   } else {
     return jf::FieldError(file, jf::Join(prefix, "type"),
                           "is '" + type + "'; it must be 'directional' or 'point'");
@@ -217,6 +223,7 @@ std::string Scene::ToJson() const {
     } else {
       o["type"] = "point";
       o["position"] = v(l.position);
+      o["falloff"] = l.falloff ? "inverse_square" : "none";
     }
     lights_json.push_back(o);
   }

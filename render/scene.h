@@ -12,8 +12,12 @@
 //                 {"type":"point", "position":[x,y,z], ...} ],
 //         each with "color":[r,g,b], "intensity":I, "shadows":true|false;
 //         "direction" is the way the light travels (from the light into
-//         the scene). Without a "lights" key the scene has one shadow-casting
-//         key light above and behind the camera; "lights":[] has none.
+//         the scene). A point light's "falloff" is "inverse_square"
+//         (default: what reaches a point at distance d is intensity / d^2,
+//         d in world units) or "none" (the intensity at every distance: the
+//         look before falloff). Without a "lights" key the scene has one
+//         shadow-casting key light above and behind the camera; "lights":[]
+//         has none.
 //     "material": {"color":[r,g,b], "diffuse":kd, "specular":ks,
 //                  "shininess":n, "reflect":kr, "transmit":kt, "ior":eta},
 //     "materials": [ {"box":{"min":[x,y,z],"max":[x,y,z]}, ...material...} ],
@@ -58,6 +62,7 @@ struct Light {
   glm::dvec3 color{1.0};
   double intensity = 1.0;
   bool shadows = true;
+  bool falloff = true;  // point lights: intensity / d^2
 };
 
 struct Material {

@@ -74,7 +74,8 @@ inline constexpr double kSurfaceOffsetVoxels = 2.5;
 // Calls f(light, to_light, dist) for each light of positive intensity that
 // has a direction at world point p: to_light is the unit direction to it and
 // dist its distance (infinite for a directional light). A point light at p
-// itself is skipped.
+// itself is skipped; one with falloff comes with its intensity divided by
+// dist^2.
 template <typename F>
 void ForEachLight(const std::vector<Light>& lights, const glm::dvec3& p, F&& f) {
   for (const Light& l : lights) {
@@ -88,6 +89,12 @@ void ForEachLight(const std::vector<Light>& lights, const glm::dvec3& p, F&& f) 
       dist = glm::length(to_light);
       if (!(dist > 0)) continue;
       to_light /= dist;
+      if (l.falloff) {
+        Light reaching = l;
+        reaching.intensity = l.intensity / (dist * dist);
+        f(reaching, to_light, dist);
+        continue;
+      }
     }
     f(l, to_light, dist);
   }
