@@ -23,8 +23,11 @@
 // Fog: absorption on the exact DDA segments (each occupied voxel's entry and
 // exit t), extinction = (absorption + scattering) * density per world unit;
 // single scattering with isotropic phase, the light attenuated by a
-// transmittance ray to the light, traced from the middle of an occupied
-// segment at most every 3 voxels along the ray. A = 1 - transmittance.
+// transmittance ray to the light from sample points along the ray (every
+// volume.light_step voxels, closer where the fog is thick: render/scene.h),
+// interpolated linearly between them. With a level-of-detail pyramid, a
+// transmittance ray's cells widen along it (volume.shadow_lod). No random
+// numbers: a pixel's value depends on the pixel alone. A = 1 - transmittance.
 // Integration stops once transmittance falls below 1e-6.
 //
 // Level of detail (RenderOptions::lod, docs/lod.md): primary rays carry a
