@@ -99,7 +99,11 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
                                                      const RenderOptions& options) {
   const StoreMeta& meta = volume->meta();
   OctreeView view = volume->view();
-  int n1 = options.n1 > 0 ? options.n1 : DefaultFirstStepLevels(view.levels);
+  // Fog walks long runs of occupied voxels: larger second-step cells.
+  const bool fog = meta.grid_class == GridClass::kFogVolume;
+  int n1 = options.n1 > 0                   ? options.n1
+           : fog ? render_internal::FogFirstStepLevels(view.levels)
+                 : DefaultFirstStepLevels(view.levels);
   VOX_ASSIGN_OR_RETURN(RenderTracer tracer, RenderTracer::Create(view, n1));
   VOX_ASSIGN_OR_RETURN(GridTransform xf, GridTransform::FromMeta(meta));
   if (!camera.finalized())

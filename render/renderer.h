@@ -23,8 +23,11 @@
 // Fog: absorption on the exact DDA segments (each occupied voxel's entry and
 // exit t), extinction = (absorption + scattering) * density per world unit;
 // single scattering with isotropic phase, the light attenuated by a
-// transmittance ray to the light, traced from the middle of an occupied
-// segment at most every 3 voxels along the ray. A = 1 - transmittance.
+// transmittance ray to the light from sample points along the ray (every
+// volume.light_step voxels, closer where the fog is thick: render/scene.h),
+// interpolated linearly between them. With a level-of-detail pyramid, a
+// transmittance ray's cells widen along it (volume.shadow_lod). No random
+// numbers: a pixel's value depends on the pixel alone. A = 1 - transmittance.
 // Integration stops once transmittance falls below 1e-6.
 //
 // Level of detail (RenderOptions::lod, docs/lod.md): primary rays carry a
@@ -303,6 +306,9 @@ class Renderer {
                  const Cone* cone = nullptr) const;
   bool Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume = nullptr) const;
   double Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone = nullptr) const;
+  // The light reaching fog at ray parameter t of primary ray gr (cone:
+  // with LOD), through transmittance rays to the shadowing lights.
+  glm::dvec3 LightInFog(const Ray& gr, double t, TraceContext& cx, const Cone* cone) const;
 
   // tracer_'s occupied box (options_.clip_to_occupied), on `t` too.
   void ApplyOccupiedBox(RenderTracer* t) const;

@@ -62,7 +62,7 @@ Status ParseMaterial(const json& m, std::string_view file, const std::string& pr
 Status ParseLight(const json& l, std::string_view file, const std::string& prefix, Light* out) {
   if (!l.is_object()) return jf::FieldError(file, prefix, "must be an object");
   VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(
-      l, {"type", "direction", "position", "color", "intensity", "shadows"}, file, prefix));
+      l, {"type", "direction", "position", "color", "intensity", "shadows", "falloff"}, file, prefix));
   std::string type;
   VOX_RETURN_IF_ERROR(jf::GetString(l, "type", file, prefix, true, &type));
   if (type == "directional") {
@@ -70,14 +70,20 @@ Status ParseLight(const json& l, std::string_view file, const std::string& prefi
     VOX_RETURN_IF_ERROR(jf::GetVec3(l, "direction", file, prefix, true, &out->direction));
     if (!jf::UnitVector(out->direction, &out->direction))
       return jf::FieldError(file, jf::Join(prefix, "direction"), "is the zero vector");
-    if (l.contains("position"))
-      return jf::FieldError(file, jf::Join(prefix, "position"),
-                            "does not apply to a directional light");
+    for (const char* key : {"position", "falloff"})
+      if (l.contains(key))
+        return jf::FieldError(file, jf::Join(prefix, key), "does not apply to a directional light");
   } else if (type == "point") {
     out->type = Light::Type::kPoint;
     VOX_RETURN_IF_ERROR(jf::GetVec3(l, "position", file, prefix, true, &out->position));
     if (l.contains("direction"))
       return jf::FieldError(file, jf::Join(prefix, "direction"), "does not apply to a point light");
+    std::string falloff = "inverse_square";
+    VOX_RETURN_IF_ERROR(jf::GetString(l, "falloff", file, prefix, false, &falloff));
+    if (falloff != "inverse_square" && falloff != "none")
+      return jf::FieldError(file, jf::Join(prefix, "falloff"),
+                            "is '" + falloff + "'; it must be 'inverse_square' or 'none'");
+    out->falloff = falloff == "inverse_square";
   } else {
     return jf::FieldError(file, jf::Join(prefix, "type"),
                           "is '" + type + "'; it must be 'directional' or 'point'");
@@ -153,7 +159,9 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
   if (auto it = j.find("volume"); it != j.end()) {
     if (!it->is_object()) return jf::FieldError(file, "volume", "must be an object");
     VOX_RETURN_IF_ERROR(
-        jf::CheckKnownKeys(*it, {"absorption", "scattering", "color"}, file, "volume"));
+        jf::CheckKnownKeys(*it, {"absorption", "scattering", "color", "light_step", "light_optical_depth",
+                            "shadow_lod"},
+                           file, "volume"));
     VOX_RETURN_IF_ERROR(
         jf::GetNumber(*it, "absorption", file, "volume", false, &s.volume.absorption));
     VOX_RETURN_IF_ERROR(NonNegative(file, "volume.absorption", s.volume.absorption));
@@ -161,6 +169,18 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
         jf::GetNumber(*it, "scattering", file, "volume", false, &s.volume.scattering));
     VOX_RETURN_IF_ERROR(NonNegative(file, "volume.scattering", s.volume.scattering));
     VOX_RETURN_IF_ERROR(ReadColor(*it, "color", file, "volume", &s.volume.color));
+    VOX_RETURN_IF_ERROR(
+        jf::GetNumber(*it, "light_step", file, "volume", false, &s.volume.light_step));
+    if (!(s.volume.light_step > 0 && s.volume.light_step <= 1e6))
+      return jf::FieldError(file, "volume.light_step", "must be in (0, 1e6] voxels");
+    VOX_RETURN_IF_ERROR(jf::GetNumber(*it, "light_optical_depth", file, "volume", false,
+                                      &s.volume.light_optical_depth));
+    if (!(s.volume.light_optical_depth > 0 && s.volume.light_optical_depth <= 1e6))
+      return jf::FieldError(file, "volume.light_optical_depth", "must be in (0, 1e6]");
+    VOX_RETURN_IF_ERROR(
+        jf::GetNumber(*it, "shadow_lod", file, "volume", false, &s.volume.shadow_lod));
+    if (!(s.volume.shadow_lod >= 0 && s.volume.shadow_lod <= 1e6))
+      return jf::FieldError(file, "volume.shadow_lod", "must be in [0, 1e6] voxels");
   }
   VOX_RETURN_IF_ERROR(jf::GetInt(j, "max_depth", file, "", false, 0, 16, &s.max_depth));
   VOX_RETURN_IF_ERROR(
@@ -203,6 +223,7 @@ std::string Scene::ToJson() const {
     } else {
       o["type"] = "point";
       o["position"] = v(l.position);
+      o["falloff"] = l.falloff ? "inverse_square" : "none";
     }
     lights_json.push_back(o);
   }
@@ -217,7 +238,10 @@ std::string Scene::ToJson() const {
   if (!regions.empty()) j["materials"] = regs;
   j["volume"] = {{"absorption", volume.absorption},
                  {"scattering", volume.scattering},
-                 {"color", v(volume.color)}};
+                 {"color", v(volume.color)},
+                 {"light_step", volume.light_step},
+                 {"light_optical_depth", volume.light_optical_depth},
+                 {"shadow_lod", volume.shadow_lod}};
   j["max_depth"] = max_depth;
   j["samples_per_pixel"] = samples_per_pixel;
   return j.dump();

@@ -12,16 +12,27 @@
 //                 {"type":"point", "position":[x,y,z], ...} ],
 //         each with "color":[r,g,b], "intensity":I, "shadows":true|false;
 //         "direction" is the way the light travels (from the light into
-//         the scene). Without a "lights" key the scene has one shadow-casting
-//         key light above and behind the camera; "lights":[] has none.
+//         the scene). A point light's "falloff" is "inverse_square"
+//         (default: what reaches a point at distance d is intensity / d^2,
+//         d in world units) or "none" (the intensity at every distance: the
+//         look before falloff). Without a "lights" key the scene has one
+//         shadow-casting key light above and behind the camera; "lights":[]
+//         has none.
 //     "material": {"color":[r,g,b], "diffuse":kd, "specular":ks,
 //                  "shininess":n, "reflect":kr, "transmit":kt, "ior":eta},
 //     "materials": [ {"box":{"min":[x,y,z],"max":[x,y,z]}, ...material...} ],
 //         region overrides in world space (min <= max on each axis): the
 //         first box holding the hit point gives the material; elsewhere
 //         "material" applies,
-//     "volume": {"absorption":sa, "scattering":ss, "color":[r,g,b]},
-//         per world unit, times the voxel density (fog volumes only),
+//     "volume": {"absorption":sa, "scattering":ss, "color":[r,g,b],
+//                "light_step":S, "light_optical_depth":D, "shadow_lod":G},
+//         absorption and scattering per world unit, times the voxel density
+//         (fog volumes only); the quality of single scattering: the light
+//         reaching a primary ray is evaluated every S voxels along it, or
+//         sooner where the extinction over the step would exceed optical
+//         depth D, and interpolated between (S, D > 0); with a pyramid
+//         a transmittance ray's cells widen by one voxel every G voxels
+//         along it (G > 0; 0: exact voxels all the way),
 //     "max_depth": D,          reflection/refraction generations (0..16)
 //     "samples_per_pixel": S   (1..1024)
 //   }
@@ -51,6 +62,7 @@ struct Light {
   glm::dvec3 color{1.0};
   double intensity = 1.0;
   bool shadows = true;
+  bool falloff = true;  // point lights: intensity / d^2
 };
 
 struct Material {
@@ -72,6 +84,13 @@ struct VolumeMedium {
   double absorption = 0.5;
   double scattering = 0.5;
   glm::dvec3 color{1.0};  // tint of the scattered light
+  // Voxels between evaluations of the light reaching a primary ray.
+  double light_step = 24.0;
+  // At most this optical depth between evaluations of the light.
+  double light_optical_depth = 0.15;
+  // Voxels along a transmittance ray per voxel of cell width (LOD
+  // pyramid); 0: exact voxels.
+  double shadow_lod = 12.0;
 };
 
 struct Scene {

@@ -152,6 +152,29 @@ TEST(EffectsTest, ExactlyOneShadowRayPerLitHitPixel) {
   EXPECT_EQ(back.counters.rays[kRayShadow], 0u);
 }
 
+TEST(EffectsTest, PointLightsFallOffWithTheSquareOfTheDistance) {
+  // The slab's top (z = 10, normal +z) seen from above, a point light straight
+  // above pixel (16, 16) at heights 10 and 20 over the surface: the diffuse
+  // light there is a quarter at twice the distance, and the same with
+  // "falloff": "none".
+  auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet), {Slab()});
+  ASSERT_TRUE(vol);
+  Camera cam = Ortho({16.5, 16.5, 30}, {16.5, 16.5, 0}, {0, 1, 0}, 32, 33, 33);
+  auto lit = [&](double height, const char* falloff) {
+    const std::string json =
+        R"({"ambient":[0,0,0], "material":{"specular":0}, "lights":[{"type":"point","position":[16.5,16.5,)" +
+        std::to_string(10 + height) + R"(],"intensity":50,"shadows":false)" + falloff + "}]}";
+    Rendered r = Render(vol.get(), cam, ParseOrDie(json.c_str()));
+    EXPECT_EQ(r.img.at("A", 16, 16), 1.0f);
+    return double(r.img.at("R", 16, 16));
+  };
+  const double near = lit(10, ""), far = lit(20, "");
+  EXPECT_GT(near, 0.05);
+  EXPECT_LT(near, 0.9);
+  EXPECT_NEAR(far / near, 0.25, 0.02);
+  EXPECT_NEAR(lit(20, R"(,"falloff":"none")"), lit(10, R"(,"falloff":"none")"), 1e-6);
+}
+
 TEST(EffectsTest, ShadowFallsWhereGeometrySays) {
   // Floor y in [0,4), a cube [12,20)^3 above it, light travelling along (1,-1,0):
   // the cube's shadow on the floor top (y = 4) covers x in [20,36), z in [12,20).

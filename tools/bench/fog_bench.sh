@@ -1,0 +1,112 @@
+#!/bin/sh
+# Shadowed fog: vox against vdb_render, and vox's quality against its own
+# converged image.
+#
+#   tools/bench/fog_bench.sh BUILD_DIR WORK_DIR [REPEATS]
+#
+# Makes two fog volumes with vdb_tool (a sphere, 249^3, and a dodecahedron:
+# -platonic f=12 s=1.0 v=0.006 w=3, each -ls2fog), ingests them, and renders
+# each with one directional light with shadows, one thread, at 256x256 and
+# 320x240, from vox's default camera (vdb_render gets the same position,
+# look-at, up and horizontal fov, and the light with a colour: without one
+# its image is black). Per frame it prints:
+#   - vox's default frame and vdb_render, alternately, REPEATS times (3),
+#     whole-process medians: CPU seconds (user + sys: fair on a shared
+#     machine) and wall seconds, and their ratio;
+#   - the RMSE of vox's image against vox's converged image (exact voxels,
+#     exact transmittance rays, the light every half voxel, float EXR), as a
+#     percentage of the converged image's mean over all pixels;
+#   - the time-against-RMSE curve: vox at other settings of the scene's
+#     "volume" quality fields (render/scene.h), one run each.
+# Needs vdb_tool, vdb_render and BUILD_DIR's vox-ingest, vox-render and
+# vox-lod-compare. The converged images take minutes.
+set -eu
+build=$(cd "$1" && pwd)
+work=$2
+repeats=${3:-3}
+mkdir -p "$work"
+cd "$work"
+render=$build/tools/render/vox-render
+compare=$build/tools/bench/vox-lod-compare
+light_dir='-1,-1,-1'  # vox: the way the light travels; vdb_render: towards the light
+
+scene() {  # scene.json with the volume fields $1
+  printf '{"lights":[{"type":"directional","direction":[%s],"color":[1,1,1],"intensity":1,"shadows":true}], "volume":{%s}}\n' \
+    "$light_dir" "$1"
+}
+
+cpu_wall() {  # runs "$@", prints "cpu wall" seconds of the whole process
+  /usr/bin/time -f '%U %S %e' -o time.txt "$@" >/dev/null 2>&1
+  awk '{ printf "%.3f %.3f\n", $1 + $2, $3 }' time.txt
+}
+
+median() { sort -n | awk '{ v[NR] = $1 } END { print v[int((NR + 1) / 2)] }'; }
+
+rmse_pct() {  # RMSE of $2 against reference $1, % of $1's mean (black: $3)
+  mean=$("$compare" "$1" "$3" | sed 's/.*"mean_abs_rgb": \([0-9.e-]*\).*/\1/')
+  "$compare" "$1" "$2" | sed 's/.*"rmse_rgb": \([0-9.e-]*\).*/\1/' |
+    awk -v m="$mean" '{ printf "%.3f", 100 * $1 / m }'
+}
+
+frame() {  # name vdb_tool-args WxH
+  name=$1 size=$3
+  w=${size%x*} h=${size#*x}
+  [ -f "$name.vdb" ] || vdb_tool $2 -ls2fog -write "$name.vdb" >/dev/null
+  [ -d "$name.vox" ] || "$build/tools/ingest/vox-ingest" "$name.vdb" "$name.vox" --quiet
+  scene "" >scene.json
+  rm -f cam.exr
+  "$render" "$name.vox" -o cam.exr --size 16x16 --save-cam "cam16_$name.json" --scene scene.json --quiet
+  sed "s/\"width\":16/\"width\":$w/; s/\"height\":16/\"height\":$h/" "cam16_$name.json" >"cam_$name.json"
+  pos=$(sed 's/.*"position":\[\([^]]*\)\].*/\1/' "cam_$name.json")
+  at=$(sed 's/.*"look_at":\[\([^]]*\)\].*/\1/' "cam_$name.json")
+  up=$(sed 's/.*"up":\[\([^]]*\)\].*/\1/' "cam_$name.json")
+  fov=$(sed 's/.*"fov_deg":\([0-9.]*\).*/\1/' "cam_$name.json")
+  vox="$render $name.vox --cam cam_$name.json --scene scene.json --threads 1 --quiet"
+  # The converged image, and an empty one (the camera turned away) for the mean.
+  if [ ! -f "ref_$name.exr" ]; then
+    scene '"light_step":0.5, "shadow_lod":0' >ref_scene.json
+    $render "$name.vox" --cam "cam_$name.json" --scene ref_scene.json --threads 1 --quiet --lod 0 \
+      --float -o "ref_$name.exr"
+  fi
+  sed 's/"position":\[[^]]*\]/"position":[0,0,1e3]/; s/"look_at":\[[^]]*\]/"look_at":[0,0,2e3]/' \
+    "cam_$name.json" >"black_$name.json"
+  rm -f "black_$name.exr"
+  $render "$name.vox" --cam "black_$name.json" --scene scene.json --quiet --float -o "black_$name.exr"
+  vdb="vdb_render $name.vdb vdb_$name.ppm -res ${w}x$h -translate $pos -lookat $at -up $up -fov $fov \
+    -light 1,1,1,1,1,1 -cpus 1"
+  : >vox_times.txt
+  : >vdb_times.txt
+  i=0
+  while [ "$i" -lt "$repeats" ]; do
+    rm -f "vox_$name.exr"
+    cpu_wall $vox --float -o "vox_$name.exr" >>vox_times.txt
+    cpu_wall $vdb >>vdb_times.txt
+    i=$((i + 1))
+  done
+  vc=$(cut -d' ' -f1 vox_times.txt | median) vw=$(cut -d' ' -f2 vox_times.txt | median)
+  dc=$(cut -d' ' -f1 vdb_times.txt | median) dw=$(cut -d' ' -f2 vdb_times.txt | median)
+  echo "| $name $size | $vc | $vw | $dc | $dw | $(echo "$vc $dc" | awk '{ printf "%.2f", $1 / $2 }') |" \
+    "$(rmse_pct "ref_$name.exr" "vox_$name.exr" "black_$name.exr") |"
+  # The curve: vox's other quality settings.
+  for q in '"light_step":64, "light_optical_depth":0.4, "shadow_lod":24' \
+    '"light_step":32, "light_optical_depth":0.2, "shadow_lod":16' \
+    '' \
+    '"light_step":16, "light_optical_depth":0.1, "shadow_lod":8' \
+    '"light_step":8, "light_optical_depth":0.05, "shadow_lod":4' \
+    '"light_step":16, "light_optical_depth":0.1, "shadow_lod":0'; do
+    scene "$q" >curve_scene.json
+    rm -f curve.exr
+    t=$(cpu_wall $render "$name.vox" --cam "cam_$name.json" --scene curve_scene.json --threads 1 \
+      --quiet --float -o curve.exr | cut -d' ' -f1)
+    echo "$name | ${q:-default} | $t | $(rmse_pct "ref_$name.exr" curve.exr "black_$name.exr")" >>curve.txt
+  done
+}
+
+: >curve.txt
+echo "| frame | vox CPU s | vox wall s | vdb_render CPU s | vdb_render wall s | CPU ratio | vox RMSE % of mean |"
+echo "|---|---|---|---|---|---|---|"
+frame sphere "-sphere" 256x256
+frame dodec "-platonic f=12 s=1.0 v=0.006 w=3" 320x240
+echo
+echo "time against RMSE (one run each): frame | volume fields | vox CPU s | RMSE % of mean"
+cat curve.txt
