@@ -479,6 +479,60 @@ def test_ctrl_c_stops_long_calls_and_keeps_old_outputs(what, vdb, store, workdir
     assert temporaries(workdir) == []
 
 
+PROBE_INTERRUPT = r"""
+import os, signal, sys, threading, time
+import numpy as np
+import vox
+store, n = sys.argv[1], int(sys.argv[2])
+rng = np.random.default_rng(3)
+d = rng.normal(size=(n, 3))
+origin = 70 * d / np.linalg.norm(d, axis=1, keepdims=True)
+rays = np.hstack([origin, rng.uniform(-40, 40, size=(n, 3)) - origin])
+t0 = time.monotonic()
+if len(sys.argv) > 3:
+    threading.Timer(0.4, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+try:
+    vox.probe(store, rays, tracer="long-double")
+    print("finished %.3f" % (time.monotonic() - t0))
+except KeyboardInterrupt:
+    print("interrupted %.3f" % (time.monotonic() - t0))
+"""
+
+
+def test_ctrl_c_stops_probe_within_a_second(store):
+    import subprocess
+    import sys
+
+    def probe(n, interrupt):
+        p = subprocess.run([sys.executable, "-c", PROBE_INTERRUPT, store, str(n)] +
+                           (["interrupt"] if interrupt else []),
+                           capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stderr
+        return p.stdout.split()
+    # Enough rays that the whole call takes several seconds.
+    n = 20000
+    while True:
+        words = probe(n, False)
+        assert words[0] == "finished", words
+        if float(words[1]) > 3.0 or n >= 20000000:
+            break
+        n = int(n * max(2.0, 4.0 / max(float(words[1]), 0.05)))
+    words = probe(n, True)
+    assert words and words[0] == "interrupted", words
+    assert float(words[1]) < 0.4 + 1.0  # stopped within a second
+
+
+def test_bytes_paths_are_file_system_names(store, workdir):
+    name = bytes(workdir) + b"/bytes-\xff.exr"  # not UTF-8: os.fsencode's bytes
+    out = vox.render(os.fsencode(store), size=(16, 16), o=name)
+    assert os.path.exists(name)
+    assert vox.read_exr(name)["width"] == 16
+    assert vox.Store(os.fsencode(store)).path == store
+    assert out["rgba"].shape == (16, 16, 4)
+    assert not any(f.startswith("b'") for f in os.listdir(workdir))
+    os.remove(name)
+
+
 def test_version_is_the_tools_version(store):
     """vox.__version__ and vox.__git_describe__ are what `vox-render --version` prints."""
     assert re.fullmatch(r"\d+\.\d+\.\d+", vox.__version__), vox.__version__
