@@ -4,7 +4,6 @@
 #include <cmath>
 #include <charconv>
 #include <malloc.h>
-#include <sys/statvfs.h>
 #include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>

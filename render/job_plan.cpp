@@ -75,7 +75,6 @@ StatusOr<Camera> JobCamera(const RenderJobOptions& options, const Camera* given,
 
 }  // namespace
 
-// The options that need no file: refused before anything is opened. The
 Status CheckJobOptions(const RenderJobOptions& options) {
   if (!options.preview_path.empty() && options.exr_path.empty())
     return InvalidArgumentError("--preview needs an EXR output (-o)");
