@@ -168,35 +168,40 @@ glm::dvec3 TurntablePivot(const Camera& camera, const glm::dvec3& centre) {
   return camera.position + f * glm::dot(centre - camera.position, f);
 }
 
-StatusOr<std::vector<Camera>> TurntableCameras(const Camera& base, int count,
-                                               const glm::dvec3& centre) {
+StatusOr<Camera> TurntableCamera(const Camera& base, int count, const glm::dvec3& centre,
+                                 int index) {
   if (count < 1 || count > kMaxFrames)
     return InvalidArgumentError("--turntable " + std::to_string(count) + ": must be 1.." +
                                 std::to_string(kMaxFrames));
+  if (index == 0) return base;
   const glm::dvec3 axis = TurntableAxis(base), pivot = TurntablePivot(base, centre);
-  std::vector<Camera> cameras;
-  cameras.reserve(size_t(count));
-  cameras.push_back(base);
-  for (int i = 1; i < count; ++i) {
-    const double angle = 2.0 * M_PI * double(i) / double(count);
-    const double c = std::cos(angle), s = std::sin(angle);
-    Camera cam = base;
-    if (base.camera_to_world) {
-      // Turn the pose: its three axes, and its position about the pivot.
-      std::array<double, 16> m = *base.camera_to_world;
-      for (int col = 0; col < 3; ++col) {
-        const glm::dvec3 v = Rotate(glm::dvec3(m[col], m[4 + col], m[8 + col]), axis, c, s);
-        for (int row = 0; row < 3; ++row) m[4 * row + col] = v[row];
-      }
-      const glm::dvec3 p = pivot + Rotate(glm::dvec3(m[3], m[7], m[11]) - pivot, axis, c, s);
-      for (int row = 0; row < 3; ++row) m[4 * row + 3] = p[row];
-      cam.camera_to_world = m;
-    } else {
-      cam.position = pivot + Rotate(base.position - pivot, axis, c, s);
-      cam.look_at = pivot;
+  const double angle = 2.0 * M_PI * double(index) / double(count);
+  const double c = std::cos(angle), s = std::sin(angle);
+  Camera cam = base;
+  if (base.camera_to_world) {
+    // Turn the pose: its three axes, and its position about the pivot.
+    std::array<double, 16> m = *base.camera_to_world;
+    for (int col = 0; col < 3; ++col) {
+      const glm::dvec3 v = Rotate(glm::dvec3(m[col], m[4 + col], m[8 + col]), axis, c, s);
+      for (int row = 0; row < 3; ++row) m[4 * row + col] = v[row];
     }
-    VOX_RETURN_IF_ERROR(cam.Finalize("--turntable frame " + std::to_string(i + 1)));
-    cameras.push_back(cam);
+    const glm::dvec3 p = pivot + Rotate(glm::dvec3(m[3], m[7], m[11]) - pivot, axis, c, s);
+    for (int row = 0; row < 3; ++row) m[4 * row + 3] = p[row];
+    cam.camera_to_world = m;
+  } else {
+    cam.position = pivot + Rotate(base.position - pivot, axis, c, s);
+    cam.look_at = pivot;
+  }
+  VOX_RETURN_IF_ERROR(cam.Finalize("--turntable frame " + std::to_string(index + 1)));
+  return cam;
+}
+
+StatusOr<std::vector<Camera>> TurntableCameras(const Camera& base, int count,
+                                               const glm::dvec3& centre) {
+  std::vector<Camera> cameras;
+  for (int i = 0; i < count || i == 0; ++i) {
+    VOX_ASSIGN_OR_RETURN(Camera cam, TurntableCamera(base, count, centre, i));
+    cameras.push_back(std::move(cam));
   }
   return cameras;
 }

@@ -16,6 +16,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/util/path_identity.h"
 #include "core/util/status.h"
 #include "render/camera.h"
 
@@ -49,6 +50,24 @@ StatusOr<bool> IsFramePattern(const std::string& role, const std::string& path);
 // a plain name as it is. REQUIRES: IsFramePattern(path) succeeded.
 std::string ExpandFramePattern(const std::string& path, int frame);
 
+// The one frame whose expansion of `pattern` is `path` (ExpandFramePattern
+// gives `path` back), or 0 when none in 1..kMaxFrames. A plain name matches
+// itself with every frame: 0 unless equal, else -1.
+int MatchFramePattern(const std::string& pattern, const std::string& path);
+
+// The outputs of the frames `range` of a run (each a frame pattern or a
+// plain name, checked by IsFramePattern) checked against each other and
+// against the existing `inputs`, in time linear in their number, not in the
+// frames': InvalidArgument, naming the frame and both paths, when two of a
+// frame's or of two frames' outputs are one file, or an output is an input.
+// Paths are compared as the same name in the same directory (by identity,
+// as core/util/path_identity.h does), where the frame number is in the name;
+// a pattern with its number in a directory is compared as text. Each
+// frame's outputs are compared by identity again when it comes
+// (CheckDistinctPaths), for links among existing files.
+Status CheckFrameOutputs(const std::vector<NamedPath>& inputs,
+                         const std::vector<NamedPath>& outputs, FrameRange range);
+
 // The cameras of cam.json text: one camera object, or a non-empty array of
 // them (a sequence). Errors name `file` and, in an array, the element
 // ("cams.json[2]: field 'width' ...").
@@ -74,6 +93,11 @@ glm::dvec3 TurntablePivot(const Camera& camera, const glm::dvec3& centre);
 // 1 <= count <= kMaxFrames.
 StatusOr<std::vector<Camera>> TurntableCameras(const Camera& base, int count,
                                                const glm::dvec3& centre);
+
+// The camera of frame `index` + 1 of TurntableCameras alone (the same bits),
+// made when the frame comes. REQUIRES: 0 <= index < count.
+StatusOr<Camera> TurntableCamera(const Camera& base, int count, const glm::dvec3& centre,
+                                 int index);
 
 }  // namespace vox
 

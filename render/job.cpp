@@ -4,7 +4,6 @@
 #include <cmath>
 #include <charconv>
 #include <malloc.h>
-#include <sys/statvfs.h>
 #include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -15,6 +14,7 @@
 #include "render/camera.h"
 #include "render/frame.h"
 #include "render/grid_transform.h"
+#include "render/internal/job_plan.h"
 #include "render/lod.h"
 #include "render/renderer.h"
 #include "render/scene.h"
@@ -28,6 +28,10 @@
 
 namespace vox {
 namespace {
+
+using job_internal::CheckFrameSize;
+using job_internal::FrameOutputs;
+using job_internal::JobSequence;
 
 // --stats "lod": the factor, stops by level, and per level the bricks paged
 // in and bytes read (level 0: the base store, as in "cache" and "io").
@@ -95,228 +99,6 @@ void LodHint(const std::string& dir, Store& base, const Camera& cam, FILE* log) 
           "vox-render: about %.1f voxels fall across a pixel at the volume's front; with a "
           "level-of-detail pyramid (vox-ingest --add-lod %s) the frame would read fewer bricks\n",
           voxels, dir.c_str());
-}
-
-// The options that need no file: refused before anything is opened. The
-// output paths are CheckJobOutputs'.
-Status CheckJobOptions(const RenderJobOptions& options) {
-  if (!options.preview_path.empty() && options.exr_path.empty())
-    return InvalidArgumentError("--preview needs an EXR output (-o)");
-  if (!options.preview_path.empty() && !options.part.whole())
-    return InvalidArgumentError(
-        "--preview needs the whole image; with --tiles, preview the vox-merge output");
-  if (options.threads < 0)
-    return InvalidArgumentError("threads " + std::to_string(options.threads) +
-                                ": must not be negative (0: all cores)");
-  if (options.io_threads < 1 || options.io_threads > kMaxIoThreads)
-    return InvalidArgumentError("--io-threads " + std::to_string(options.io_threads) +
-                                ": must be 1.." + std::to_string(kMaxIoThreads));
-  if (options.lod && !(*options.lod >= 0 && std::isfinite(*options.lod)))
-    return InvalidArgumentError("--lod " + std::to_string(*options.lod) +
-                                ": must be finite and >= 0 (0: exact)");
-  if (options.silhouette_grid < 0 || options.silhouette_grid > kMaxSilhouetteGrid)
-    return InvalidArgumentError("--silhouette-aa " + std::to_string(options.silhouette_grid) +
-                                ": must be 0 (off) or 1.." + std::to_string(kMaxSilhouetteGrid));
-  if (options.single_step && !options.split.empty())
-    return InvalidArgumentError("--split and --single-step both choose the split; give one");
-  return OkStatus();
-}
-
-// A frame over kMaxPixelsUnlessAllowed is refused without --allow-huge;
-// the EXR's uncompressed size (an upper bound) is printed and must fit the
-// free space of its directory.
-Status CheckFrameSize(const RenderJobOptions& options, const std::string& exr_path,
-                      const Camera& camera, bool say) {
-  // The layout's own limit first (the most tiles an image may have).
-  VOX_RETURN_IF_ERROR(CheckTileCount(camera.width, camera.height,
-                                     std::clamp(options.tile_size, kMinTileSize, kMaxTileSize)));
-  if (const std::string w = PartCountWarning(camera.width, camera.height, options.tile_size,
-                                              options.part);
-      say && !w.empty())
-    fprintf(options.log, "vox-render: warning: %s\n", w.c_str());
-  const int64_t pixels = int64_t(camera.width) * int64_t(camera.height);
-  const std::string size = std::to_string(camera.width) + "x" + std::to_string(camera.height);
-  if (pixels > kMaxPixelsUnlessAllowed && !options.allow_huge)
-    return InvalidArgumentError("a " + size + " frame has " + std::to_string(pixels) +
-                                " pixels, more than " + std::to_string(kMaxPixelsUnlessAllowed) +
-                                "; pass --allow-huge to render it");
-  if (exr_path.empty()) return OkStatus();
-  const int bytes_per_pixel = (options.layers.float_color ? 16 : 8) + 4 +
-                              (options.layers.normal ? 12 : 0) + (options.layers.voxel ? 12 : 0);
-  const double fraction = options.part.whole() ? 1.0 : 1.0 / options.part.count;
-  const uint64_t estimate = uint64_t(double(pixels) * bytes_per_pixel * fraction);
-  if (say)
-    fprintf(options.log, "vox-render: %s: %s, at most %.1f MiB\n", exr_path.c_str(),
-            size.c_str(), double(estimate) / double(kMiB));
-  std::string dir, name;
-  SplitPath(exr_path, &dir, &name);
-  struct statvfs vfs;
-  if (statvfs(dir.c_str(), &vfs) != 0) return OkStatus();
-  const uint64_t free_bytes = uint64_t(vfs.f_bavail) * uint64_t(vfs.f_frsize);
-  if (estimate > free_bytes)
-    return ResourceExhaustedError("-o " + exr_path + ": the " + size + " image may take " +
-                                  std::to_string(estimate >> 20) + " MiB and " + dir + " has " +
-                                  std::to_string(free_bytes >> 20) + " MiB free");
-  return OkStatus();
-}
-
-// The frames of a run: the cameras given, how many frames the sequence
-// has and which of them this run renders.
-struct JobSequence {
-  std::vector<Camera> given;  // --cam's or the camera JSON's; empty: the default camera
-  std::string source;         // where `given` came from, for messages
-  int count = 1;              // frames in the sequence
-  FrameRange range;           // the frames this run renders
-  int frames() const { return range.last - range.first + 1; }
-};
-
-// Reads the cameras (before the store is opened: their number decides the
-// outputs) and the frames to render. `keep`: the image is kept in memory,
-// which holds one frame.
-StatusOr<JobSequence> PlanSequence(const RenderJobOptions& options, bool keep) {
-  JobSequence seq;
-  if (!options.camera_path.empty()) {
-    VOX_ASSIGN_OR_RETURN(seq.given, LoadCameras(options.camera_path));
-    seq.source = options.camera_path;
-  } else if (!options.camera_json.empty()) {
-    VOX_ASSIGN_OR_RETURN(seq.given, ParseCameras(options.camera_json, "camera"));
-    seq.source = "camera";
-  }
-  const std::string cameras = std::to_string(seq.given.size()) + " cameras";
-  if (seq.given.size() > 1 && options.turntable > 0)
-    return InvalidArgumentError("--turntable turns one camera; " + seq.source + " holds " + cameras);
-  if (seq.given.size() > 1 && options.view)
-    return InvalidArgumentError("--view places one camera; with the " + cameras + " of " +
-                                seq.source + " every frame would show the same view");
-  if (options.turntable < 0 || options.turntable > kMaxFrames)
-    return InvalidArgumentError("--turntable " + std::to_string(options.turntable) +
-                                ": must be 1.." + std::to_string(kMaxFrames));
-  seq.count = options.turntable > 0 ? options.turntable : std::max<int>(1, int(seq.given.size()));
-  VOX_ASSIGN_OR_RETURN(seq.range,
-                       FramesToRender(seq.count, options.frames ? &*options.frames : nullptr));
-  if (keep && seq.frames() > 1)
-    return InvalidArgumentError("an image kept in memory is one frame; the sequence has " +
-                                std::to_string(seq.count) +
-                                " frames: choose one with frames=N (or render them with vox-render)");
-  return seq;
-}
-
-// One frame's output paths, the patterns expanded.
-struct FrameOutputs {
-  int number = 1;
-  std::string exr, preview, stats;
-  std::string save_camera;  // a pattern's expansion, or the plain name on the run's last frame
-};
-
-// "out.exr" -> "out.%04d.exr", for the message asking for a pattern.
-std::string SuggestPattern(const std::string& path) {
-  std::string escaped;  // a '%' of the name is written %% in a pattern
-  for (const char c : path) escaped += c == '%' ? std::string("%%") : std::string(1, c);
-  const size_t slash = escaped.find_last_of('/');
-  const size_t dot = escaped.find_last_of('.');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash))
-    return escaped + ".%04d";
-  return escaped.substr(0, dot) + ".%04d" + escaped.substr(dot);
-}
-
-// Every frame's outputs: patterns where a sequence needs them, each path
-// writable, with its format's extension, and none an input or another
-// output; all refused before any work.
-StatusOr<std::vector<FrameOutputs>> CheckJobOutputs(const RenderJobOptions& options,
-                                                    const JobSequence& seq) {
-  bool save_camera_pattern = false;
-  for (const auto& [role, path] : {std::pair<std::string, std::string>{"-o", options.exr_path},
-                                   {"--preview", options.preview_path},
-                                   {"--stats", options.stats_path},
-                                   {"--save-cam", options.save_camera_path}}) {
-    if (path.empty()) continue;
-    VOX_ASSIGN_OR_RETURN(const bool pattern, IsFramePattern(role, path));
-    if (role == "--save-cam") save_camera_pattern = pattern;
-    if (!pattern && seq.count > 1 && role != "--save-cam")
-      return InvalidArgumentError(role + " " + path + ": the sequence has " +
-                                  std::to_string(seq.count) +
-                                  " frames; give a frame pattern such as " + SuggestPattern(path) +
-                                  " (frames are numbered from 1)");
-  }
-  std::vector<FrameOutputs> frames;
-  std::vector<NamedPath> named;
-  for (int n = seq.range.first; n <= seq.range.last; ++n) {
-    FrameOutputs f;
-    f.number = n;
-    f.exr = ExpandFramePattern(options.exr_path, n);
-    f.preview = ExpandFramePattern(options.preview_path, n);
-    f.stats = ExpandFramePattern(options.stats_path, n);
-    if (save_camera_pattern || n == seq.range.last)
-      f.save_camera = ExpandFramePattern(options.save_camera_path, n);
-    const std::string frame = seq.count > 1 ? "frame " + std::to_string(n) + "'s " : "";
-    for (const auto& [role, path] : {std::pair<std::string, const std::string*>{"-o", &f.exr},
-                                     {"--preview", &f.preview},
-                                     {"--stats", &f.stats},
-                                     {"--save-cam", &f.save_camera}}) {
-      if (path->empty()) continue;
-      VOX_RETURN_IF_ERROR(CheckOutputPath(*path));
-      named.push_back({frame + role, *path});
-    }
-    if (!f.exr.empty()) VOX_RETURN_IF_ERROR(CheckExtension(frame + "-o", f.exr, ".exr"));
-    if (!f.preview.empty())
-      VOX_RETURN_IF_ERROR(CheckExtension(frame + "--preview", f.preview, ".png"));
-    frames.push_back(std::move(f));
-  }
-  // No output may be an input (a store file, the camera, the scene) or
-  // another output.
-  std::vector<NamedPath> inputs = StoreInputs(options.store_dir);
-  inputs.push_back({"camera", options.camera_path});
-  inputs.push_back({"scene", options.scene_path});
-  VOX_RETURN_IF_ERROR(CheckDistinctPaths(inputs, named));
-  return frames;
-}
-
-// The one camera of a run or the base of its turntable: `given` (or the
-// default framing of the volume's world box), then --size and --view, which
-// override it.
-StatusOr<Camera> JobCamera(const RenderJobOptions& options, const Camera* given,
-                           const std::string& source, const StoreMeta& meta) {
-  glm::dvec3 lo, hi;
-  WorldBounds(meta, &lo, &hi);
-  Camera camera = given != nullptr
-                      ? *given
-                      : DefaultCamera(lo, hi, options.default_width, options.default_height);
-  if (options.size_given) {
-    camera.width = options.default_width;
-    camera.height = options.default_height;
-    VOX_RETURN_IF_ERROR(camera.Finalize("--size"));
-  }
-  if (options.view) {
-    VOX_ASSIGN_OR_RETURN(camera,
-                         OrbitCamera(camera, lo, hi, options.view->first, options.view->second));
-  }
-  // A given camera may be anywhere; the default one and --view's are near.
-  if (given != nullptr && !options.view)
-    VOX_RETURN_IF_ERROR(CheckCameraDistance(camera, lo, hi).WithContext(source));
-  return camera;
-}
-
-// The cameras of the whole sequence (frame n is element n - 1): each given
-// camera, or the one camera and, with --turntable, its turns.
-StatusOr<std::vector<Camera>> SequenceCameras(const RenderJobOptions& options,
-                                              const JobSequence& seq, const StoreMeta& meta) {
-  std::vector<Camera> cameras;
-  if (seq.given.size() > 1) {
-    for (size_t i = 0; i < seq.given.size(); ++i) {
-      VOX_ASSIGN_OR_RETURN(
-          Camera camera,
-          JobCamera(options, &seq.given[i], seq.source + "[" + std::to_string(i) + "]", meta));
-      cameras.push_back(camera);
-    }
-    return cameras;
-  }
-  VOX_ASSIGN_OR_RETURN(const Camera camera,
-                       JobCamera(options, seq.given.empty() ? nullptr : &seq.given[0],
-                                 seq.source, meta));
-  if (options.turntable == 0) return std::vector<Camera>{camera};
-  glm::dvec3 lo, hi;
-  WorldBounds(meta, &lo, &hi);
-  return TurntableCameras(camera, options.turntable, 0.5 * (lo + hi));
 }
 
 // --stats "camera": the camera used, as cam.json, and where its parts came
@@ -588,7 +370,7 @@ Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera
               run.sequence.frames());
     fprintf(options.log, "\n");
   }
-  VOX_RETURN_IF_ERROR(CheckFrameSize(options, files.exr, camera, say && first));
+  VOX_RETURN_IF_ERROR(CheckFrameSize(options, files.exr, camera, /*say=*/false));
 
   // The budget's split, before any output exists: a store whose resident
   // top does not fit fails here, saying how much it needs. Each frame sets
@@ -655,22 +437,6 @@ Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera
   return OkStatus();
 }
 
-// --save-cam's text for frame `number`: its camera with a pattern or a
-// single frame, else (on the run's last frame) the array of the cameras of
-// the frames rendered.
-std::string SaveCameraText(const RenderJobOptions& options, const JobSequence& seq,
-                           const std::vector<Camera>& cameras, int number) {
-  if (options.save_camera_path.empty()) return "";
-  if (seq.count == 1 || ExpandFramePattern(options.save_camera_path, 1) !=
-                            ExpandFramePattern(options.save_camera_path, 2))
-    return cameras[size_t(number - 1)].ToJson() + "\n";
-  if (number != seq.range.last) return "";
-  std::string text = "[\n";
-  for (int n = seq.range.first; n <= seq.range.last; ++n)
-    text += "  " + cameras[size_t(n - 1)].ToJson() + (n < seq.range.last ? ",\n" : "\n");
-  return text + "]\n";
-}
-
 }  // namespace
 
 StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<double> lod,
@@ -700,6 +466,7 @@ StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<do
 }
 
 Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
+  using namespace job_internal;
   // Each frame sets the heap watch's target from its budget; once the job
   // ends, stores opened outside a job (the Python module's) are not watched.
   struct UnwatchHeap {
@@ -709,15 +476,8 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   const Stopwatch open_time;
   VOX_RETURN_IF_ERROR(CheckJobOptions(options));
   const bool keep = options.keep_image && out != nullptr;
-  VOX_ASSIGN_OR_RETURN(const JobSequence sequence, PlanSequence(options, keep));
-  VOX_ASSIGN_OR_RETURN(const std::vector<FrameOutputs> frames, CheckJobOutputs(options, sequence));
-  if (options.on_outputs) {
-    std::vector<std::string> paths;
-    for (const FrameOutputs& f : frames)
-      for (const std::string* p : {&f.exr, &f.preview, &f.stats, &f.save_camera})
-        if (!p->empty()) paths.push_back(*p);
-    options.on_outputs(paths);
-  }
+  VOX_ASSIGN_OR_RETURN(JobSequence sequence, PlanSequence(options, keep));
+  VOX_RETURN_IF_ERROR(CheckJobOutputs(options, sequence));
 
   // The store and its pyramid, opened once for every frame.
   const uint64_t anon_at_start = ReadProcessMemory().rss_anon;
@@ -733,9 +493,9 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   VOX_ASSIGN_OR_RETURN(RenderStores stores, OpenRenderStores(options.store_dir, options.lod, open));
   const double open_seconds = open_time.Seconds();
 
-  // The cameras and the scene, then the frames in order.
-  VOX_ASSIGN_OR_RETURN(const std::vector<Camera> cameras,
-                       SequenceCameras(options, sequence, stores.base->meta()));
+  // The cameras (every frame of the run checked) and the scene, then the
+  // frames in order, each frame's camera and paths made when it comes.
+  VOX_RETURN_IF_ERROR(PrepareCameras(options, stores.base->meta(), &sequence));
   VOX_ASSIGN_OR_RETURN(const Scene scene, JobScene(options));
   JobRun run{options, sequence, stores, scene, process};
   run.threads =
@@ -744,16 +504,24 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
   run.keep = keep;
   run.out = out;
   run.anon_at_start = anon_at_start;
-  for (const FrameOutputs& files : frames) {
-    const bool first = files.number == sequence.range.first;
-    VOX_RETURN_IF_ERROR(RenderJobFrame(run, files, cameras[size_t(files.number - 1)], first,
-                                       open_seconds,
-                                       SaveCameraText(options, sequence, cameras, files.number)));
+  for (int n = sequence.range.first; n <= sequence.range.last; ++n) {
+    const FrameOutputs files = FrameFiles(options, sequence, n);
+    VOX_RETURN_IF_ERROR(CheckFrameFiles(options, sequence, files));
+    if (options.on_outputs) {
+      std::vector<std::string> paths;
+      for (const std::string* p : {&files.exr, &files.preview, &files.stats, &files.save_camera})
+        if (!p->empty()) paths.push_back(*p);
+      options.on_outputs(paths);
+    }
+    VOX_ASSIGN_OR_RETURN(const Camera camera, FrameCamera(options, sequence, n));
+    VOX_ASSIGN_OR_RETURN(const std::string save_camera, SaveCameraText(options, sequence, n));
+    VOX_RETURN_IF_ERROR(RenderJobFrame(run, files, camera, n == sequence.range.first,
+                                       open_seconds, save_camera));
     // A frame that turns over the brick cache leaves freed pages scattered
     // in the allocator's heaps; without this, a sequence's resident memory
     // crept up 3-4 MiB a frame past the budget (the 8192^3 sphere's exact
     // turntable was OOM-killed in 512 MiB at frame 22).
-    if (frames.size() > 1) malloc_trim(0);
+    if (sequence.frames() > 1) malloc_trim(0);
   }
   return OkStatus();
 }

@@ -98,9 +98,8 @@ struct RenderJobOptions {
   int turntable = 0;
   // --frames A-B: the frames of the sequence this run renders; unset: all.
   std::optional<FrameRange> frames;
-  // Called once every frame's outputs are known and checked, before any
-  // work, with their paths (vox-render's signal thread removes their
-  // temporaries).
+  // Called with each frame's output paths when the frame comes, before
+  // its work (vox-render's signal thread removes their temporaries).
   std::function<void(const std::vector<std::string>&)> on_outputs;
   FILE* log = stderr;
   // Keep the image in RenderJobOutput; its bytes are charged to the memory

@@ -307,9 +307,8 @@ Status RunJobs(Store& base, const std::vector<BaseJob>& jobs,
 StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   const fs::path target = fs::path(store_dir) / kLodDirName;
-  std::error_code ec;
-  const bool exists = fs::exists(fs::symlink_status(target, ec));
-  if (exists && !options.force)
+  VOX_ASSIGN_OR_RETURN(const CheckedTarget checked, CheckTarget(target.string()));
+  if (checked.exists && !options.force)
     return InvalidArgumentError("'" + target.string() +
                                 "' already exists (replace it with --force)");
   OpenOptions oo;
@@ -356,7 +355,7 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
     stats.base_bricks_read = bricks_done;
   }
   VOX_RETURN_IF_ERROR(SyncDir(temp));
-  VOX_RETURN_IF_ERROR(PublishAtomically(temp, target.string(), "level-of-detail pyramid"));
+  VOX_RETURN_IF_ERROR(PublishAtomically(temp, target.string(), "level-of-detail pyramid", checked));
   cleanup.keep = true;
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return stats;

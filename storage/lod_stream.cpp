@@ -162,7 +162,7 @@ class LodStream::Impl {
     pyramid_.reset();
     stats.base_bricks_read = taken_;
     VOX_RETURN_IF_ERROR(SyncDir(temp_));
-    VOX_RETURN_IF_ERROR(PublishAtomically(temp_, target_, "level-of-detail pyramid"));
+    VOX_RETURN_IF_ERROR(PublishAtomically(temp_, target_, "level-of-detail pyramid", {}));
     published_ = true;
     stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return stats;

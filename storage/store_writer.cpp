@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <mutex>
@@ -114,12 +115,34 @@ std::string NotAStoreReason(const fs::path& dir) {
   return "";
 }
 
+// A fault point for tests of a race between the check and the publish: with
+// VOX_TEST_PUBLISH_GATE naming a FIFO in the directory of `target`, Finish
+// reads it to its end (waiting for the test to open and close it) just
+// before publishing (not the stores inside it, a pyramid's levels).
+void WaitAtTestGate(const std::string& target) {
+  const char* gate = std::getenv("VOX_TEST_PUBLISH_GATE");
+  if (gate == nullptr || *gate == '\0') return;
+  std::string gate_dir, target_dir, name;
+  SplitPath(gate, &gate_dir, &name);
+  SplitPath(target, &target_dir, &name);
+  if (gate_dir != target_dir) return;
+  const int fd = open(gate, O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return;
+  char buf[64];
+  for (;;) {
+    const ssize_t n = read(fd, buf, sizeof buf);
+    if (n == 0 || (n < 0 && errno != EINTR)) break;
+  }
+  close(fd);
+}
+
 class StoreWriterImpl : public StoreWriter {
  public:
-  StoreWriterImpl(std::string target, std::string temp, StoreMeta meta, WriteOptions options,
-                  uint64_t store_id)
+  StoreWriterImpl(std::string target, std::string temp, CheckedTarget checked, StoreMeta meta,
+                  WriteOptions options, uint64_t store_id)
       : target_(std::move(target)),
         temp_(std::move(temp)),
+        checked_(checked),
         meta_(std::move(meta)),
         options_(options),
         store_id_(store_id),
@@ -365,11 +388,26 @@ class StoreWriterImpl : public StoreWriter {
       VOX_RETURN_IF_ERROR(SyncDir(temp_));
     }
 
-    // Into place: swap atomically with an existing store, or rename.
-    return PublishAtomically(temp_, target_, "store");
+    WaitAtTestGate(target_);
+    // Into place: replace the store (or empty directory) Create found, and
+    // only if it is still one; else only where nothing is.
+    Status s = PublishAtomically(temp_, target_, "store", checked_, MayReplace);
+    if (s.code() == StatusCode::kInvalidArgument && !checked_.exists && !options_.force)
+      return InvalidArgumentError(s.message() + " (use --force to replace a store)");
+    return s;
+  }
+
+  // "" when the directory moved out of the target is still an empty
+  // directory or a store, as Create found it.
+  static std::string MayReplace(const std::string& old) {
+    std::error_code ec;
+    if (fs::is_empty(old, ec) && !ec) return "";
+    const std::string why = NotAStoreReason(old);
+    return why.empty() ? "" : "it is no longer a vox store: " + why;
   }
 
   const std::string target_, temp_;
+  const CheckedTarget checked_;
   StoreMeta meta_;
   const WriteOptions options_;
   const uint64_t store_id_;
@@ -403,6 +441,10 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
   std::string target = dir;
   while (target.size() > 1 && target.back() == '/') target.pop_back();
   if (target.empty()) return InvalidArgumentError("empty store path");
+  // What Finish may replace: what is there now, if it passes the checks
+  // below (Finish checks again that it is still the same and still a store).
+  StatusOr<CheckedTarget> checked = CheckTarget(target);
+  if (!checked.ok()) return checked.status();
   fs::path tp(target);
   std::error_code ec;
   auto st = fs::symlink_status(tp, ec);
@@ -431,7 +473,7 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
                 uint64_t(std::chrono::steady_clock::now().time_since_epoch().count());
   StatusOr<std::string> temp = CreateTemporary(target, /*directory=*/true);
   if (!temp.ok()) return temp.status().WithContext("store '" + target + "'");
-  auto w = std::make_unique<StoreWriterImpl>(target, *temp, meta, options,
+  auto w = std::make_unique<StoreWriterImpl>(target, *temp, *checked, meta, options,
                                              options.store_id != 0 ? options.store_id : id);
   Status init = w->Init();
   if (!init.ok()) return init.WithContext("writing store '" + target + "'");

@@ -53,18 +53,22 @@ StatusOr<AtomicFile> AtomicFile::Create(const std::string& path) {
   if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
     return InvalidArgumentError(path + ": not a regular file; this output is written to a " +
                                 "temporary beside it and renamed over it");
+  // What Commit may replace: the file found here now, or nothing.
+  VOX_ASSIGN_OR_RETURN(const CheckedTarget checked, CheckTarget(path));
   StatusOr<std::string> temp = CreateTemporary(path, /*directory=*/false);
   if (!temp.ok()) return IoError(path + ": " + temp.status().message());
   AtomicFile f;
   f.path_ = path;
   f.temp_ = *temp;
+  f.checked_ = checked;
   return f;
 }
 
 AtomicFile::AtomicFile(AtomicFile&& o) noexcept
     : path_(std::move(o.path_)),
       temp_(std::exchange(o.temp_, std::string())),
-      synced_(o.synced_) {}
+      synced_(o.synced_),
+      checked_(o.checked_) {}
 
 AtomicFile& AtomicFile::operator=(AtomicFile&& o) noexcept {
   if (this != &o) {
@@ -72,6 +76,7 @@ AtomicFile& AtomicFile::operator=(AtomicFile&& o) noexcept {
     path_ = std::move(o.path_);
     temp_ = std::exchange(o.temp_, std::string());
     synced_ = o.synced_;
+    checked_ = o.checked_;
   }
   return *this;
 }
@@ -104,7 +109,7 @@ Status AtomicFile::Sync() {
 
 Status AtomicFile::Commit() {
   VOX_RETURN_IF_ERROR(Sync());
-  Status s = PublishAtomically(temp_, path_, "output");
+  Status s = PublishAtomically(temp_, path_, "output", checked_);
   if (!s.ok()) {
     s = IoError(path_ + ": cannot put the finished output into place: " + s.message());
     Abandon();

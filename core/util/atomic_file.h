@@ -15,6 +15,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/util/file.h"
 #include "core/util/status.h"
 
 namespace vox {
@@ -46,6 +47,9 @@ class AtomicFile {
   // fsyncs the temporary (once; a failure removes it).
   Status Sync();
   // Sync, then renames the temporary over path() and fsyncs the directory.
+  // It replaces only the file found at path() by Create (same device and
+  // inode), or nothing if there was none: a directory, or anything else put
+  // there since, is refused and left as it is (InvalidArgument).
   Status Commit();
   // Removes the temporary now.
   void Abandon();
@@ -54,6 +58,7 @@ class AtomicFile {
   AtomicFile() = default;
   std::string path_, temp_;
   bool synced_ = false;
+  CheckedTarget checked_;
 };
 
 // Writes `bytes` to `path` atomically.

@@ -495,37 +495,4 @@ StatusOr<std::string> CreateTemporary(const std::string& target, bool directory)
   return path;
 }
 
-Status PublishAtomically(const std::string& temp, const std::string& target,
-                         const std::string& what) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  const bool replace_directory = fs::is_directory(fs::symlink_status(target, ec));
-  if (!replace_directory) {
-    if (rename(temp.c_str(), target.c_str()) != 0)
-      return ErrnoError("cannot rename '" + temp + "' to", target, errno);
-  } else if (renameat2(AT_FDCWD, temp.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
-    fs::remove_all(temp, ec);  // now the old one
-    if (ec)
-      return IoError("cannot remove the replaced " + what + " at '" + temp + "': " + ec.message());
-  } else if (errno == EINVAL || errno == ENOSYS || errno == ENOTSUP) {
-    // No atomic exchange here: move the old one aside, then rename.
-    const std::string old = temp + ".old";
-    if (rename(target.c_str(), old.c_str()) != 0)
-      return ErrnoError("cannot move the old " + what + " aside", target, errno);
-    if (rename(temp.c_str(), target.c_str()) != 0) {
-      const int err = errno;
-      rename(old.c_str(), target.c_str());
-      return ErrnoError("cannot rename '" + temp + "' to", target, err);
-    }
-    fs::remove_all(old, ec);
-    if (ec)
-      return IoError("cannot remove the replaced " + what + " at '" + old + "': " + ec.message());
-  } else {
-    return ErrnoError("cannot replace " + what, target, errno);
-  }
-  std::string dir, name;
-  SplitPath(target, &dir, &name);
-  return SyncDir(dir);
-}
-
 }  // namespace vox

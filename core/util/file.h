@@ -12,6 +12,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -173,14 +174,43 @@ std::mutex& TemporaryMutex();
 // without O_CREAT, so a temporary removed under them is not made again.
 StatusOr<std::string> CreateTemporary(const std::string& target, bool directory);
 
+// What a writer found at its output path when it checked it, before the
+// long work: nothing, or the file or directory of this device and inode.
+// PublishAtomically replaces only that.
+struct CheckedTarget {
+  bool exists = false;
+  bool directory = false;  // a directory (lstat: a link is not one)
+  uint64_t device = 0, inode = 0;
+};
+
+// What is at `target` now (lstat). IoError naming it when it cannot be
+// examined (anything but "no such file").
+StatusOr<CheckedTarget> CheckTarget(const std::string& target);
+
+// Given where the replaced output now lies (moved out of the target, under
+// a temporary name), "" when it may be removed, or why not.
+using ReplaceCheck = std::function<std::string(const std::string& old_path)>;
+
 // Puts the finished temporary `temp` (a synced file or directory, beside
-// `target`) in place of `target` and fsyncs their directory. A file replaces
-// a file by rename(2). A directory replaces an existing one by an atomic
-// exchange (renameat2 RENAME_EXCHANGE) where the file system has it, else by
-// moving the old one aside to `temp`.old first; the old one is then removed.
-// `what` names the output in messages ("store", "level-of-detail pyramid").
+// `target`) in place of `target` and fsyncs their directory. It never
+// removes anything it did not check:
+//  - `checked` found nothing: nothing is replaced (renameat2
+//    RENAME_NOREPLACE; where the file system lacks it, link(2) for a file,
+//    a placeholder directory for a directory). Anything at `target` now gives
+//    InvalidArgument "'<target>' already exists".
+//  - `checked` found something: it is exchanged with `temp` (RENAME_EXCHANGE;
+//    else moved aside to `temp`.old first), and removed only when it is the
+//    same device and inode, the same kind, and `may_replace` (if given)
+//    accepts it. Otherwise it is put back as it was and the publish fails
+//    with InvalidArgument "'<target>' changed after it was checked".
+// `what` names the output in messages ("store", "output").
 Status PublishAtomically(const std::string& temp, const std::string& target,
-                         const std::string& what);
+                         const std::string& what, const CheckedTarget& checked,
+                         const ReplaceCheck& may_replace = nullptr);
+
+// For tests: PublishAtomically behaves as on a file system without
+// renameat2's flags (the fallbacks above).
+void SetRenameFlagsUnsupportedForTesting(bool unsupported);
 
 // "<what> '<path>': <strerror(err)>" as an IoError (ResourceExhausted for
 // ENOSPC/EDQUOT/EFBIG, NotFound for ENOENT).

@@ -132,7 +132,7 @@ TEST_F(CliTest, TilesAndMergeEqualTheFullRender) {
   // A missing part is refused.
   RunResult bad = testing::RunCommand(std::string(VOX_MERGE_BIN) + " " + Path("p1.exr") + " " + Path("p3.exr") +
                        " -o " + Path("bad.exr"));
-  EXPECT_NE(bad.code, 0);
+  EXPECT_EQ(bad.code, 1) << bad.output;
   EXPECT_NE(bad.output.find("part 2/3 is missing"), std::string::npos) << bad.output;
 }
 

@@ -184,6 +184,20 @@ const char kCamB[] =
 const char kCamC[] =
     R"({"camera_to_world":[0,0,1,18, 0,1,0,0, -1,0,0,0, 0,0,0,1], "fov_deg":45, "width":32, "height":48})";
 
+// Every frame's size, tiles and room on disk are checked before the first
+// frame is rendered: a bad third camera leaves no frame published.
+TEST_F(SequenceCliTest, ABadFrameInAnArrayIsFoundBeforeTheFirstFrame) {
+  const std::string huge =
+      R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40, "width":100000, "height":100000})";
+  const std::string cams =
+      Write("badsize.json", std::string("[") + kCamA + ",\n" + kCamB + ",\n" + huge + "]");
+  auto r = Render("--cam " + cams + " -o " + Path("bad.%02d.exr"));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_TRUE(Has(r.output, "frame 3") && Has(r.output, "100000x100000")) << r.output;
+  EXPECT_FALSE(Has(r.output, "frame 1/3")) << "work began: " << r.output;
+  EXPECT_EQ(Files("bad."), std::vector<std::string>{});
+}
+
 TEST_F(SequenceCliTest, CameraArrayRendersEachFrameAsASingleRunWould) {
   const std::string cams =
       Write("cams.json", std::string("[") + kCamA + ",\n" + kCamB + ",\n" + kCamC + "]");
@@ -274,6 +288,7 @@ TEST_F(SequenceCliTest, BadPatternsAreRefusedBeforeAnyWork) {
   const std::string cam = Write("c1.json", kCamA);
   struct Case {
     std::string args, expect;
+    int code = 1;  // 2: a bad flag value, refused as the command line is read
   } cases[] = {
       {"--turntable 3 -o " + Path("nopat.exr"), "give a frame pattern such as"},
       {"--turntable 3 -o " + Path("p.%d.exr") + " --stats " + Path("nopat.json"),
@@ -290,12 +305,12 @@ TEST_F(SequenceCliTest, BadPatternsAreRefusedBeforeAnyWork) {
       {"--cam " + Write("two.json", std::string("[") + kCamA + "," + kCamB + "]") +
            " --turntable 3 -o " + Path("p.%d.exr"),
        "--turntable turns one camera"},
-      {"--frames 0 -o " + Path("p.%d.exr"), "--frames '0'"},
+      {"--frames 0 -o " + Path("p.%d.exr"), "--frames '0'", 2},
   };
   const std::string cam_bytes = testing::RunCommand("cat " + cam).output;
   for (const Case& c : cases) {
     auto r = Render(c.args);
-    EXPECT_NE(r.code, 0) << c.args;
+    EXPECT_EQ(r.code, c.code) << c.args << "\n" << r.output;
     EXPECT_TRUE(Has(r.output, c.expect)) << c.args << "\n" << r.output;
     EXPECT_FALSE(Has(r.output, "vox-render: memory")) << "work began: " << r.output;
   }

@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -258,6 +259,42 @@ TEST_F(OutputSafetyTest, FarCamerasAreRefusedNearOnesRender) {
     EXPECT_TRUE(Has(r.output, "camera position") && Has(r.output, "65536")) << r.output;
     EXPECT_FALSE(fs::exists(Path("far.exr")));
   }
+}
+
+}  // namespace
+}  // namespace vox
+
+namespace vox {
+namespace {
+
+// SIGPIPE (an output or the log piped to a reader that is gone, `| head`)
+// fails the write like any other: the run exits 1, publishes nothing and
+// leaves no temporary, where it used to die with the EXR's behind.
+TEST_F(OutputSafetyTest, ABrokenPipeLeavesNoTemporaries) {
+  const std::string cmd = Render("store", "--size 16x16 --tile-size 16 --quiet -o " +
+                                              Path("pipe.exr") + " --stats /dev/stdout 2>" +
+                                              Path("pipe.err"));
+  int fds[2];
+  ASSERT_EQ(pipe(fds), 0);
+  close(fds[0]);  // the reader is gone before the first byte
+  const pid_t pid = fork();
+  if (pid == 0) {
+    signal(SIGPIPE, SIG_DFL);
+    dup2(fds[1], 1);
+    execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(fds[1]);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  const std::string err = Bytes(Path("pipe.err"));
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1)
+      << "status " << status << (WIFSIGNALED(status) ? " (signal)" : "") << ": " << err;
+  EXPECT_TRUE(Has(err, "/dev/stdout")) << err;
+  EXPECT_FALSE(fs::exists(Path("pipe.exr")));
+  for (const auto& e : fs::directory_iterator(*dir_))
+    EXPECT_EQ(e.path().filename().string().find(".pipe.exr.tmp-"), std::string::npos)
+        << e.path();
 }
 
 }  // namespace

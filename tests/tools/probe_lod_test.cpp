@@ -126,11 +126,11 @@ TEST_F(ProbeLod, WideConeStopsAtCoarseCellsNoLaterThanTheExactHit) {
 TEST_F(ProbeLod, BadInputNamesTheFlag) {
   for (const char* bad : {"0", "-2", "nan", "inf", "x"}) {
     Result r = RunProbe(dir_, (dir_ / "s").string() + " --lod " + bad + " --cone-rad 0.1", rays_);
-    EXPECT_NE(r.exit_code, 0) << bad;
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.err;  // a bad flag value
     EXPECT_NE(r.err.find("--lod"), std::string::npos) << r.err;
   }
   Result r = RunProbe(dir_, (dir_ / "n").string() + " --lod 1 --cone-rad 0.1", rays_);
-  EXPECT_NE(r.exit_code, 0);
+  EXPECT_EQ(r.exit_code, 2) << r.err;  // --lod without a pyramid: a bad flag for this store
   EXPECT_NE(r.err.find("--lod"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("--add-lod"), std::string::npos) << r.err;
   r = RunProbe(dir_, (dir_ / "s").string() + " --lod 1", rays_);

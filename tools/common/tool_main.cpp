@@ -1,6 +1,7 @@
 #include "tools/common/tool_main.h"
 
 #include <cstdio>
+#include <csignal>
 #include <cstring>
 #include <new>
 
@@ -9,6 +10,10 @@
 namespace vox {
 
 int ToolMain(const char* name, int argc, char** argv, int (*run)(int argc, char** argv)) {
+  // A reader gone from a pipe (`| head`) fails the write (EPIPE) like any
+  // other write error, so the tool removes its temporaries and exits 1,
+  // instead of dying with them left behind.
+  std::signal(SIGPIPE, SIG_IGN);
   try {
     for (int i = 1; i < argc; ++i) {
       if (std::strcmp(argv[i], "--version") == 0) {

@@ -4,7 +4,9 @@
 // without running the tool. Otherwise the exit codes are what `run` returns
 // (0 done, 1 failed, 2 bad command line, as each tool documents); an
 // allocation failure anywhere (an image, a brick, a table sized from input)
-// ends with a clear message and exit 1, never an abort.
+// ends with a clear message and exit 1, never an abort. SIGPIPE is
+// ignored: a write to a pipe whose reader is gone fails (EPIPE) and the tool
+// handles it as any failed write (temporaries removed, exit 1).
 //
 // Thread safety: called once, from main.
 #ifndef VOX_TOOLS_COMMON_TOOL_MAIN_H_

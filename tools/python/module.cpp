@@ -48,10 +48,13 @@
 #include "tools/common/prober.h"
 #include "tools/common/version.h"
 #include "tools/python/ingest_process.h"
+#include "tools/python/polled.h"
 
 namespace py = pybind11;
 
 namespace {
+
+using vox::RunPolled;
 
 [[noreturn]] void Raise(vox::StatusCode code, const std::string& text) {
   PyObject* type = PyExc_RuntimeError;
@@ -81,10 +84,12 @@ void CheckRun(const vox::Status& s) {
   if (!s.ok()) Raise(s.code(), s.ToString());
 }
 
-// str, os.PathLike or vox.Store -> a path.
+// str, bytes, os.PathLike or vox.Store -> a path: its bytes in the file
+// system's encoding (os.fsencode; bytes as they are), the file Python names.
 std::string PathOf(const py::handle& h) {
-  if (py::hasattr(h, "path") && !py::isinstance<py::str>(h)) return py::str(h.attr("path"));
-  return py::str(py::module_::import("os").attr("fspath")(h));
+  if (py::hasattr(h, "path") && !py::isinstance<py::str>(h) && !py::isinstance<py::bytes>(h))
+    return PathOf(h.attr("path"));
+  return py::module_::import("os").attr("fsencode")(h).cast<std::string>();
 }
 
 // A keyword argument -> the tool's flag and its text value (None: not given,
@@ -120,7 +125,7 @@ KwFlag ToFlag(const std::string& key, const py::handle& v) {
     const py::tuple t = v.cast<py::tuple>();
     f.value = py::str(t[0]).cast<std::string>() +
               (key == "size" ? "x" : key == "view" ? "," : "/") + py::str(t[1]).cast<std::string>();
-  } else if (py::hasattr(v, "__fspath__")) {
+  } else if (py::hasattr(v, "__fspath__") || py::isinstance<py::bytes>(v)) {
     f.value = PathOf(v);
   } else {
     f.value = py::str(v).cast<std::string>();
@@ -177,56 +182,6 @@ std::string g_module_name = "vox._vox";  // set on import: the child imports it 
 // Calls a Python progress(bricks_done, bricks_total, voxels_done) from the
 // ingest's thread; after it raises, it is not called again and the exception
 // is raised when the ingest returns.
-// Runs `work` on its own thread, the GIL released, while this thread checks
-// for signals (PyErr_CheckSignals, which acts only on Python's main thread)
-// every 50 ms. A signal handler's exception (KeyboardInterrupt) sets
-// *cancel, which the work polls (between tiles, at each brick) to stop and
-// remove its temporaries; once the work has returned, the exception is
-// raised. Ctrl-C thus stops vox.render and vox.ingest within a moment, and
-// no output is published after it.
-void RunPolled(std::atomic<bool>* cancel, const std::function<void()>& work) {
-  std::mutex mu;
-  std::condition_variable cv;
-  bool done = false;
-  std::unique_ptr<py::error_already_set> interrupt;
-  std::exception_ptr thrown;  // bad_alloc from the work: raised as MemoryError
-  std::thread worker;
-  {
-    py::gil_scoped_release release;
-    worker = std::thread([&] {
-      try {
-        work();
-      } catch (...) {
-        thrown = std::current_exception();
-      }
-      std::lock_guard<std::mutex> lock(mu);
-      done = true;
-      cv.notify_all();
-    });
-  }
-  for (;;) {
-    {
-      py::gil_scoped_release release;
-      std::unique_lock<std::mutex> lock(mu);
-      cv.wait_for(lock, std::chrono::milliseconds(50), [&] { return done; });
-      if (done) break;
-    }
-    if (!interrupt && PyErr_CheckSignals() != 0) {
-      interrupt = std::make_unique<py::error_already_set>();  // fetched: the error is kept
-      cancel->store(true);
-    }
-  }
-  {
-    py::gil_scoped_release release;
-    worker.join();
-  }
-  if (interrupt) {
-    interrupt->restore();
-    throw py::error_already_set();
-  }
-  if (thrown) std::rethrow_exception(thrown);
-}
-
 // Forwards to `inner` (may be null) and answers Cancelled from `cancel` or
 // the inner sink.
 class CancelSink : public vox::ProgressSink {
@@ -507,34 +462,31 @@ py::tuple Probe(const py::object& store, const py::object& rays_in, const py::kw
   vox::Status status;
   py::ssize_t bad_row = -1;
   vox::TraceCounters counters;
-  {
-    py::gil_scoped_release release;
+  std::atomic<bool> cancel{false};  // Ctrl-C: checked every ray
+  RunPolled(&cancel, [&] {
     auto opened = vox::Prober::Open(opt);
     status = opened.status();
-    if (status.ok()) {
-      prober = std::move(opened).value();
-      const double* r = rays.data();
-      for (py::ssize_t i = 0; i < n; ++i) {
-        vox::Ray ray;
-        ray.origin = {r[i * 6 + 0], r[i * 6 + 1], r[i * 6 + 2]};
-        ray.dir = {r[i * 6 + 3], r[i * 6 + 4], r[i * 6 + 5]};
-        auto h = prober->Trace(ray, &counters);
-        if (!h.ok()) {
-          status = h.status();
-          bad_row = i;
-          break;
-        }
-        if (*h) {
-          const vox::Hit& x = **h;
-          voxels[size_t(i) * 3 + 0] = x.voxel.x;
-          voxels[size_t(i) * 3 + 1] = x.voxel.y;
-          voxels[size_t(i) * 3 + 2] = x.voxel.z;
-          t[size_t(i)] = x.t;
-          hit[size_t(i)] = 1;
-        }
+    if (!status.ok()) return;
+    prober = std::move(opened).value();
+    const double* r = rays.data();
+    for (py::ssize_t i = 0; i < n && !cancel.load(std::memory_order_relaxed); ++i) {
+      vox::Ray ray;
+      ray.origin = {r[i * 6 + 0], r[i * 6 + 1], r[i * 6 + 2]};
+      ray.dir = {r[i * 6 + 3], r[i * 6 + 4], r[i * 6 + 5]};
+      auto h = prober->Trace(ray, &counters);
+      if (!h.ok()) {
+        status = h.status();
+        bad_row = i;
+        return;
+      }
+      if (*h) {
+        const vox::Hit& x = **h;
+        for (int c = 0; c < 3; ++c) voxels[size_t(i) * 3 + c] = x.voxel[c];
+        t[size_t(i)] = x.t;
+        hit[size_t(i)] = 1;
       }
     }
-  }
+  });
   if (bad_row >= 0) Raise(status.code(), "rays[" + std::to_string(bad_row) + "]: " + status.message());
   if (!status.ok()) Raise(status.code(), status.message());  // as vox-probe prints it
   if (opt.stats) py::print("vox-probe:", counters.ToString(), py::arg("file") = py::module_::import("sys").attr("stderr"));
