@@ -2,8 +2,8 @@
 # Ingest benchmark: throughput, store size against the .vdb, bytes per
 # occupied voxel and peak memory of vox-ingest on one .vdb file.
 #   tools/bench/bench_ingest.sh [VOX_INGEST] [VDB] [THREADS]
-# Defaults: build/tools/ingest/vox-ingest, /tmp/sphere2048.vdb (made with
-# `vdb_tool -sphere d=2048 r=1 c=0,0,0 v=0.001 w=3 -write /tmp/sphere2048.vdb`
+# Defaults: build/tools/ingest/vox-ingest, sphere2048.vdb under /tmp (made with
+# `vdb_tool -sphere d=2048 r=1 c=0,0,0 v=0.001 w=3 -write VDB`
 # when missing), 2 threads. CPU time and max RSS from /usr/bin/time; peak
 # memory also sampled from /proc every 50 ms:
 # RssAnon (the process's own memory) apart from RssFile (the memory-mapped

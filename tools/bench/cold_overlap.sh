@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # cold_overlap.sh VOX_RENDER STORE [RUNS] [MODES] [PREFETCH]
 #
-# Does a cold frame wait only for the disk? (issue 29, item 4). Measures, side
+# Does a cold frame wait only for the disk? Measures, side
 # by side and alternating, for each mode (exact = --lod 0, default = the
 # store's level of detail) and each reading strategy (wait = the render
 # threads read what they need, prefetch = --prefetch):

@@ -784,7 +784,7 @@ class Bench:
                     self.report()
         self.report()
 
-    # ------------------------------------------------------------ the scale law (issue 25)
+    # ------------------------------------------------------------ the scale law
 
     def law_rows(self, rows):
         lim = f"{self.a.limit_mib}MiB" if self.a.limit_mib else "none"
@@ -817,7 +817,7 @@ class Bench:
     def law(self, rows, grids, svg):
         a = self.a
         lim, vox = self.law_rows(rows)
-        L = ["## The scale law (issue 25)\n"]
+        L = ["## The scale law\n"]
         if not vox:
             L.append(f"No vox runs at limit `{lim}` yet.\n")
             return L

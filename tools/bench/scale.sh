@@ -8,7 +8,7 @@
 # docs/scale.svg, raw rows in WORK/scale.csv (resumable: runs already there for
 # the same vox-render binary are skipped, existing stores are reused).
 #
-#   tools/bench/scale.sh [--build build] [--work /tmp/vox-scale] [--grids 1024,2048,4096]
+#   tools/bench/scale.sh [--build build] [--work DIR] [--grids 1024,2048,4096]
 #                        [--shapes sphere,bumpy] [--modes default,exact]
 #                        [--limits 1/2,1/4,1/8 | --limit-mib 512] [--runs 3] [--threads 2]
 #                        [--size 1024x1024] [--store SHAPE:N=PATH]... [--store-8192 PATH]
@@ -17,7 +17,7 @@
 #                        [--out docs/scale.md]
 #   tools/bench/scale.sh --compare A.exr B.exr   # are two tiled EXRs' pixels identical?
 #
-# The scale law (issue 25), e.g. on existing stores:
+# The scale law, e.g. on existing stores:
 #   nice -n 19 tools/bench/scale.sh --grids 4096,8192,16384,32768 --shapes sphere,bumpy \
 #       --modes default,exact --limit-mib 512 --runs 1 \
 #       --store sphere:4096=/data/sphere4096.store --store bumpy:4096=/data/bumpy4096.store ...

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # turntable.sh STORE [vox-render flags...]
 #
-# A turntable of STORE in one vox-render process (issue 28's benchmark):
+# A turntable of STORE in one vox-render process (the frame-sequence benchmark):
 # N frames (TURNTABLE, default 36) around the volume from --view 0,20, the
 # first one cold (the page cache dropped first, unless WARM=1), in a fresh
 # cgroup v1 memory group of LIMIT_MB (default 512; 0: unlimited). Prints
@@ -12,7 +12,7 @@
 # find the bricks the earlier ones read in the cache of the one process.
 #
 # Environment: VOX_RENDER (default build/tools/render/vox-render), WORK
-# (default /tmp/vox-turntable: frames, stats and the log go there),
+# (default: vox-turntable under /tmp; frames, stats and the log go there),
 # TURNTABLE, LIMIT_MB, SIZE (default 1024x1024), THREADS (default 2), WARM,
 # GOAL. Extra arguments go to vox-render (e.g. --lod 0, --memory-mb 400).
 # Needs root and /sys/fs/cgroup/memory for the cold frame and the limit;
