@@ -19,7 +19,7 @@
 //                    2^24); NaN on a miss and on fog pixels;
 //   P.X P.Y P.Z      world position of the first hit (0 on a miss);
 //   distance         world distance from the camera along the pixel's ray to
-//                    the first hit (what Z was before planar depth), +inf on
+//                    the first hit (Z is the planar depth), +inf on
 //                    a miss.
 // R, G, B and A are HALF
 // unless ImageLayers::float_color asks for FLOAT (vox-render --float); the

@@ -6,7 +6,8 @@
 # page under docs/ is at most 500 lines. Prints each offending line as
 # FILE:LINE:TEXT and exits 1 if there is one, 0 otherwise.
 # Markdown files are checked whole; C++ files on their comment lines (after
-# // or on a /* or * line); shell, Python and CMake files after a #.
+# // or on a /* or * line); shell and CMake files after a #; Python files
+# after a # and, for numbered history, whole (their docstrings).
 # Only files git tracks are read. .ci/run runs it before the tests.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -21,7 +22,8 @@ while IFS= read -r f; do
     scripts/check-docs.sh) ;;
     *.md) report "$(grep -nHiE "$pat" "$f")" ;;
     *.h | *.hpp | *.cpp | *.cc | *.c | *.inl) report "$(grep -nHiE "(//|^[[:space:]]*/?\*).*$pat" "$f")" ;;
-    *.sh | *.py | *.cmake | *CMakeLists.txt | .ci/*) report "$(grep -nHiE "#.*$pat" "$f")" ;;
+    *.py) report "$(grep -nHiE "$history|#.*($machine)" "$f")" ;;
+    *.sh | *.cmake | *CMakeLists.txt | .ci/*) report "$(grep -nHiE "#.*$pat" "$f")" ;;
   esac
 done < <(git ls-files)
 while IFS= read -r f; do

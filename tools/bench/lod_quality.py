@@ -2,7 +2,7 @@
 """Level of detail: what the default costs and how close it is to the truth.
 
     python3 tools/bench/lod_quality.py STORE [STORE ...] [--build build] [--size 512]
-        [--runs 3] [--threads 2] [--work /tmp/vox-lod-quality] [--view full|close]
+        [--runs 3] [--threads 2] [--work DIR] [--view full|close]
 
 For each store (a vox-gen sphere or bumpy store with its pyramid) renders the
 full view (camera at (0,0,3) looking at the origin, 40 degrees; --view close:

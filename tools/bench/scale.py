@@ -3,7 +3,7 @@
 
 Usage (from the repository root; tools/bench/scale.sh wraps this):
 
-  python3 tools/bench/scale.py [--build build] [--work /tmp/vox-scale]
+  python3 tools/bench/scale.py [--build build] [--work DIR]
       [--grids 1024,2048,4096] [--shapes sphere,bumpy] [--modes default,exact]
       [--limits 1/2,1/4,1/8 | --limit-mib 512] [--runs 3] [--threads 2]
       [--size 1024x1024] [--store SHAPE:N=PATH ...] [--store-8192 PATH]
@@ -13,7 +13,7 @@ Usage (from the repository root; tools/bench/scale.sh wraps this):
   python3 tools/bench/scale.py --compare A.exr B.exr   # pixel check of two tiled EXRs
   python3 tools/bench/scale.py --report-only ...       # rewrite docs from the CSV only
 
-The scale law (issue 25), in one command on existing stores:
+The scale law, in one command on existing stores:
 
   nice -n 19 tools/bench/scale.sh --grids 4096,8192,16384,32768 --shapes sphere,bumpy \
       --modes default,exact --limit-mib 512 --store sphere:4096=/data/sphere4096.store ...
@@ -874,7 +874,7 @@ class Bench:
                 L.append(f"{shape}: not measured (yet): " + ", ".join(f"{n}³" for n in missing)
                          + " (no store, or not run).\n")
 
-        # The issue's goals, as ratios of cold full views.
+        # The goals, as ratios of cold full views.
         def ratio(shape, num, den, what, mode_n="default", mode_d="default"):
             v1 = self.law_value(sel(shape, num, mode_n, "full", "cold"), what)
             v0 = self.law_value(sel(shape, den, mode_d, "full", "cold"), what)
