@@ -118,7 +118,7 @@ using ExrAttributes = std::map<std::string, std::string>;
 
 // How tiles are compressed. kZip is zlib at its fastest level (a few percent
 // larger than its default level, at about half the time); kNone suits parts
-// that vox-merge recompresses. docs/benchmarks.md has the measured times.
+// that vox-merge recompresses. docs/performance.md has the EXR write's share.
 enum class ExrCompression { kZip, kZips, kPiz, kRle, kNone };
 // "zip", "zips", "piz", "rle", "none".
 StatusOr<ExrCompression> ParseExrCompression(const std::string& name);

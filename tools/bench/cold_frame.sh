@@ -12,7 +12,7 @@
 # slower disk: the process then also runs in a cgroup v1 blkio group that
 # throttles reads of the store's disk to that many MB/s and reads/s
 # (tools/bench/disk_throttle.sh). Needs root and /sys/fs/cgroup/memory. Used for the out-of-core
-# tables in docs/benchmarks.md; the machine is shared, so compare runs made
+# tables in docs/scale.md; the machine is shared, so compare runs made
 # side by side, alternating.
 set -euo pipefail
 bin=$1; store=$2; lim=$3; tag=$4; shift 4

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # peer.sh BUILD_DIR SCRATCH_DIR [SCENES]: vox against NanoVDB's CPU ray caster
-# (vox-peer-bench) on the peer scenes of docs/benchmarks.md, each seen by two
+# (vox-peer-bench) on the peer scenes of docs/performance.md, each seen by two
 # cameras: a full view (the whole object) and a close view (the object fills
 # at least half the frame: checked, the run fails otherwise). Makes each
 # scene's level set (.vdb, with vdb_tool), its vox store (vox-ingest) and

@@ -6,7 +6,7 @@ Reads COUNT blocks of SIZE bytes at random page-aligned offsets of FILE
 are in flight), with POSIX_FADV_RANDOM (no kernel read-ahead), and prints
 the time, reads per second and MB/s. Drop the page cache first for a cold
 disk (`sync; echo 3 > /proc/sys/vm/drop_caches`, as root). Used to choose
-the brick reader's window sizes (docs/benchmarks.md, out of core), e.g.
+the brick reader's window sizes (docs/scale.md, "One frame under memory limits"), e.g.
 
   for cfg in "2 4096 20000" "8 4096 20000" "2 1048576 400" "8 1048576 400"; do
     sync; echo 3 > /proc/sys/vm/drop_caches; tools/bench/read_probe.py STORE/bricks.vxb $cfg
