@@ -3,9 +3,12 @@
 # files points at a file that exists, and that a link with a #fragment
 # points at a heading of its page (GitHub's anchors: lower case, spaces to
 # hyphens, punctuation dropped). Prints FILE:LINE: the broken link, and exits
-# 1 if there is one. .ci/run runs it before the tests.
+# 1 if there is one. Code and scripts that name a page (docs/NAME.md, or
+# storage/FORMAT.md) are held to the same: the page must exist.
+# .ci/run runs it before the tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+bad=0
 git ls-files '*.md' | python3 -c '
 import os, re, sys
 def anchors(path):
@@ -40,5 +43,13 @@ for md in sys.stdin.read().split():
             elif frag and full.endswith(".md") and frag not in anchors(full):
                 print(f"{md}:{no}: {target}: no such heading"); bad = 1
 sys.exit(bad)
-' || { echo "check-links: the links above are broken" >&2; exit 1; }
+' || bad=1
+refs=$(git ls-files | grep -vE '\.md$|^scripts/check-links\.sh$' | while IFS= read -r f; do
+  [ -f "$f" ] || continue
+  grep -noE '(docs/[A-Za-z0-9_./-]+|storage/FORMAT)\.md' "$f" 2>/dev/null | while IFS=: read -r no page; do
+    [ -f "$page" ] || echo "$f:$no: $page: no such file"
+  done
+done) || true
+if [ -n "$refs" ]; then printf '%s\n' "$refs"; bad=1; fi
+[ "${bad:-0}" = 0 ] || { echo "check-links: the links above are broken" >&2; exit 1; }
 echo "check-links: every relative link holds"
