@@ -19,7 +19,7 @@
 //                    2^24); NaN on a miss and on fog pixels;
 //   P.X P.Y P.Z      world position of the first hit (0 on a miss);
 //   distance         world distance from the camera along the pixel's ray to
-//                    the first hit (what Z was before planar depth), +inf on
+//                    the first hit (Z is the planar depth), +inf on
 //                    a miss.
 // R, G, B and A are HALF
 // unless ImageLayers::float_color asks for FLOAT (vox-render --float); the
@@ -118,7 +118,7 @@ using ExrAttributes = std::map<std::string, std::string>;
 
 // How tiles are compressed. kZip is zlib at its fastest level (a few percent
 // larger than its default level, at about half the time); kNone suits parts
-// that vox-merge recompresses. docs/benchmarks.md has the measured times.
+// that vox-merge recompresses. docs/performance.md has the EXR write's share.
 enum class ExrCompression { kZip, kZips, kPiz, kRle, kNone };
 // "zip", "zips", "piz", "rle", "none".
 StatusOr<ExrCompression> ParseExrCompression(const std::string& name);

@@ -67,7 +67,7 @@ StatusOr<std::unique_ptr<TiledExrWriter>> OpenFrameWriter(const Renderer& render
   if (options.exr_path.empty()) return std::unique_ptr<TiledExrWriter>();
   // Tiles are written one per call as they finish: OpenEXR's pool would
   // hand each tile to a pool thread and back (measured: 2-3x the write
-  // time of compressing in the calling thread, docs/benchmarks.md).
+  // time of compressing in the calling thread).
   SetExrThreads(0);
   const Camera& cam = renderer.camera();
   const ExrCompression compression = options.compression.value_or(

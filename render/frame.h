@@ -48,7 +48,7 @@ struct FrameOptions {
   FILE* progress_out = stderr;
   ExrAttributes attrs;  // extra header attributes
   // Tile compression; default rle (the cheapest that shrinks a frame: half
-  // the size of none, a third of zip's write time, docs/benchmarks.md), or
+  // the size of none, a third of zip's write time), or
   // none for a part of a split render (vox-merge recompresses it as zip).
   std::optional<ExrCompression> compression;
   // Prefetch: when set, a scout thread hands it the bricks the next tiles'

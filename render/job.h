@@ -60,7 +60,7 @@ struct RenderJobOptions {
   // misses (RenderOptions::read_ahead); the scout only without a level of
   // detail in effect. Same pixels either way. Off by default: cold frames
   // wait only for the disk without it, and its threads cost CPU
-  // (docs/benchmarks.md, "Cold frames against the disk").
+  // (docs/scale.md, "Cold frames against the disk").
   bool prefetch = false;
   // Read brick records a window of file neighbours at a time
   // (OpenOptions::read_windows); --no-read-windows: each record alone.

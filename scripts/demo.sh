@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# The README's first command: installs what vox needs, builds everything, and
-# runs the main job on the built-in demo scene: a level set made with
-# OpenVDB's vdb_tool, ingested into a store and rendered to out/demo.exr and
-# out/demo.png.
+# The README's first command: installs what vox needs, builds the three
+# programs the demo runs (vox-ingest, vox-info, vox-render; scripts/test.sh
+# builds the rest), and runs them on the built-in demo scene: a level set made
+# with OpenVDB's vdb_tool, ingested into a store and rendered to out/demo.exr
+# and out/demo.png.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/build.sh
+VOX_TARGETS="vox-ingest vox-info vox-render" scripts/build.sh
 mkdir -p out
 bin=build/tools
 if [ ! -s out/demo.vdb ]; then

@@ -5,7 +5,7 @@
 #
 # Usage: scripts/identical.sh OLD_BUILD NEW_BUILD [WORKDIR]
 #   OLD_BUILD, NEW_BUILD  build directories (tools/*/vox-*, python/vox/)
-#   WORKDIR               scratch directory (default /tmp/vox-identical)
+#   WORKDIR               scratch directory (default: vox-identical under /tmp)
 #
 # Inputs (made once, shared by both builds): vox-gen sphere and bumpy at 256
 # with their pyramid; the demo scene's .vdb (scripts/demo.sh's vdb_tool line)
@@ -32,7 +32,7 @@
 # IDENTICAL_NEW_FLAGS are added to every render of that side but the --lod 1
 # one, IDENTICAL_OLD_LOD_FLAGS and IDENTICAL_NEW_LOD_FLAGS to that one, and
 # IDENTICAL_SKIP_ATTRS names header attributes left out of the comparison.
-# Level of detail on by default (issue 25): the old default is the new
+# Builds from before level of detail was the default: their default is the new
 # --lod 0, and the old --lod 1 the new --lod 1 --silhouette-aa 0:
 #   IDENTICAL_NEW_FLAGS="--lod 0" IDENTICAL_NEW_LOD_FLAGS="--silhouette-aa 0" \
 #   IDENTICAL_SKIP_ATTRS=vox:lod scripts/identical.sh OLD NEW

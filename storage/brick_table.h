@@ -27,7 +27,7 @@ class LendingBrickTable : public BrickSource {
 
   // Table size for a shared cache of `capacity` bytes: 256 slots (a 64 x 64
   // tile's rays enter a few dozen bricks; 256 was faster than 64,
-  // docs/benchmarks.md) at 1 GiB, fewer (down to 16) for smaller caches, so
+  // docs/performance.md) at 1 GiB, fewer (down to 16) for smaller caches, so
   // the pins of a thread stay near 1/64 of the budget for bricks of 64 KiB.
   static int SlotBits(uint64_t capacity);
   // The most slots (a power of two, 1..256) whose pins, at `brick_bytes`

@@ -71,8 +71,8 @@ ProcessMemory ReadProcessMemory();
 // budget line counts. Giving the pages back (malloc_trim) cost 25-55% of the
 // frame. So stores ask the watch, as they load bricks, how much of their
 // cache to give up instead: whatever the anonymous memory grew past the
-// target since its last answer (docs/benchmarks.md, "Memory the allocator
-// keeps"). Thread-safe; one instance per process.
+// target since its last answer (docs/scale.md, "The allocator's
+// share"). Thread-safe; one instance per process.
 class HeapWatch {
  public:
   static HeapWatch& Process();
@@ -125,12 +125,12 @@ struct BudgetInputs {
   // Pins wanted per thread table (a power of two, 1..256); the split lowers
   // it until the tables fit their share (1/8 of what the fixed costs leave).
   int pins_per_thread = 256;
-  // An explicit brick cache size (the old --cache-mb); 0: the rest. Must fit
+  // An explicit brick cache size (--cache-mb); 0: the rest. Must fit
   // in what the fixed costs leave.
   uint64_t cache_override = 0;
   // Code, libraries, stacks, allocator and decoder state of the process that
   // do not scale with the image or the store: a measured base plus a margin
-  // for more threads and other allocators (docs/benchmarks.md).
+  // for more threads and other allocators (docs/performance.md).
   uint64_t process_base = kDefaultProcessBase;
   static constexpr uint64_t kDefaultProcessBase = 24 * kMiB;
 };
@@ -140,7 +140,7 @@ struct MemoryBudget {
   uint64_t total = 0;
   uint64_t process_base = 0;   // fixed: code, libraries, stacks, allocator
   uint64_t headroom = 0;       // 1/8 of total: fragmentation and estimates' error (1/16 was
-                               // too little: docs/benchmarks.md)
+                               // too little: docs/performance.md)
   uint64_t resident_top = 0;   // the store's top and brick table
   uint64_t tile_buffers = 0;   // one TileBuffer per thread
   uint64_t exr_writer = 0;     // compressed tiles in flight, offset table, preview rows

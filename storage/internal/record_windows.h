@@ -42,7 +42,7 @@ class RecordWindows {
   // power of two of at most 1/128 of it, at most kMaxWindow; below kMinWindow
   // (a cache under 8 MiB) windows are off and every record is read alone.
   // 128 windows in the cache: fewer are evicted before their neighbours are
-  // asked for (the replayed reads that chose it: docs/benchmarks.md).
+  // asked for (the replayed reads that chose it: docs/performance.md).
   void SetCapacity(uint64_t bytes);
   uint64_t capacity() const { return capacity_; }
   uint64_t window_bytes() const { return window_; }

@@ -190,7 +190,7 @@ TEST_F(WriteFault, MergeKeepsTheEarlierImage) {
 // The writer itself, without the shim: a file size limit (RLIMIT_FSIZE, so
 // writes past it fail with EFBIG) makes one tile's write fail part-way.
 // OpenEXR's TiledOutputFile never releases the tile buffer whose write
-// threw, so a second writeTile used to wait for it forever: every later
+// threw, so a second writeTile would wait for it forever: every later
 // WriteTile must return the first error at once, and Finish must fail and
 // leave no temporary. Runs in a child with a watchdog (a hang is SIGALRM).
 TEST(TiledExrWriterFault, WritesAfterAFailureFailAtOnce) {

@@ -3,7 +3,7 @@
 // replaced), and the peak heap of Ingest() on a level-set sphere 4 times the
 // radius (16 times the leaves and file bytes) may grow by at most 25% of the
 // file's growth (measured: 13%; the compact tables take about 45 bytes per
-// leaf. OpenVDB's delayed-load tree and the old per-leaf tables held some
+// leaf, where OpenVDB's delayed-load tree and per-leaf tables hold some
 // 380 bytes per leaf, more than the file's own bytes per leaf). Counting allocations rather than RSS keeps the test
 // exact on a loaded machine. A budget (--memory-mb) too small for the
 // grid's tables is refused with an error naming the flag, and leaves no store.

@@ -2,7 +2,7 @@
 // exits 128 + the signal and leaves no temporary store directory; a later
 // run removes the temporary directory of a writer that was SIGKILLed.
 // The ingest is held mid-way (after the writer created its temporary
-// directory) by the tool's VOX_INGEST_TEST_STALL hook. Also (issue 26): a dead
+// directory) by the tool's VOX_INGEST_TEST_STALL hook. Also: a dead
 // --add-lod's pyramid temporary is stale, and an output holding its input is
 // refused.
 #include <gtest/gtest.h>
@@ -139,7 +139,7 @@ TEST_F(IngestSignalTest, ALaterRunRemovesTheTemporaryOfAKilledOne) {
   EXPECT_TRUE(Store::Open(out, {}).ok());
 }
 
-// Issue 26: a pyramid temporary left in a store by a --add-lod that died
+// A pyramid temporary left in a store by a --add-lod that died
 // (STORE/.lod.tmp-PID-*) is stale, not foreign data: --force replaces the
 // store. A live process's one still stops it.
 TEST_F(IngestSignalTest, AStalePyramidTemporaryDoesNotMakeTheStoreForeign) {

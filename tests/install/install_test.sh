@@ -54,7 +54,8 @@ cd "$tmp"
 
 # The documentation, laid out as in the source tree.
 doc=$prefix/share/doc/vox
-for f in README.md storage/FORMAT.md docs/usage.md docs/benchmarks.md docs/lod/sphere8k-off-vs-lod1.png; do
+for f in README.md CHANGELOG.md storage/FORMAT.md docs/getting-started.md docs/performance.md \
+         docs/accuracy-paper.svg docs/lod/sphere8k-off-vs-lod1.png; do
   [ -s "$doc/$f" ] || fail "$doc/$f not installed"
 done
 

@@ -265,7 +265,7 @@ def test_quiet_takes_a_bool(store, vdb, workdir):
     assert not (workdir / "quiet.store").exists()
 
 
-# Issue 28: the keywords are the tools' flags. Each tool's command line and
+# The keywords are the tools' flags. Each tool's command line and
 # its Python function read one option table (tools/common/options.h); every
 # flag its --help lists is a keyword of the function (None: not given).
 def help_flags(name):
@@ -370,7 +370,7 @@ def test_render_in_a_thread_does_not_block_python(store, files, workdir):
     assert result["rgba"].shape == (camera["height"], camera["width"], 4)
 
 
-# Issue 26: every keyword does what its flag does; Ctrl-C and a raising
+# Every keyword does what its flag does; Ctrl-C and a raising
 # progress callback stop a long call, keep the old outputs and raise.
 
 @pytest.fixture(scope="session")

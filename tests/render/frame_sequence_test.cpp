@@ -1,4 +1,4 @@
-// Frame sequences (issue 28): frame ranges, printf patterns and turntable
+// Frame sequences: frame ranges, printf patterns and turntable
 // cameras as functions; then vox-render end to end: a --cam array renders
 // each frame as a single run with that camera would (pixel for pixel), a
 // turntable's cameras keep their distance and elevation, --frames renders

@@ -192,7 +192,7 @@ TEST_F(FrameTest, ExrRoundTripMatchesTheRenderer) {
   auto timings = nlohmann::json::parse(img->info.attrs["vox:timings"]);
   EXPECT_EQ(timings["threads"], 2);
   EXPECT_NEAR(timings["render_seconds"].get<double>(), img->info.render_seconds, 1e-3);
-  // The stats document has the counters the issue asks for.
+  // The stats document has the counters users read: rays by kind, moves, bricks.
   auto js = nlohmann::json::parse(StatsJson(*r, stats, {{"total_seconds", 1.0}}));
   EXPECT_EQ(js["rays"]["primary"], 83 * 61);
   EXPECT_EQ(js["rays"]["shadow"], stats.counters.rays[kRayShadow]);

@@ -1,4 +1,4 @@
-// Level of detail by default (issue 25): vox-render uses the pyramid when
+// Level of detail by default: vox-render uses the pyramid when
 // the store has one (--lod 0: the exact frame, bit for bit the frame of a
 // store without one), says so in --stats and the EXR header, keeps close-ups
 // exact, antialiases coarse silhouettes (fractional alpha nearer an exact

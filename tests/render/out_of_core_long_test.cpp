@@ -3,7 +3,7 @@
 //  - the full view of an 8192^3 sphere store in a 256 MiB cgroup, cold: not
 //    killed, peak within the limit, every EXR channel bit-identical to the
 //    unlimited cold run (wall times of both are printed, not judged: the
-//    ratio is a benchmark, docs/benchmarks.md);
+//    ratio is a benchmark, docs/scale.md);
 //  - a store larger than this machine's RAM, pyramid included, written by
 //    vox-gen in a 1 GiB cgroup, and its full view (level of detail, the
 //    default) and a close-up rendered cold in a 1 GiB cgroup: none is

@@ -1,4 +1,4 @@
-// Issue 26, "nothing a user owns is ever overwritten", end to end through
+// "Nothing a user owns is ever overwritten", end to end through
 // vox-render, vox-merge and vox-info: an output naming an input (a store
 // file, the camera, the scene, a part, through a symlink or a hard link) or
 // another output is refused before any work, naming both; the format

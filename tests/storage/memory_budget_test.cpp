@@ -411,7 +411,7 @@ TEST(SplitMemoryBudget, CacheOverrideInsideTheBudget) {
   EXPECT_EQ(Sum(*b), 768 * kMiB);
   EXPECT_NE(b->ToString().find("unused"), std::string::npos);
 
-  in.cache_override = 1024 * kMiB;  // the old default does not fit in 768 MiB
+  in.cache_override = 1024 * kMiB;  // a 1 GiB cache does not fit in 768 MiB
   auto over = SplitMemoryBudget(768 * kMiB, in);
   ASSERT_FALSE(over.ok());
   EXPECT_EQ(over.status().code(), StatusCode::kInvalidArgument);

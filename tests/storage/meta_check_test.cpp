@@ -1,4 +1,4 @@
-// Issue 26: store metadata edited with a valid CRC is refused at open (voxel
+// Store metadata edited with a valid CRC is refused at open (voxel
 // size 0, -1 or NaN, origins near INT64_MAX, a bbox shrunk or grown past the
 // occupied bricks of the resident top), and `InspectStore(..., verify)`
 // (vox-info --verify) checks every pyramid level: a byte flipped in

@@ -1,4 +1,4 @@
-// Issue 26: `vox-ingest --add-lod STORE` stopped by SIGTERM or SIGINT exits
+// `vox-ingest --add-lod STORE` stopped by SIGTERM or SIGINT exits
 // 128 + the signal and removes its pyramid temporary (STORE/.lod.tmp-PID-*);
 // the store stays as it was, and a later --add-lod succeeds.
 #include <gtest/gtest.h>

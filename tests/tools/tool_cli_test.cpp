@@ -1,4 +1,4 @@
-// The command line of each vox tool, end to end (issue 28): --flag=value
+// The command line of each vox tool, end to end: --flag=value
 // works, --version prints the version line, --help groups the options by
 // topic, and a bad command line prints one line and a pointer to the help,
 // exit 2.
