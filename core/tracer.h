@@ -44,7 +44,7 @@ namespace vox {
 // all its first-step cells). Then the ray's first-step DDA jumps, in exact
 // integer arithmetic, to the state it would have on entering the last
 // driving slab before the plane, and the walk goes on from there: the same
-// voxels, hits and t as without the hint, bit for bit (docs/benchmarks.md).
+// voxels, hits and t as without the hint, bit for bit (docs/performance.md).
 // s_min == +inf: the ray meets no occupied voxel at all (a miss, no walk).
 struct StartPlane {
   double g[3] = {0, 0, 0};
@@ -523,7 +523,7 @@ inline constexpr int kFixed64MaxLevels = 26;
 
 // The paper's tracer with the word chosen for the grid: Fixed64 up to
 // kFixed64MaxLevels levels, Fixed128 (exact on every grid the tests reach,
-// slower per ray: docs/benchmarks.md) above. Same interface as Tracer.
+// slower per ray: docs/accuracy.md) above. Same interface as Tracer.
 template <class Real = long double>
 class AutoTracer {
  public:

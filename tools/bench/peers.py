@@ -41,6 +41,7 @@ def add_arguments(p):
     p.add_argument("--compare", action="store_true",
                    help="only compare vox's hit mask with nanocast's, per frame")
     p.add_argument("--no-whole", action="store_true", help="skip the vdb_render whole-process rows")
+    p.add_argument("--split", default="", help="vox's first-step levels (vox-render --split N1)")
 
 
 def nanocast(h):
@@ -111,7 +112,8 @@ def round_pair(h, f, a, nc, flat, bare):
     """One vox process and one nanocast process on frame f: their best frames (seconds)."""
     tag = h.path(f"{f['scene']}.{f['view']}")
     vox = [h.tool("vox-render-bench"), f["store"], "--lod", "0", "--cam", f["cam"], "--scene", flat,
-           "--threads", str(h.threads), "--runs", str(a.repeat + 1)] + (["--bare"] if bare else [])
+           "--threads", str(h.threads), "--runs", str(a.repeat + 1)] + (["--bare"] if bare else []) + \
+        (["--split", a.split] if a.split else [])
     r = H.run(vox, stdout=tag + ".vox.json", stderr=tag + ".vox.err")
     if r["exit"] != 0:
         H.fail(f"vox-render-bench failed: see {h.rel(tag + '.vox.err')}")
@@ -188,6 +190,7 @@ def main(h, a):
     flat = H.write_json(h.path("flat.json"), {"lights": []})
     rep = H.Report(h, "peers", "vox against NanoVDB and vdb_render")
     rep.add(f"{a.size}^2 pixels, {h.threads} threads, vox `--lod 0`" +
+            (f" `--split {a.split}`" if a.split else "") +
             (" `--bare` (first hits only)" if bare else " with no light") +
             f", NanoVDB: nanocast (the bare loop). {a.rounds} rounds alternately, best of "
             f"{a.repeat} frames per process. Ratios are vox's speed over NanoVDB's (above 1: vox "
