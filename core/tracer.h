@@ -230,8 +230,9 @@ class Tracer {
       JumpToSlab(cx, l1, target, &st, xyz);
       return st;
     }
-    VOX_ALWAYS_INLINE Dda SecondStep(const internal::StepLayout& l1, const internal::StepLayout& l2, uint64_t xyz,
-                   uint64_t prev, const Dda& first, uint64_t* xyz2) {
+    VOX_ALWAYS_INLINE Dda SecondStep(const internal::StepLayout& l1, const internal::StepLayout& l2,
+                                     uint64_t xyz, uint64_t prev, const Dda& first,
+                                     uint64_t* xyz2) {
       Dda st = t.Transition(cx, l1, l2, xyz, prev, first, xyz2);
       if (t.has_box_) JumpToSlab(cx, l2, t.BoxSlab(cx, 0, l1.Coord(xyz, cx.d) << t.n2_), &st, xyz2);
       return st;
@@ -308,8 +309,8 @@ class Tracer {
   // docs/algorithm.md, section 3: a step's DDA state from a start point in
   // the step's units, and its start voxel packed per `lay`. Axes in the bit
   // mask `before` take BeforeVoxel instead of StartVoxel.
-  VOX_ALWAYS_INLINE Dda InitStep(const ScaledRay& cx, const internal::StepLayout& lay, const Real p[3], uint64_t* xyz,
-               unsigned before = 0) const {
+  VOX_ALWAYS_INLINE Dda InitStep(const ScaledRay& cx, const internal::StepLayout& lay,
+                                 const Real p[3], uint64_t* xyz, unsigned before = 0) const {
     int64_t size = int64_t(1) << lay.n;
     int64_t v[3];
     for (int a = 0; a < 3; ++a)
@@ -334,8 +335,8 @@ class Tracer {
   // first-step voxel the walk meets before it lies before the plane, so is
   // empty, and the walk from there visits the same voxels as from the
   // start. False when the ray leaves the grid before the plane (a miss).
-  VOX_ALWAYS_INLINE bool PlaneSlab(const ScaledRay& cx, const internal::StepLayout& lay, const Real p1[3],
-                 const StartPlane& sp, int64_t* target) const {
+  VOX_ALWAYS_INLINE bool PlaneSlab(const ScaledRay& cx, const internal::StepLayout& lay,
+                                   const Real p1[3], const StartPlane& sp, int64_t* target) const {
     double s0 = 0, gd = 0;
     for (int a = 0; a < 3; ++a) {
       s0 += sp.g[a] * double(cx.p[a]);
@@ -358,8 +359,8 @@ class Tracer {
   // integer arithmetic (see PlaneSlab); the moves it stands for are
   // counted. A ray that leaves the step's grid before that slab: *xyz gets
   // the carry bits (the walk ends at once).
-  VOX_ALWAYS_INLINE static void JumpToSlab(const ScaledRay& cx, const internal::StepLayout& lay, int64_t target,
-                         Dda* st, uint64_t* xyz) {
+  VOX_ALWAYS_INLINE static void JumpToSlab(const ScaledRay& cx, const internal::StepLayout& lay,
+                                           int64_t target, Dda* st, uint64_t* xyz) {
     if (target <= st->dprime || (*xyz & lay.carry)) return;  // (carry: the walk has ended)
     const int d = cx.d, sd = cx.s[d];
     const int64_t size = int64_t(1) << lay.n;
@@ -422,8 +423,9 @@ class Tracer {
   // follow section 6).
   // `prev` is XYZ before the last first-step move (== xyz when none). Sets
   // *xyz2 to the second step's start voxel.
-  VOX_ALWAYS_INLINE Dda Transition(ScaledRay& cx, const internal::StepLayout& lay1, const internal::StepLayout& lay2,
-                 uint64_t xyz, uint64_t prev, const Dda& first, uint64_t* xyz2) const {
+  VOX_ALWAYS_INLINE Dda Transition(ScaledRay& cx, const internal::StepLayout& lay1,
+                                   const internal::StepLayout& lay2, uint64_t xyz, uint64_t prev,
+                                   const Dda& first, uint64_t* xyz2) const {
     const int n2 = n2_;
     const int64_t size2 = int64_t(1) << n2;
     int64_t C[3];

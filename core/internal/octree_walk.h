@@ -273,8 +273,8 @@ inline int TravelSign(double unscaled) { return unscaled >= 0 ? 1 : -1; }
 // sets the start point p (the origin, or the entry point set exactly onto the
 // entry face) and the entry parameter. False when the ray misses the grid.
 template <class Real>
-VOX_ALWAYS_INLINE bool ClipToGrid(const glm::dvec3& origin, const Real D[3], const int s[3], Real G, Real p[3],
-                Real* t_start) {
+VOX_ALWAYS_INLINE bool ClipToGrid(const glm::dvec3& origin, const Real D[3], const int s[3], Real G,
+                                  Real p[3], Real* t_start) {
   if constexpr (std::is_floating_point_v<Real>) {  // exact Reals need no help
     if (IsFarOrigin(origin, double(G))) {           // exact entry point (core/ray.h)
       const double Dd[3] = {double(D[0]), double(D[1]), double(D[2])};

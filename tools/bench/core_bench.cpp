@@ -119,17 +119,18 @@ void BM_CloseRays(benchmark::State& state) {
   const double half = std::tan(M_PI / 6);
   for (int y = 0; y < kSide; ++y)
     for (int x = 0; x < kSide; ++x)
-      rays.push_back({{512.3, 511.7, kWall + 400.0},
-                      {(2 * (x + 0.5) / kSide - 1) * half, (1 - 2 * (y + 0.5) / kSide) * half, -1.0}});
+      rays.push_back(
+          {{512.3, 511.7, kWall + 400.0},
+           {(2 * (x + 0.5) / kSide - 1) * half, (1 - 2 * (y + 0.5) / kSide) * half, -1.0}});
   TraceCounters c;
   for (auto _ : state)
     for (const Ray& r : rays) {
       auto h = tracer.FirstHit(r, &c);
       benchmark::DoNotOptimize(h);
     }
-  state.counters["ns/ray"] = benchmark::Counter(double(rays.size()) * double(state.iterations()),
-                                                benchmark::Counter::kIsRate |
-                                                    benchmark::Counter::kInvert);
+  state.counters["ns/ray"] =
+      benchmark::Counter(double(rays.size()) * double(state.iterations()),
+                         benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
   state.counters["hit_rate"] = double(c.hits) / double(c.rays);
   state.counters["moves/ray"] = double(c.total_moves()) / double(c.rays);
   state.counters["cells/ray"] = double(c.cells_visited) / double(c.rays);

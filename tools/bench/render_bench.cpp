@@ -57,8 +57,9 @@ int main(int argc, char** argv) {
       bare = true;
       continue;
     }
-    if (a != "--mask" && a != "--cam" && a != "--scene" && a != "--split" && a != "--exr" && a != "--runs" &&
-        a != "--threads" && a != "--tile-size" && a != "--cache-mb" && a != "--lod")
+    if (a != "--mask" && a != "--cam" && a != "--scene" && a != "--split" && a != "--exr" &&
+        a != "--runs" && a != "--threads" && a != "--tile-size" && a != "--cache-mb" &&
+        a != "--lod")
       return usage();
     const std::optional<std::string> v = flags.Value();
     if (!v) {
