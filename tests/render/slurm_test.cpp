@@ -31,7 +31,8 @@ int Sh(const std::string& cmd) {
 
 std::string SlurmTool() {
   const char* env = std::getenv("VOX_SLURM_TOOL");
-  return env ? env : "/work/shared/tools/slurm-single-node";
+  // Default: the workplace's shared tools beside the repository.
+  return env ? env : VOX_SLURM_TOOL_DEFAULT;
 }
 
 // Stops the cluster however the test ends.
