@@ -139,9 +139,10 @@ struct RenderOptions {
   // covered instead of a whole dilated cell; 0: off. Surfaces only: fog
   // already integrates the cells' optical depth.
   int silhouette_grid = kDefaultSilhouetteGrid;
-  // The bare loop, for comparisons with peers' first-hit loops: each
-  // primary ray's first hit only (alpha 1 on a hit, Z its depth, the voxel
-  // layer its voxel), no shading, no attributes, no secondary rays.
+  // The bare loop, for comparisons with peers' first-hit loops: on level
+  // sets, each primary ray's first hit only (alpha 1 on a hit, Z its depth,
+  // the voxel layer its voxel), no shading, no attributes, no secondary
+  // rays. Fog volumes are integrated as without it.
   bool first_hits_only = false;
 };
 
