@@ -10,7 +10,9 @@ namespace vox {
 
 using render_internal::ForEachLight;
 using render_internal::kInf;
+using render_internal::kMaxLightLatticeLevel;
 using render_internal::kMaxOpticalDepth;
+using render_internal::kMaxShadowOpticalDepth;
 
 double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone) const {
   ++cx.c->rays[kRayVolume];
@@ -28,7 +30,7 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
           if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume))
             return false;
           tau += sigma_t * rho * std::max(0.0, t1 - seg.t0);
-          return tau <= kMaxOpticalDepth;
+          return tau <= kMaxShadowOpticalDepth;
         },
         &cx.c->trace);
     if (!s.ok()) cx.Fail(s);
@@ -42,7 +44,7 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
         double rho = 1.0;
         if (has_density && !Density(h, cx, &rho)) return false;
         tau += sigma_t * rho * std::max(0.0, t1 - h.t);
-        return tau <= kMaxOpticalDepth;
+        return tau <= kMaxShadowOpticalDepth;
       },
       &cx.c->trace);
   if (!s.ok()) cx.Fail(s);
@@ -61,16 +63,16 @@ bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volu
   return true;
 }
 
-glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, TraceContext& cx, const Cone* cone) const {
-  const glm::dvec3 p_g = gr.origin + t * gr.dir;
+glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone) const {
   const glm::dvec3 p_w = xf_.GridToWorld(p_g);
-  // With a pyramid, the transmittance ray's cells widen along it (at least
-  // as fast as the primary ray's cone): the light's path far from the point
-  // is seen coarsely, near it exactly.
+  // With a pyramid, the transmittance ray's cells widen along it (as fast as
+  // the primary ray's cone, or volume.shadow_lod's rate if faster), from
+  // exact voxels where it starts: the light's path far from the point is
+  // seen coarsely, near it exactly.
   Cone shadow_cone;
   const Cone* sc = nullptr;
   if (cone != nullptr) {
-    shadow_cone = SecondaryCone(*cone, t);
+    shadow_cone = Cone{0.0, cone->spread};
     const double g = scene_.volume.shadow_lod;
     if (g > 0) shadow_cone.spread = std::max(shadow_cone.spread, 1.0 / (g * volume_->meta().voxel_size));
     sc = &shadow_cone;
@@ -83,6 +85,150 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, TraceContext& cx, const
   return light_in;
 }
 
+// The largest log-ratio of the light at a lattice block's corners that is
+// interpolated (a factor of about 1.65).
+constexpr double kMaxLatticeLogRatio = 0.5;
+// The lattice's least spacing in pixel footprints.
+constexpr double kMinLatticeFootprints = 4.0;
+
+glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext& cx, const Cone* cone,
+                                render_internal::FogLightCache* cache) const {
+  const glm::dvec3 p_g = gr.origin + t * gr.dir;
+  // The lattice's spacing: the largest power of two voxels within half the
+  // sample spacing h (world units). It is used where that spacing is at
+  // least kMinLatticeFootprints pixel footprints (the cone's width), so that
+  // neighbouring pixels share its points; elsewhere (thick fog, whose light
+  // varies within a voxel; close views; the exact frame, without a cone)
+  // each sample has its own rays.
+  const double h_vox = h / volume_->meta().voxel_size;
+  if (!scene_.volume.light_lattice || cone == nullptr) return LightAtPoint(p_g, cx, cone);
+  const double min_spacing = kMinLatticeFootprints * std::max(1.0, cone->Width(t));
+  if (!(0.5 * h_vox >= min_spacing)) return LightAtPoint(p_g, cx, cone);
+  const int level = std::min(kMaxLightLatticeLevel, std::ilogb(0.5 * h_vox));
+  const double s = std::ldexp(1.0, level);
+  const glm::dvec3 u = p_g / s - 0.5;
+  const glm::dvec3 f0 = glm::floor(u);
+  const glm::i64vec3 i0(f0);
+  const glm::dvec3 f = u - f0;
+  glm::dvec3 corner[8];
+  const bool ok = cache->Block(level, i0,
+                               [&](const glm::dvec3& q, glm::dvec3* log_light) {
+                                 const glm::dvec3 l = LightAtPoint(q, cx, cone);
+                                 if (cx.failed()) return false;
+                                 *log_light = glm::log(l);  // -inf where no light arrives
+                                 return true;
+                               },
+                               corner);
+  if (!ok) return glm::dvec3(0.0);
+  // Trilinear in the logarithm: exact where the light decays exponentially
+  // across the block, as in fog of even density. Where the corners' light
+  // differs by more than a factor kMaxLatticeRatio (the block straddles a
+  // shadow's edge or the rim of thick fog), or a corner has none, the
+  // sample has its own rays.
+  glm::dvec3 out;
+  for (int k = 0; k < 3; ++k) {
+    double v[8], lo = kInf, hi = -kInf;
+    for (int c = 0; c < 8; ++c) {
+      v[c] = corner[c][k];
+      lo = std::min(lo, v[c]);
+      hi = std::max(hi, v[c]);
+    }
+    if (hi == -kInf) {  // no light in this channel anywhere
+      out[k] = 0.0;
+      continue;
+    }
+    if (!(hi - lo <= kMaxLatticeLogRatio)) return LightAtPoint(p_g, cx, cone);
+    const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
+    const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
+    const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
+    out[k] = std::exp(y0 + f.z * (y1 - y0));
+  }
+  return out;
+}
+
+namespace {
+
+// The light reaching a primary ray through fog, sampled at points ta < tb
+// along it and interpolated in between: geometrically where both samples
+// have light (exact where the light is attenuated along the ray at a
+// constant rate, as behind fog of even density), linearly otherwise.
+// light_at(t, h): the light at t, for samples h apart there. Integrate() gives a cell's in-scattered light exactly for that model, one
+// sample interval at a time. Samples start where the ray enters the fog, and
+// again at the first cell after a gap longer than a step; an interval chosen
+// for thinner fog is cut short at the first cell of higher extinction (a ray
+// entering fog through its thin rim must not carry the rim's light deep into
+// the fog).
+template <class LightAt>
+class LightAlongRay {
+ public:
+  explicit LightAlongRay(LightAt light_at) : light_at_(std::move(light_at)) {}
+
+  // The integral over t in [t0, t1] of st e^(-st (t - t0)) L(t), per
+  // channel, for a cell of extinction st; step(t): the sample spacing from t.
+  template <class Step>
+  glm::dvec3 Integrate(double t0, double t1, double st, Step&& step) {
+    if (t0 > tb_) {  // the fog's entry, or the first cell after a long gap
+      ta_ = t0;
+      const double h = step(t0);
+      la_ = light_at_(t0, h);
+      ext_ = st;
+      SetB(t0 + h, h);
+    } else if (st > ext_) {
+      ext_ = st;
+      const double h = step(ta_);
+      const double tc = std::max(ta_ + h, t0);
+      if (tc < tb_) SetB(tc, h);
+    }
+    glm::dvec3 sum(0.0);
+    double t = t0, trans = 1.0;  // trans: the cell's transmittance from t0 to t
+    while (t < t1) {
+      if (t >= tb_) {
+        ta_ = tb_;
+        la_ = lb_;
+        ext_ = st;
+        const double h = step(ta_);
+        SetB(ta_ + h, h);
+      }
+      const double e = std::min(t1, tb_), len = e - t;
+      const double piece_trans = std::exp(-st * len);
+      for (int k = 0; k < 3; ++k) {
+        double in;
+        if (geometric_) {
+          const double kappa = rate_[k];  // the light's decay rate along the ray
+          const double l = la_[k] * std::exp(-kappa * (t - ta_));
+          const double x = st + kappa;
+          in = l * (std::abs(x * len) < 1e-12 ? st * len : -st * std::expm1(-x * len) / x);
+        } else {
+          const double w = tb_ > ta_ ? std::clamp((t + 0.5 * len - ta_) / (tb_ - ta_), 0.0, 1.0) : 0.0;
+          in = (1.0 - piece_trans) * (la_[k] + w * (lb_[k] - la_[k]));
+        }
+        sum[k] += trans * in;
+      }
+      trans *= piece_trans;
+      t = e;
+    }
+    return sum;
+  }
+
+ private:
+  void SetB(double t, double h) {
+    tb_ = t;
+    lb_ = light_at_(t, h);
+    geometric_ = tb_ > ta_;
+    for (int k = 0; k < 3; ++k) {
+      geometric_ = geometric_ && la_[k] > 0 && lb_[k] > 0;
+      if (geometric_) rate_[k] = std::log(la_[k] / lb_[k]) / (tb_ - ta_);
+    }
+  }
+
+  LightAt light_at_;
+  double ta_ = -kInf, tb_ = -kInf, ext_ = 0.0;  // ext_: the extinction [ta, tb] was chosen for
+  glm::dvec3 la_{0.0}, lb_{0.0}, rate_{0.0};
+  bool geometric_ = false;
+};
+
+}  // namespace
+
 glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance, double* first_t,
                          const Cone* cone) const {
   const VolumeMedium& v = scene_.volume;
@@ -90,19 +236,19 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
   const bool has_density = volume_->meta().has_density;
   double tau = 0.0, trans = 1.0;
   glm::dvec3 scattered(0.0);
-  // The light reaching the ray at sample points ta < tb, interpolated
-  // linearly in between. The next sample is light_step voxels on (times the
-  // cone's width with LOD), or less where the fog is thick: at most
-  // light_optical_depth of the extinction of the cell the sample lies in.
-  // The samples start where the ray enters the fog, and again at the next
-  // cell after an empty gap longer than a step.
+  // The light reaching the ray is sampled at points along it and
+  // interpolated in between (LightAlongRay). The next sample is light_step
+  // voxels on (times the cone's width with LOD), or less where the fog is
+  // thick: at most light_optical_depth of the extinction of the cell it
+  // starts in.
   const double light_step = v.light_step * volume_->meta().voxel_size;  // t is in world units
   auto step_from = [&](double t, double extinction) {
     const double h = cone != nullptr ? light_step * std::max(1.0, cone->Width(t)) : light_step;
     return extinction > 0 ? std::min(h, v.light_optical_depth / extinction) : h;
   };
-  double ta = -kInf, tb = -kInf;
-  glm::dvec3 la(0.0), lb(0.0);
+  render_internal::FogLightCache local_cache;  // (a thread's own when it has one)
+  render_internal::FogLightCache* cache = cx.light_cache != nullptr ? cx.light_cache : &local_cache;
+  LightAlongRay light([&](double t, double h) { return LightInFog(gr, t, h, cx, cone, cache); });
   *first_t = kInf;
   // One occupied cell [t0, t1] of density rho (Cone: `level` > 0 for coarse cells).
   auto cell = [&](double t0, double t1, double rho) {
@@ -113,17 +259,9 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
     const double seg_tau = st * len;
     const double seg_trans = std::exp(-seg_tau);
     if (passes_.scattering) {
-      const double mid = t0 + 0.5 * len;
-      while (mid > tb) {
-        const bool restart = t0 > tb;
-        ta = restart ? t0 : tb;
-        la = restart ? LightInFog(gr, ta, cx, cone) : lb;
-        tb = ta + step_from(ta, st);
-        lb = LightInFog(gr, tb, cx, cone);
-      }
-      const double w = std::clamp((mid - ta) / (tb - ta), 0.0, 1.0);
-      const glm::dvec3 light_in = la + w * (lb - la);
-      scattered += trans * (1.0 - seg_trans) * (v.scattering / sigma_t) * v.color * light_in;
+      const glm::dvec3 in_cell =
+          light.Integrate(t0, t1, st, [&](double t) { return step_from(t, st); });
+      scattered += trans * (v.scattering / sigma_t) * v.color * in_cell;
     }
     tau += seg_tau;
     trans *= seg_trans;

@@ -73,6 +73,10 @@
 
 namespace vox {
 
+namespace render_internal {
+class FogLightCache;
+}  // namespace render_internal
+
 enum RayKind { kRayPrimary, kRayShadow, kRayReflection, kRayRefraction, kRayVolume, kNumRayKinds };
 const char* RayKindName(int kind);
 
@@ -307,9 +311,14 @@ class Renderer {
                  const Cone* cone = nullptr) const;
   bool Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume = nullptr) const;
   double Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone = nullptr) const;
-  // The light reaching fog at ray parameter t of primary ray gr (cone:
-  // with LOD), through transmittance rays to the shadowing lights.
-  glm::dvec3 LightInFog(const Ray& gr, double t, TraceContext& cx, const Cone* cone) const;
+  // The light reaching fog at grid point p_g (cone: with LOD), through
+  // transmittance rays to the shadowing lights.
+  glm::dvec3 LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone) const;
+  // The light reaching fog at ray parameter t of primary ray gr, for light
+  // samples h apart there: interpolated on `cache`'s lattice
+  // (render/internal/fog_light.h) unless volume.light_lattice is off.
+  glm::dvec3 LightInFog(const Ray& gr, double t, double h, TraceContext& cx, const Cone* cone,
+                        render_internal::FogLightCache* cache) const;
 
   // tracer_'s occupied box (options_.clip_to_occupied), on `t` too.
   void ApplyOccupiedBox(RenderTracer* t) const;

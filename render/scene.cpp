@@ -160,7 +160,7 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
     if (!it->is_object()) return jf::FieldError(file, "volume", "must be an object");
     VOX_RETURN_IF_ERROR(
         jf::CheckKnownKeys(*it, {"absorption", "scattering", "color", "light_step", "light_optical_depth",
-                            "shadow_lod"},
+                            "shadow_lod", "light_lattice"},
                            file, "volume"));
     VOX_RETURN_IF_ERROR(
         jf::GetNumber(*it, "absorption", file, "volume", false, &s.volume.absorption));
@@ -181,6 +181,8 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
         jf::GetNumber(*it, "shadow_lod", file, "volume", false, &s.volume.shadow_lod));
     if (!(s.volume.shadow_lod >= 0 && s.volume.shadow_lod <= 1e6))
       return jf::FieldError(file, "volume.shadow_lod", "must be in [0, 1e6] voxels");
+    VOX_RETURN_IF_ERROR(
+        jf::GetBool(*it, "light_lattice", file, "volume", &s.volume.light_lattice));
   }
   VOX_RETURN_IF_ERROR(jf::GetInt(j, "max_depth", file, "", false, 0, 16, &s.max_depth));
   VOX_RETURN_IF_ERROR(
@@ -241,7 +243,8 @@ std::string Scene::ToJson() const {
                  {"color", v(volume.color)},
                  {"light_step", volume.light_step},
                  {"light_optical_depth", volume.light_optical_depth},
-                 {"shadow_lod", volume.shadow_lod}};
+                 {"shadow_lod", volume.shadow_lod},
+                 {"light_lattice", volume.light_lattice}};
   j["max_depth"] = max_depth;
   j["samples_per_pixel"] = samples_per_pixel;
   return j.dump();

@@ -25,14 +25,18 @@
 //         first box holding the hit point gives the material; elsewhere
 //         "material" applies,
 //     "volume": {"absorption":sa, "scattering":ss, "color":[r,g,b],
-//                "light_step":S, "light_optical_depth":D, "shadow_lod":G},
+//                "light_step":S, "light_optical_depth":D, "shadow_lod":G,
+//                "light_lattice":L},
 //         absorption and scattering per world unit, times the voxel density
 //         (fog volumes only); the quality of single scattering: the light
 //         reaching a primary ray is evaluated every S voxels along it, or
 //         sooner where the extinction over the step would exceed optical
 //         depth D, and interpolated between (S, D > 0); with a pyramid
 //         a transmittance ray's cells widen by one voxel every G voxels
-//         along it (G > 0; 0: exact voxels all the way),
+//         along it (G > 0; 0: exact voxels all the way), and where samples
+//         lie far apart the light is kept on a lattice shared by
+//         neighbouring pixels (L true, the default; false: every sample
+//         traces its own transmittance rays),
 //     "max_depth": D,          reflection/refraction generations (0..16)
 //     "samples_per_pixel": S   (1..1024)
 //   }
@@ -91,6 +95,9 @@ struct VolumeMedium {
   // Voxels along a transmittance ray per voxel of cell width (LOD
   // pyramid); 0: exact voxels.
   double shadow_lod = 12.0;
+  // The light kept on a lattice and interpolated (render/internal/fog_light.h);
+  // false: evaluated at every sample (the reference).
+  bool light_lattice = true;
 };
 
 struct Scene {

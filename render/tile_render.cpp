@@ -202,7 +202,12 @@ Status Renderer::ShadeTilePixel(int px, int py, TileRays& rays, TraceContext& cx
 Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounters* counters,
                             ThreadState* ts) const {
   TraceContext cx{ts ? &ts->tracer : &tracer_, counters, OkStatus()};
-  if (ts != nullptr) cx.lod = ts->lod.get();
+  render_internal::FogLightCache tile_light;  // fog without a thread's state: the tile's
+  cx.light_cache = &tile_light;
+  if (ts != nullptr) {
+    cx.lod = ts->lod.get();
+    cx.light_cache = &ts->light_cache;
+  }
   TileRays rays(*this, rect);
   // Each pixel's stop level, for the silhouette test (antialias() only).
   std::vector<int8_t> levels;

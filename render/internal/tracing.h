@@ -16,6 +16,7 @@
 
 #include "core/ray.h"
 #include "core/util/status.h"
+#include "render/internal/fog_light.h"
 #include "render/renderer.h"
 #include "render/scene.h"
 #include "storage/brick_table.h"
@@ -28,6 +29,7 @@ struct Renderer::TraceContext {
   RenderCounters* c;
   Status error;
   const LodThread* lod = nullptr;  // --lod: the thread's coarse tracers (optional)
+  render_internal::FogLightCache* light_cache = nullptr;  // fog: the thread's (optional)
   bool failed() const { return !error.ok(); }
   void Fail(const Status& s) {
     if (error.ok()) error = s;
@@ -39,6 +41,7 @@ struct Renderer::ThreadState {
   std::unique_ptr<LendingBrickTable> bricks;
   RenderTracer tracer;
   std::unique_ptr<LodThread> lod;  // --lod: the coarse levels' tracers and table
+  render_internal::FogLightCache light_cache;  // fog: the light on its lattice
 };
 
 // One primary sample's result (ShadePixel).
@@ -64,6 +67,12 @@ inline constexpr double kMinTransmittance = 1e-6;
 // The optical depth of kMinTransmittance: -ln(1e-6) (compared per cell
 // instead of the transmittance, which would cost an exp per cell).
 inline constexpr double kMaxOpticalDepth = 13.815510557964274;
+// Transmittance rays stop at this optical depth (a transmittance of 1e-3):
+// the light they would still tell apart is below a thousandth of the
+// light's own.
+inline constexpr double kMaxShadowOpticalDepth = 6.907755278982137;
+// The coarsest lattice fog's light is kept on: 2^10 voxels.
+inline constexpr int kMaxLightLatticeLevel = 10;
 // The first-step levels of a fog volume's traversal unless told otherwise:
 // 5 instead of the surfaces' 6 (DefaultFirstStepLevels), so the second step
 // covers at least 8^3 voxels on the grids of 2^8 and 2^9 measured
