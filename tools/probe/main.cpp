@@ -1,6 +1,8 @@
 // vox-probe: first hits of rays read from stdin, one "ox oy oz dx dy dz" per
-// line (decimal or C99 hex floats, index space: voxel (i,j,k) is
-// [i,i+1)x[j,j+1)x[k,k+1)); prints "hit i j k t" or "miss" per line, in order.
+// line (decimal or C99 hex floats, vox index space: voxel (i,j,k), OpenVDB's
+// Coord(i,j,k), is [i,i+1)x[j,j+1)x[k,k+1), so an OpenVDB index point q is
+// q + 0.5 here; docs/usage.md, Spaces); prints "hit i j k t" or "miss" per
+// line, in order.
 //
 //   vox-probe --generate sphere:1024 [--brick-level L] [options] < rays.txt
 //   vox-probe store/ [options] < rays.txt
@@ -32,7 +34,8 @@ const vox::CommandLineSpec kCommandLine{
     "vox-probe",
     "vox-probe (--generate SHAPE | STORE_DIR) [options] < rays.txt",
     "Traces the rays read from stdin, one 'ox oy oz dx dy dz' per line (decimal or C99 hex "
-    "floats, index space), through a store or a generated shape, and prints 'hit i j k t' or "
+    "floats, index space: voxel i j k is [i, i+1) x [j, j+1) x [k, k+1), an OpenVDB index point "
+    "plus 0.5), through a store or a generated shape, and prints 'hit i j k t' or "
     "'miss' per line, in order.",
     vox::ProbeOptionTable(),
     "Exit codes: 0 done, 1 some lines refused (each prints 'error'), 2 bad command line or\n"
