@@ -1,17 +1,28 @@
 // The coordinate convention and the values vox reads out of a store, against
 // OpenVDB's own answers for the same grids: vox-probe's hits against the
-// openvdb::Coord that holds each point.
+// openvdb::Coord that holds each point; storage/sample.h's points, boxes and
+// trilinear values against the grid's values, OpenVDB's BoxSampler and the
+// level set's gradient.
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
 #include <gtest/gtest.h>
+#include <openvdb/math/Operators.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/LevelSetSphere.h>
 
 #include "ingest/ingest.h"
+#include "storage/sample.h"
 #include "storage/store.h"
 #include "tests/common/run_command.h"
 #include "tests/ingest/ingest_test_util.h"
@@ -88,6 +99,170 @@ TEST_F(ValuesTest, ProbeReportsTheOpenVdbCoordOfEachPoint) {
     EXPECT_EQ(word, "hit");
     EXPECT_EQ(Coord(int(i), int(j), int(k)), c);
   }
+}
+
+
+// A sparse fog: random voxels of a 24^3 box around the origin, random densities.
+openvdb::FloatGrid::Ptr RandomFog(unsigned seed) {
+  auto g = openvdb::FloatGrid::create(0.0f);
+  g->setGridClass(openvdb::GRID_FOG_VOLUME);
+  g->setName("density");
+  auto acc = g->getAccessor();
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> pos(-12, 11);
+  std::uniform_real_distribution<float> den(0.05f, 1.0f);
+  for (int n = 0; n < 3000; ++n) acc.setValue(Coord(pos(rng), pos(rng), pos(rng)), den(rng));
+  return g;
+}
+
+std::unique_ptr<StoreValues> OpenValues(const std::string& store, int level = 0) {
+  auto v = StoreValues::Open(store, level, size_t(16) << 20);
+  EXPECT_TRUE(v.ok()) << v.status().ToString();
+  return v.ok() ? std::move(v).value() : nullptr;
+}
+
+TEST_F(ValuesTest, NearestAndBoxMatchTheFogsDensities) {
+  auto grid = RandomFog(1);
+  auto values = OpenValues(IngestGrid(grid, "fog"));
+  ASSERT_NE(values, nullptr);
+  auto acc = grid->getConstAccessor();
+  // Points anywhere in the voxels, on their faces too, in OpenVDB's index space.
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<double> u(-11.4, 11.4);
+  std::vector<glm::dvec3> points;
+  std::vector<openvdb::Vec3d> q;
+  for (int n = 0; n < 4000; ++n) {
+    openvdb::Vec3d p(u(rng), u(rng), u(rng));
+    if (n % 4 == 0) p = openvdb::Vec3d(std::round(p.x()) - 0.5, std::round(p.y()), std::round(p.z()) - 0.5);
+    q.push_back(p);
+    points.push_back(glm::dvec3(p.x(), p.y(), p.z()) + 0.5);
+  }
+  auto s = values->Sample(points, SampleMode::kNearest);
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  int occupied = 0;
+  for (size_t i = 0; i < q.size(); ++i) {
+    const Coord c = Coord::round(q[i]);
+    const bool on = acc.isValueOn(c);
+    occupied += on;
+    ASSERT_TRUE(s->inside[i]) << i;
+    EXPECT_EQ(s->occupancy[i], on ? 1.0f : 0.0f) << c;
+    EXPECT_EQ(s->density[i], on ? acc.getValue(c) : 0.0f) << c;
+  }
+  EXPECT_GT(occupied, 100);
+  // A box, half-open, straddling the occupied box's corner.
+  const glm::i64vec3 lo(-14, -3, 5), hi(3, 9, 15);
+  std::vector<float> box(size_t(StoreValues::ReadBytes(lo, hi, ValueAttr::kDensity) / sizeof(float)), -1.0f);
+  ASSERT_TRUE(values->Read(lo, hi, ValueAttr::kDensity, box.data()).ok());
+  size_t i = 0;
+  for (int64_t x = lo.x; x < hi.x; ++x)
+    for (int64_t y = lo.y; y < hi.y; ++y)
+      for (int64_t z = lo.z; z < hi.z; ++z, ++i) {
+        const Coord c(static_cast<int>(x), static_cast<int>(y), static_cast<int>(z));
+        ASSERT_EQ(box[i], acc.isValueOn(c) ? acc.getValue(c) : 0.0f) << c;
+      }
+  // Outside the occupied box: NaN and a mask.
+  const glm::dvec3 far[] = {{40.0, 0.0, 0.0}, {-12.6, 0.0, 0.0}};
+  auto o = values->Sample(far, SampleMode::kTrilinear);
+  ASSERT_TRUE(o.ok());
+  for (int k = 0; k < 2; ++k) {
+    EXPECT_FALSE(o->inside[size_t(k)]);
+    EXPECT_TRUE(std::isnan(o->density[size_t(k)]));
+  }
+}
+
+TEST_F(ValuesTest, TrilinearIsOpenVdbsBoxSampler) {
+  auto grid = RandomFog(3);
+  auto values = OpenValues(IngestGrid(grid, "fog3"));
+  ASSERT_NE(values, nullptr);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> u(-10.0, 10.0);
+  std::vector<glm::dvec3> points;
+  std::vector<openvdb::Vec3d> q;
+  for (int n = 0; n < 3000; ++n) {
+    q.emplace_back(u(rng), u(rng), u(rng));
+    points.push_back(glm::dvec3(q.back().x(), q.back().y(), q.back().z()) + 0.5);
+  }
+  auto s = values->Sample(points, SampleMode::kTrilinear);
+  ASSERT_TRUE(s.ok());
+  for (size_t i = 0; i < q.size(); ++i)
+    EXPECT_NEAR(s->density[i], openvdb::tools::BoxSampler::sample(grid->tree(), q[i]), 2e-6) << q[i];
+}
+
+TEST_F(ValuesTest, LevelSetOccupancyExactAndNormalsWithinQuantisation) {
+  auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(9.3f, openvdb::Vec3f(0.7f, -0.4f, 0.2f), 1.0f, 3.0f);
+  grid->setName("ls");
+  auto values = OpenValues(IngestGrid(grid, "sphere"));
+  ASSERT_NE(values, nullptr);
+  EXPECT_TRUE(values->meta().has_normal);
+  const glm::i64vec3 lo(-14, -14, -14), hi(14, 14, 14);
+  std::vector<float> occ(size_t(StoreValues::ReadBytes(lo, hi, ValueAttr::kOccupancy) / 4));
+  std::vector<float> nor(size_t(StoreValues::ReadBytes(lo, hi, ValueAttr::kNormal) / 4));
+  ASSERT_TRUE(values->Read(lo, hi, ValueAttr::kOccupancy, occ.data()).ok());
+  ASSERT_TRUE(values->Read(lo, hi, ValueAttr::kNormal, nor.data()).ok());
+  auto acc = grid->getConstAccessor();
+  const openvdb::math::UniformScaleMap map;
+  size_t i = 0, surface = 0;
+  for (int x = -14; x < 14; ++x)
+    for (int y = -14; y < 14; ++y)
+      for (int z = -14; z < 14; ++z, ++i) {
+        const Coord c(x, y, z);
+        const bool on = acc.isValueOn(c) && acc.getValue(c) <= 0.0f;
+        ASSERT_EQ(occ[i], on ? 1.0f : 0.0f) << c;
+        if (!on) continue;
+        openvdb::Vec3f g = openvdb::math::ISGradient<openvdb::math::CD_2ND>::result(acc, c);
+        if (g.length() < 1e-6f) continue;
+        g.normalize();
+        ++surface;
+        for (int k = 0; k < 3; ++k) EXPECT_NEAR(nor[i * 3 + size_t(k)], g[k], 1e-3) << c;
+      }
+  EXPECT_GT(surface, 1000u);
+}
+
+// vox-probe --at prints the wall's densities as OpenVDB holds them, and
+// --slice writes the plane x = 5 as an EXR whose pixels are the grid's.
+TEST_F(ValuesTest, ProbeAtAndSliceFromTheCommandLine) {
+  auto grid = Wall();
+  const std::string store = IngestGrid(grid, "wall2");
+  auto acc = grid->getConstAccessor();
+  auto r = testing::RunCommand(std::string(VOX_PROBE_BIN) + " " + store +
+                               " --at 5.5 -0.2 0.5 --at 5.2 2.9 -2.1 --at 4.9 0 0 --at 50 0 0");
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::istringstream out(r.output);
+  const Coord expect[] = {Coord(5, -1, 0), Coord(5, 2, -3)};
+  for (const Coord& c : expect) {
+    double x, y, z, occ, den;
+    std::string inside, w1, w2;
+    ASSERT_TRUE(out >> x >> y >> z >> inside >> w1 >> occ >> w2 >> den) << r.output;
+    EXPECT_EQ(inside, "inside");
+    EXPECT_EQ(occ, 1.0);
+    EXPECT_EQ(float(den), acc.getValue(c)) << c;
+  }
+  std::string line;
+  std::getline(out, line);
+  std::getline(out, line);
+  EXPECT_EQ(line, "4.9 0 0 outside occupancy nan density nan");
+  std::getline(out, line);
+  EXPECT_EQ(line, "50 0 0 outside occupancy nan density nan");
+  const std::string exr = dir_.File("slice.exr");
+  r = testing::RunCommand(std::string(VOX_PROBE_BIN) + " " + store + " --slice x 5 -o " + exr);
+  ASSERT_EQ(r.code, 0) << r.output;
+  Imf::InputFile in(exr.c_str());
+  const Imath::Box2i dw = in.header().dataWindow();
+  const int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+  ASSERT_EQ(w, 7);  // y from -3 to 3 across, z from -3 to 3 down
+  ASSERT_EQ(h, 7);
+  std::vector<float> px(size_t(w) * size_t(h));
+  Imf::FrameBuffer fb;
+  fb.insert("density", Imf::Slice(Imf::FLOAT, (char*)px.data(), sizeof(float), sizeof(float) * size_t(w)));
+  in.setFrameBuffer(fb);
+  in.readPixels(dw.min.y, dw.max.y);
+  for (int row = 0; row < h; ++row)
+    for (int col = 0; col < w; ++col)
+      EXPECT_EQ(px[size_t(row * w + col)], acc.getValue(Coord(5, col - 3, row - 3))) << col << " " << row;
+  // Bad input: a clear message, no file.
+  r = testing::RunCommand(std::string(VOX_PROBE_BIN) + " " + store + " --slice x 5 -o " + exr + ".2 --attr normal");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("attribute 'normal': this store keeps occupancy, density"), std::string::npos) << r.output;
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 // --cone-rad R [--cone-width W] a ray's cone is W + R * t |dir| voxels wide at
 // ray parameter t; a stop at a coarse cell of level L prints "lod L i j k t"
 // (i j k: the cell's first voxel), a voxel "hit i j k t".
+// With --at X Y Z or --slice AXIS INDEX it reads values instead (values.h).
 #include <cstdint>
 #include <cstdio>
 #include <iostream>
@@ -27,12 +28,15 @@
 #include "tools/common/options.h"
 #include "tools/common/prober.h"
 #include "tools/common/tool_main.h"
+#include "tools/probe/values.h"
 
 namespace {
 
 const vox::CommandLineSpec kCommandLine{
     "vox-probe",
-    "vox-probe (--generate SHAPE | STORE_DIR) [options] < rays.txt",
+    "vox-probe (--generate SHAPE | STORE_DIR) [options] < rays.txt\n"
+    "       vox-probe STORE_DIR --at X Y Z [--at ...] | --slice AXIS INDEX -o OUT.exr (vox-probe --at: "
+    "its own help)",
     "Traces the rays read from stdin, one 'ox oy oz dx dy dz' per line (decimal or C99 hex "
     "floats, index space: voxel i j k is [i, i+1) x [j, j+1) x [k, k+1), an OpenVDB index point "
     "plus 0.5), through a store or a generated shape, and prints 'hit i j k t' or "
@@ -93,6 +97,7 @@ int Run(const vox::Prober& prober, bool stats) {
 }  // namespace
 
 static int RunTool(int argc, char** argv) {
+  if (vox::WantsValues(argc, argv)) return vox::RunValues(argc, argv);  // --at, --slice
   vox::ProbeOptions opt;
   std::vector<std::string> stores;
   const auto apply = [&](const std::string& flag, const std::string& value) {
