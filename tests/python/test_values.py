@@ -87,3 +87,29 @@ def test_probe_at_prints_the_samples(store):
         words = line.split()
         assert words[3] == "inside" and float(words[5]) == s["occupancy"][i]
         assert [float(v) for v in words[7:10]] == pytest.approx(s["normal"][i].tolist(), abs=1e-7)
+
+
+@pytest.fixture(scope="session")
+def shell_512(workdir):
+    """vox-gen's sphere at 512: a shell of index radius 240 (15/32 of the
+    grid), its centre on index 0, with its level-of-detail pyramid."""
+    path = workdir / "shell512.store"
+    code, _, err = run([tool("gen"), "sphere", path, "--size", "512", "--quiet"])
+    assert code == 0, err
+    return str(path)
+
+
+def test_picking_layers_are_exact_by_default(shell_512):
+    """With the default level of detail (colour from the pyramid), the voxel
+    layer names base voxels of the shell: radii within [239, 240], as the
+    exact frame's; a coarse cell would put them several voxels off."""
+    default = vox.render(shell_512, size=(200, 150), layers="voxel,position")
+    assert default["stats"]["lod"]["default"] and len(default["stats"]["lod"]["stops_by_level"]) > 1
+    exact = vox.render(shell_512, size=(200, 150), layers="voxel,position", lod=0)
+    v = default["voxel"]
+    hit = ~np.isnan(v[..., 0])
+    assert hit.sum() > 4000
+    radius = np.linalg.norm(v[hit], axis=1)
+    assert radius.min() >= 239.0 and radius.max() <= 240.0
+    # Every voxel the exact frame picks, the default frame picks too.
+    assert not (~hit & ~np.isnan(exact["voxel"][..., 0])).any()
