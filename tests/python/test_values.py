@@ -113,3 +113,13 @@ def test_picking_layers_are_exact_by_default(shell_512):
     assert radius.min() >= 239.0 and radius.max() <= 240.0
     # Every voxel the exact frame picks, the default frame picks too.
     assert not (~hit & ~np.isnan(exact["voxel"][..., 0])).any()
+
+
+def test_ingest_array_reads_back_as_the_array(workdir):
+    """vox.ingest_array then vox.read: the elements above the threshold, 0 elsewhere."""
+    rng = np.random.default_rng(5)
+    a = rng.random((24, 20, 16)).astype(np.float32)
+    path = str(workdir / "array.store")
+    vox.ingest_array(a, path, voxel_size=0.5, origin=(-4, 2, 0), threshold=0.6, quiet=True)
+    back = vox.read(path, ((-4, 2, 0), (20, 22, 16)))
+    assert np.array_equal(back, np.where(a > 0.6, a, 0))

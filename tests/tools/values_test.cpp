@@ -3,8 +3,11 @@
 // openvdb::Coord that holds each point; storage/sample.h's points, boxes and
 // trilinear values against the grid's values, OpenVDB's BoxSampler and the
 // level set's gradient.
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <random>
 #include <sstream>
@@ -263,6 +266,108 @@ TEST_F(ValuesTest, ProbeAtAndSliceFromTheCommandLine) {
   r = testing::RunCommand(std::string(VOX_PROBE_BIN) + " " + store + " --slice x 5 -o " + exr + ".2 --attr normal");
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("attribute 'normal': this store keeps occupancy, density"), std::string::npos) << r.output;
+}
+
+// The bytes of a file.
+std::string FileBytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+// Stores a and b hold the same metadata (the id and the input's name aside)
+// and the same bricks, voxel for voxel.
+void ExpectSameStore(const std::string& a, const std::string& b) {
+  auto sa = Store::Open(a, OpenOptions{});
+  auto sb = Store::Open(b, OpenOptions{});
+  ASSERT_TRUE(sa.ok() && sb.ok()) << sa.status().ToString() << sb.status().ToString();
+  const StoreMeta &ma = (*sa)->meta(), &mb = (*sb)->meta();
+  EXPECT_EQ(ma.grid_name, mb.grid_name);
+  EXPECT_EQ(ma.grid_class, mb.grid_class);
+  EXPECT_EQ(ma.levels, mb.levels);
+  EXPECT_EQ(ma.brick_level, mb.brick_level);
+  EXPECT_EQ(ma.origin, mb.origin);
+  EXPECT_EQ(ma.bbox_min, mb.bbox_min);
+  EXPECT_EQ(ma.bbox_max, mb.bbox_max);
+  EXPECT_EQ(ma.index_to_world, mb.index_to_world);
+  EXPECT_EQ(ma.voxel_size, mb.voxel_size);
+  EXPECT_EQ(ma.voxel_count, mb.voxel_count);
+  EXPECT_EQ(ma.brick_count, mb.brick_count);
+  EXPECT_EQ(ma.top_cells, mb.top_cells);
+  EXPECT_EQ(ma.has_density, mb.has_density);
+  EXPECT_EQ(ma.has_normal, mb.has_normal);
+  EXPECT_EQ(ma.threshold, mb.threshold);
+  // The bricks: the same voxels at the same brick and payload (the brick
+  // file's bytes differ: its header and record checksums carry the store_id).
+  auto va = testutil::ReadAll(**sa);
+  auto vb = testutil::ReadAll(**sb);
+  ASSERT_TRUE(va.ok() && vb.ok());
+  ASSERT_EQ(va->size(), vb->size());
+  for (const auto& [ijk, at] : *va) {
+    auto it = vb->find(ijk);
+    ASSERT_NE(it, vb->end());
+    EXPECT_EQ(at.brick, it->second.brick);
+    EXPECT_EQ(at.payload, it->second.payload);
+    auto x = (*sa)->Attributes(at.brick, at.payload);
+    auto y = (*sb)->Attributes(it->second.brick, it->second.payload);
+    ASSERT_TRUE(x.ok() && y.ok());
+    EXPECT_EQ(x->density, y->density);
+  }
+}
+
+// The same data through a .vdb (built here with OpenVDB, every element
+// active), a .npy and a raw file: the same store.
+TEST_F(ValuesTest, NpyAndRawGiveTheStoreOfTheSameVdb) {
+  const int nx = 20, ny = 16, nz = 12;
+  const int ox = -7, oy = 3, oz = -2;
+  std::vector<float> data(size_t(nx) * ny * nz);
+  auto grid = openvdb::FloatGrid::create(0.0f);
+  grid->setName("density");
+  grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(0.25));
+  auto acc = grid->getAccessor();
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j)
+      for (int k = 0; k < nz; ++k) {
+        const float v = 0.5f + 0.5f * std::sin(0.7f * float(i)) * std::cos(0.45f * float(j + k));
+        data[(size_t(i) * ny + j) * nz + k] = v;
+        acc.setValueOn(Coord(i + ox, j + oy, k + oz), v);
+      }
+  const std::string vdb = dir_.File("ref.vdb");
+  testutil::WriteVdb(vdb, {grid});
+  IngestOptions o;
+  o.input = vdb;
+  o.output = dir_.File("ref.store");
+  o.threshold = 0.3;
+  ASSERT_TRUE(Ingest(o).ok());
+  // data.npy: format 1.0, its header padded to 64 bytes.
+  std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (20, 16, 12), }";
+  while ((10 + header.size() + 1) % 64 != 0) header += ' ';
+  header += '\n';
+  std::string npy = std::string("\x93NUMPY\x01\x00", 8);
+  npy += char(header.size() & 0xff);
+  npy += char(header.size() >> 8);
+  npy += header;
+  const std::string raw(reinterpret_cast<const char*>(data.data()), data.size() * sizeof(float));
+  std::ofstream(dir_.File("data.npy"), std::ios::binary) << npy << raw;
+  std::ofstream(dir_.File("data.raw"), std::ios::binary) << raw;
+  const std::string ingest = std::string(VOX_INGEST_BIN) + " --quiet --voxel-size 0.25 --origin -7,3,-2 --threshold 0.3 ";
+  auto r = testing::RunCommand(ingest + dir_.File("data.npy") + " " + dir_.File("npy.store"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  ExpectSameStore(o.output, dir_.File("npy.store"));
+  r = testing::RunCommand(ingest + "--shape 20,16,12 --dtype float32 " + dir_.File("data.raw") + " " +
+                          dir_.File("raw.store"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  ExpectSameStore(o.output, dir_.File("raw.store"));
+  // No temporary .vdb is left beside the outputs.
+  for (const auto& e : std::filesystem::directory_iterator(dir_.path()))
+    EXPECT_EQ(e.path().string().find(".input-"), std::string::npos) << e.path();
+  // Bad input: the file and the problem named, no store.
+  r = testing::RunCommand(std::string(VOX_INGEST_BIN) + " --shape 20,16,13 --dtype float32 " + dir_.File("data.raw") +
+                          " " + dir_.File("bad.store"));
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("data.raw' has 15360 bytes; shape 20 x 16 x 13 of float32 needs 16640"), std::string::npos)
+      << r.output;
+  EXPECT_FALSE(std::filesystem::exists(dir_.File("bad.store")));
 }
 
 }  // namespace

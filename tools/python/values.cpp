@@ -1,6 +1,7 @@
 // vox.sample, vox.read and vox.slice: a store's values at points, in boxes
 // and in slices as numpy arrays, over storage/sample.h (read out of core
-// through the store's brick cache, cache_mb per store).
+// through the store's brick cache, cache_mb per store); and the conversion
+// under vox.ingest_array (__init__.py.in), over ingest/array_ingest.h.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -11,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "ingest/array_ingest.h"
 #include "storage/sample.h"
 #include "tools/python/bindings.h"
 
@@ -135,9 +137,37 @@ py::array Slice(const py::object& store, const py::object& axis_in, int64_t inde
   return a.attr("squeeze")(axis);
 }
 
+// vox.ingest_array's first half: the array as a fog volume in a .vdb file.
+void ArrayToVdb(const py::array& array, const py::object& vdb_path, double voxel_size,
+                const std::vector<int64_t>& origin, double threshold) {
+  if (array.ndim() != 3) throw py::value_error("the array must be 3-D, not " + std::to_string(array.ndim()) + "-D");
+  const bool c_order = (array.flags() & py::array::c_style) != 0;
+  const bool f_order = (array.flags() & py::array::f_style) != 0;
+  if (!c_order && !f_order) throw py::value_error("the array must be contiguous (numpy.ascontiguousarray)");
+  if (origin.size() != 3) throw py::value_error("origin is (x, y, z)");
+  vox::ArrayView view;
+  view.dtype = py::str(array.dtype().attr("str")).cast<std::string>();
+  view.shape = {array.shape(0), array.shape(1), array.shape(2)};
+  view.fortran_order = !c_order;
+  view.data = array.data();
+  vox::ArrayPlacement place;
+  place.voxel_size = voxel_size;
+  place.origin = {origin[0], origin[1], origin[2]};
+  place.threshold = threshold;
+  const std::string path = PathOf(vdb_path);
+  vox::Status st;
+  {
+    py::gil_scoped_release release;
+    st = vox::ArrayToVdb(view, place, path, "the array");
+  }
+  CheckUsage(st);
+}
+
 }  // namespace
 
 void RegisterValues(py::module_& m) {
+  m.def("_array_to_vdb", &ArrayToVdb, py::arg("array"), py::arg("vdb_path"), py::arg("voxel_size"),
+        py::arg("origin"), py::arg("threshold"), "vox.ingest_array's conversion; not for direct use.");
   m.def("sample", &Sample, py::arg("store"), py::arg("points"), py::arg("level") = 0,
         py::arg("space") = "index", py::arg("mode") = "nearest", py::arg("cache_mb") = 256.0,
         "Values at points: points is (N, 3), in vox index space (voxel ijk is [ijk, ijk+1): "
