@@ -20,7 +20,8 @@ StatusOr<IngestStats> Ingest(const IngestOptions& options, const IngestLimits& l
 
 namespace {
 
-// "[####    ]  42% 420/1000 bricks, 123456 voxels" on a terminal, the same
+// "[####    ]  42% 420/1000 bricks, 123456 voxels, 1m20s left" on a terminal
+// (the time left once a second has passed), the same
 // text without the bar every 10% otherwise.
 class StderrProgress : public ProgressSink {
  public:
@@ -38,20 +39,25 @@ class StderrProgress : public ProgressSink {
     done_ = done;
     total_ = total;
     voxels_ = voxels;
-    display_.Update(done, total, [this](double) { return Text(); });
+    display_.Update(done, total, [this](double now) { return Text(now); });
   }
 
   void Done() override {
-    if (total_ > 0) display_.Finish(done_, total_, [this](double) { return Text(); });
+    if (total_ > 0) display_.Finish(done_, total_, [this](double now) { return Text(now); });
   }
 
  private:
-  std::string Text() const {
-    char buf[128];
+  // `now`: seconds since the display started; the time left is the
+  // elapsed time scaled by the bricks still to write.
+  std::string Text(double now) const {
+    char buf[160];
     std::snprintf(buf, sizeof buf, "%3d%% %llu/%llu bricks, %llu voxels",
                   int(done_ * 100 / total_), (unsigned long long)done_,
                   (unsigned long long)total_, (unsigned long long)voxels_);
-    return buf;
+    std::string text = buf;
+    if (done_ > 0 && done_ < total_ && now >= 1.0)
+      text += ", " + vox::Progress::Duration(now * double(total_ - done_) / double(done_)) + " left";
+    return text;
   }
 
   vox::Progress display_;

@@ -1,6 +1,7 @@
 // The Renderer's level-of-detail rays (render/lod.h, docs/lod.md): first
 // hits of a ray cone over the pyramid, and the shadow and reflection rays
-// of a coarse hit, which carry the cone on.
+// of a coarse hit, which carry the cone on; and the exact pick of a coarse
+// primary stop (the voxel, position and Z layers).
 #include "render/internal/tracing.h"
 #include "render/renderer.h"
 
@@ -31,6 +32,21 @@ bool Renderer::FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, 
   *level = seg.level;
   ++cx.c->lod.stops[seg.level];
   return true;
+}
+
+void Renderer::PickExactly(const WorldRay& wr, TraceContext& cx, Sample* s,
+                           const StartPlane* start) const {
+  if (!s->hit || s->level == 0 || fog_ || !(options_.layers.voxel || options_.layers.position)) return;
+  const Ray gr{xf_.WorldToGrid(wr.origin), xf_.world_to_grid_linear * wr.dir};
+  Hit h;
+  if (!FindHit(gr, /*skip_start_run=*/false, cx, &h, nullptr, start)) {
+    s->z = render_internal::kInf;  // a coarse cell with no voxel on this ray: no pick
+    s->depth = render_internal::kInf;
+    return;
+  }
+  s->z = h.t;
+  SetHitGeometry(wr, s);
+  s->voxel = h.voxel + volume_->meta().origin;
 }
 
 bool Renderer::OccludedLod(const Ray& gr, double t_max, const Cone& cone, TraceContext& cx) const {

@@ -300,6 +300,11 @@ class Renderer {
   bool FindHitLod(const Ray& gr, const Cone& cone, bool skip_start_run, TraceContext& cx, Hit* hit,
                   int* level, VoxelAttributes* attrs, const StartPlane* start = nullptr) const;
   bool OccludedLod(const Ray& gr, double t_max, const Cone& cone, TraceContext& cx) const;
+  // The picking layers of a primary sample `s` of ray `wr` that stopped at a
+  // coarse cell, traced exactly (level 0) when voxel or position is asked
+  // for: its voxel, z, depth and position are the base voxel's (z = inf: no
+  // voxel along the ray), colour and normal stay the pyramid's.
+  void PickExactly(const WorldRay& wr, TraceContext& cx, Sample* s, const StartPlane* start) const;
   glm::dvec3 RadianceLod(const Ray& gr, const glm::dvec3& dir_w, int depth, int kind,
                          const Cone& cone, TraceContext& cx) const;
   // The cone of a secondary ray leaving a hit at ray parameter t of a ray with `cone`.

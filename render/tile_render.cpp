@@ -155,7 +155,9 @@ void Renderer::WritePixel(const PixelValue& v, int px, int py, TileBuffer* buf) 
   if (options_.layers.voxel) {
     // NaN where no voxel was hit (misses; fog names no single voxel), so a
     // miss cannot be read as voxel (0, 0, 0).
-    const bool voxel = v.any_hit && !fog_;
+    // With level of detail, a coarse stop whose exact pick found no voxel
+    // (PickExactly) has z = inf: no voxel either.
+    const bool voxel = hit && !fog_;
     const float nan = std::numeric_limits<float>::quiet_NaN();
     *buf->at(kChVi, px, py) = voxel ? float(v.voxel.x) : nan;
     *buf->at(kChVj, px, py) = voxel ? float(v.voxel.y) : nan;
@@ -189,6 +191,7 @@ Status Renderer::ShadeTilePixel(int px, int py, TileRays& rays, TraceContext& cx
   for (int k = 0; k < spp; ++k) {
     Sample s;
     ShadePixel(rays.At(px, py, k), cx, &s, start);
+    if (lod_ && !cx.failed()) PickExactly(rays.At(px, py, k), cx, &s, start);
     if (cx.failed()) {
       Status e = std::move(cx.error);
       cx.error = OkStatus();
@@ -346,9 +349,9 @@ Status Renderer::RefineSilhouettes(const TileRect& rect, const std::vector<int8_
       for (int j = 0; j < grid; ++j)
         for (int i = 0; i < grid; ++i) {
           Sample s;
-          ShadePixel(camera_.PixelRay(rect.x0 + px + (i + 0.5) / grid,
-                                      rect.y0 + py + (j + 0.5) / grid),
-                     cx, &s, nullptr, &cone);
+          const WorldRay wr = camera_.PixelRay(rect.x0 + px + (i + 0.5) / grid, rect.y0 + py + (j + 0.5) / grid);
+          ShadePixel(wr, cx, &s, nullptr, &cone);
+          if (!cx.failed()) PickExactly(wr, cx, &s, nullptr);
           if (cx.failed()) return cx.error;
           v.Add(s);
         }

@@ -19,10 +19,15 @@
 # the flags give the sequence and run in the current directory, so relative
 # paths in them hold; logs go to OUT's directory, frames-I.log. With --wait,
 # blocks until every task has finished and exits non-zero if one failed.
+#
+# Resources, before the other arguments, go to every sbatch call:
+#   --partition P  --time T  --mem M  --cpus-per-task N  --sbatch-arg ARG (repeatable)
+# A missing sbatch, or a submission sbatch refuses, exits 1 with its message.
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 wait_flag=()
 merge_flags=()
+res=()  # resources for sbatch
 frames='' chunk=1
 while [[ $# -gt 0 ]]; do
   case $1 in
@@ -30,13 +35,26 @@ while [[ $# -gt 0 ]]; do
     --preview) merge_flags+=(--preview "$(realpath -m "$2")"); shift 2 ;;
     --frames) frames=$2; shift 2 ;;
     --chunk) chunk=$2; shift 2 ;;
+    --partition|--time|--mem|--cpus-per-task) res+=("$1=$2"); shift 2 ;;
+    --sbatch-arg) res+=("$2"); shift 2 ;;
     *) break ;;
   esac
 done
+command -v sbatch >/dev/null || { echo "submit.sh: sbatch not found: run this on a Slurm login node" >&2; exit 1; }
+# sbatch with the resources; on failure, says which submission failed and exits 1.
+submit() {
+  local what=$1 out
+  shift
+  if ! out=$(sbatch "${res[@]}" "$@"); then
+    echo "submit.sh: sbatch refused the $what" >&2
+    exit 1
+  fi
+  printf '%s' "$out"
+}
 if [[ -n $frames ]]; then
   # A frame sequence: an array of ceil(FRAMES / K) tasks.
   if [[ $# -lt 2 ]]; then
-    sed -n '2,22p' "$0" >&2
+    sed -n '2,27p' "$0" >&2
     exit 2
   fi
   [[ $frames =~ ^[1-9][0-9]*$ ]] || { echo "submit.sh: --frames must be a positive integer, not '$frames'" >&2; exit 2; }
@@ -49,11 +67,15 @@ if [[ -n $frames ]]; then
   export VOX_RENDER=${VOX_RENDER:-$(command -v vox-render || echo vox-render)}
   tasks=$(( (frames + chunk - 1) / chunk ))
   set +e
-  job=$(sbatch --parsable --export=ALL --array="1-$tasks" --chdir="$PWD" \
+  job=$(sbatch "${res[@]}" --parsable --export=ALL --array="1-$tasks" --chdir="$PWD" \
     --output="$logs/frames-%a.log" "${wait_flag[@]}" \
     "$here/render-frames.sbatch" "$store" "$frames" "$chunk" "$out" "$@")
   status=$?
   set -e
+  if [[ -z $job ]]; then
+    echo "submit.sh: sbatch refused the frames array" >&2
+    exit 1
+  fi
   echo "submitted frames array ${job%%;*} ($frames frames in $tasks tasks of up to $chunk) -> $out"
   if [[ ${#wait_flag[@]} -gt 0 ]]; then
     if [[ $status -ne 0 ]]; then
@@ -65,7 +87,7 @@ if [[ -n $frames ]]; then
   exit $status
 fi
 if [[ $# -lt 4 ]]; then
-  sed -n '2,22p' "$0" >&2
+  sed -n '2,27p' "$0" >&2
   exit 2
 fi
 store=$(realpath "$1") cam=$(realpath "$2") out=$(realpath -m "$3") n=$4
@@ -75,16 +97,20 @@ work="${out%.exr}.parts"
 mkdir -p "$work"
 export VOX_RENDER=${VOX_RENDER:-$(command -v vox-render || echo vox-render)}
 export VOX_MERGE=${VOX_MERGE:-$(command -v vox-merge || echo vox-merge)}
-array_job=$(sbatch --parsable --export=ALL --array="1-$n" --chdir="$work" \
+array_job=$(submit "render array" --parsable --export=ALL --array="1-$n" --chdir="$work" \
   --output="$work/part-%a.log" "$here/render-part.sbatch" "$store" "$cam" "$work" "$@")
 array_job=${array_job%%;*}
 echo "submitted render array $array_job ($n parts)"
 set +e
-merge_job=$(sbatch --parsable --export=ALL --dependency="afterok:$array_job" --kill-on-invalid-dep=yes \
+merge_job=$(sbatch "${res[@]}" --parsable --export=ALL --dependency="afterok:$array_job" --kill-on-invalid-dep=yes \
   --chdir="$work" --output="$work/merge.log" "${wait_flag[@]}" \
   "$here/merge.sbatch" "$work" "$n" "$out" "${merge_flags[@]}")
 status=$?
 set -e
+if [[ -z $merge_job ]]; then
+  echo "submit.sh: sbatch refused the merge" >&2
+  exit 1
+fi
 echo "submitted merge ${merge_job%%;*} -> $out"
 if [[ ${#wait_flag[@]} -gt 0 ]]; then
   if [[ $status -ne 0 || ! -f $out ]]; then

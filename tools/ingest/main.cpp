@@ -1,6 +1,8 @@
 // vox-ingest: reads an OpenVDB grid and writes a vox store.
 //   vox-ingest data.vdb store/ [options]
 //   vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]
+//   vox-ingest data.npy store/ [--voxel-size S] [--origin X,Y,Z] [--threshold T] [options]
+//   vox-ingest data.raw store/ --shape X,Y,Z --dtype float32 [...]   (array_input.h)
 // The options are tools/common/options.h's ingest table (vox-ingest --help).
 // Exit codes: 0 done, 1 the ingest failed (or its child process crashed),
 // 2 bad command line, 128+N killed by signal N (SIGINT, SIGTERM, SIGKILL: the
@@ -25,13 +27,16 @@
 #include "tools/common/signals.h"
 #include "tools/common/supervisor.h"
 #include "tools/common/tool_main.h"
+#include "tools/ingest/array_input.h"
 
 namespace {
 
 const vox::CommandLineSpec kCommandLine{
     "vox-ingest",
     "vox-ingest data.vdb store/ [options]\n"
-    "vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]",
+    "vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]\n"
+    "vox-ingest data.npy|data.raw store/ [--shape X,Y,Z --dtype D] [--voxel-size S] "
+    "[--origin X,Y,Z] [--threshold T] [options]",
     "Reads a grid of the OpenVDB file data.vdb and writes the vox store store/ (with its "
     "level-of-detail pyramid), or adds the pyramid to an existing store.",
     vox::IngestOptionTable(),
@@ -125,4 +130,18 @@ static int IngestAndReport(const vox::IngestOptions& o, const vox::IngestLimits&
   return 0;
 }
 
-int main(int argc, char** argv) { return vox::ToolMain("vox-ingest", argc, argv, RunTool); }
+int main(int argc, char** argv) {
+  // A .npy or raw input: converted to a temporary .vdb first (array_input.h).
+  vox::ArrayInput array = vox::PrepareArrayInput(argc, argv);
+  if (!array.error.empty()) {
+    std::fprintf(stderr, "vox-ingest: %s\n", array.error.c_str());
+    return 2;
+  }
+  if (!array.wanted) return vox::ToolMain("vox-ingest", argc, argv, RunTool);
+  std::vector<char*> args;
+  for (std::string& a : array.args) args.push_back(a.data());
+  args.push_back(nullptr);
+  const int code = vox::ToolMain("vox-ingest", int(array.args.size()), args.data(), RunTool);
+  ::unlink(array.temp_vdb.c_str());
+  return code;
+}

@@ -1,6 +1,8 @@
 // vox-probe: first hits of rays read from stdin, one "ox oy oz dx dy dz" per
-// line (decimal or C99 hex floats, index space: voxel (i,j,k) is
-// [i,i+1)x[j,j+1)x[k,k+1)); prints "hit i j k t" or "miss" per line, in order.
+// line (decimal or C99 hex floats, vox index space: voxel (i,j,k), OpenVDB's
+// Coord(i,j,k), is [i,i+1)x[j,j+1)x[k,k+1), so an OpenVDB index point q is
+// q + 0.5 here; docs/usage.md, Spaces); prints "hit i j k t" or "miss" per
+// line, in order.
 //
 //   vox-probe --generate sphere:1024 [--brick-level L] [options] < rays.txt
 //   vox-probe store/ [options] < rays.txt
@@ -11,6 +13,7 @@
 // --cone-rad R [--cone-width W] a ray's cone is W + R * t |dir| voxels wide at
 // ray parameter t; a stop at a coarse cell of level L prints "lod L i j k t"
 // (i j k: the cell's first voxel), a voxel "hit i j k t".
+// With --at X Y Z or --slice AXIS INDEX it reads values instead (values.h).
 #include <cstdint>
 #include <cstdio>
 #include <iostream>
@@ -25,14 +28,18 @@
 #include "tools/common/options.h"
 #include "tools/common/prober.h"
 #include "tools/common/tool_main.h"
+#include "tools/probe/values.h"
 
 namespace {
 
 const vox::CommandLineSpec kCommandLine{
     "vox-probe",
-    "vox-probe (--generate SHAPE | STORE_DIR) [options] < rays.txt",
+    "vox-probe (--generate SHAPE | STORE_DIR) [options] < rays.txt\n"
+    "       vox-probe STORE_DIR --at X Y Z [--at ...] | --slice AXIS INDEX -o OUT.exr (vox-probe --at: "
+    "its own help)",
     "Traces the rays read from stdin, one 'ox oy oz dx dy dz' per line (decimal or C99 hex "
-    "floats, index space), through a store or a generated shape, and prints 'hit i j k t' or "
+    "floats, index space: voxel i j k is [i, i+1) x [j, j+1) x [k, k+1), an OpenVDB index point "
+    "plus 0.5), through a store or a generated shape, and prints 'hit i j k t' or "
     "'miss' per line, in order.",
     vox::ProbeOptionTable(),
     "Exit codes: 0 done, 1 some lines refused (each prints 'error'), 2 bad command line or\n"
@@ -90,6 +97,7 @@ int Run(const vox::Prober& prober, bool stats) {
 }  // namespace
 
 static int RunTool(int argc, char** argv) {
+  if (vox::WantsValues(argc, argv)) return vox::RunValues(argc, argv);  // --at, --slice
   vox::ProbeOptions opt;
   std::vector<std::string> stores;
   const auto apply = [&](const std::string& flag, const std::string& value) {

@@ -47,6 +47,7 @@
 #include "tools/common/options.h"
 #include "tools/common/prober.h"
 #include "tools/common/version.h"
+#include "tools/python/bindings.h"
 #include "tools/python/ingest_process.h"
 #include "tools/python/polled.h"
 
@@ -55,42 +56,11 @@ namespace py = pybind11;
 namespace {
 
 using vox::RunPolled;
-
-[[noreturn]] void Raise(vox::StatusCode code, const std::string& text) {
-  PyObject* type = PyExc_RuntimeError;
-  switch (code) {
-    case vox::StatusCode::kInvalidArgument:
-    case vox::StatusCode::kUnsupported:
-      type = PyExc_ValueError;
-      break;
-    case vox::StatusCode::kNotFound:
-    case vox::StatusCode::kIoError:
-    case vox::StatusCode::kCorruption:
-      type = PyExc_OSError;
-      break;
-    default:
-      break;
-  }
-  PyErr_SetString(type, text.c_str());
-  throw py::error_already_set();
-}
-
-// A refused option: the tool prints the message alone.
-void CheckUsage(const vox::Status& s) {
-  if (!s.ok()) Raise(s.code(), s.message());
-}
-// A failed run: the tool prints "Code: message".
-void CheckRun(const vox::Status& s) {
-  if (!s.ok()) Raise(s.code(), s.ToString());
-}
-
-// str, bytes, os.PathLike or vox.Store -> a path: its bytes in the file
-// system's encoding (os.fsencode; bytes as they are), the file Python names.
-std::string PathOf(const py::handle& h) {
-  if (py::hasattr(h, "path") && !py::isinstance<py::str>(h) && !py::isinstance<py::bytes>(h))
-    return PathOf(h.attr("path"));
-  return py::module_::import("os").attr("fsencode")(h).cast<std::string>();
-}
+using voxpy::CheckRun;
+using voxpy::CheckUsage;
+using voxpy::Owned;
+using voxpy::PathOf;
+using voxpy::Raise;
 
 // A keyword argument -> the tool's flag and its text value (None: not given,
 // bool: a switch). "o" is -o; "zstd_level" is --zstd-level.
@@ -162,13 +132,6 @@ void ApplyKwargs(const py::kwargs& kwargs, const char* fn, vox::OptionTable tabl
       if (vox::ArityOf(table, off) == vox::FlagArity::kSwitch) CheckUsage(apply(off, ""));
     }
   }
-}
-
-template <class T>
-py::array_t<T> Owned(std::vector<T>&& v, std::vector<py::ssize_t> shape) {
-  auto* heap = new std::vector<T>(std::move(v));
-  py::capsule owner(heap, [](void* p) { delete static_cast<std::vector<T>*>(p); });
-  return py::array_t<T>(shape, heap->data(), owner);
 }
 
 py::object JsonToPython(const std::string& text) {
@@ -557,6 +520,7 @@ PYBIND11_MODULE(_vox, m) {
   m.def("read_exr", &ReadExr, py::arg("path"),
         "Reads a complete EXR written by vox: {'width', 'height', 'channels': {name: (H, W) "
         "float32}, 'attributes': the string attributes}.");
+  voxpy::RegisterValues(m);
   m.attr("__version__") = vox::kVersion;
   m.attr("__git_describe__") = vox::kGitDescribe;
 }
