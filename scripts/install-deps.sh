@@ -8,7 +8,7 @@ pkgs=(build-essential cmake ninja-build pkg-config
       libopenexr-dev libzstd-dev libglm-dev libtbb-dev nlohmann-json3-dev libpng-dev
       libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libgmp-dev python3
       python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib
-      clang libclang-rt-14-dev)
+      clang libclang-rt-14-dev libcpp-httplib-dev chromium python3-websocket)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
