@@ -1,5 +1,6 @@
 #include "storage/store_budget.h"
 
+#include <malloc.h>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -18,7 +19,11 @@ namespace {
 
 // glibc gives each thread that allocates concurrently an arena of its own, up
 // to 8 per core, each reserving 64 MiB of address space (HEAP_MAX_SIZE).
+// Under an address space limit the process keeps to kArenasUnderLimit
+// arenas besides the main one (mallopt M_ARENA_MAX), or its threads' arenas
+// alone would take hundreds of MiB of the limit.
 constexpr uint64_t kArenaAddressSpace = 64 * kMiB;
+constexpr int kArenasUnderLimit = 2;
 
 // What RLIMIT_AS leaves for the budget (0: no limit), or an error when it
 // leaves nothing.
@@ -29,8 +34,8 @@ StatusOr<uint64_t> AddressSpaceLeft(int threads, const ProcessMemory& now) {
   const uint64_t stack_bytes = getrlimit(RLIMIT_STACK, &stack) == 0 && stack.rlim_cur != RLIM_INFINITY
                                    ? uint64_t(stack.rlim_cur)
                                    : 8 * kMiB;
-  const uint64_t cores = std::max(1u, std::thread::hardware_concurrency());
-  const uint64_t arenas = std::min<uint64_t>(uint64_t(threads), 8 * cores);
+  mallopt(M_ARENA_MAX, kArenasUnderLimit);
+  const uint64_t arenas = std::min<uint64_t>(uint64_t(threads), kArenasUnderLimit);
   // One more arena's worth: a new arena maps twice its size before trimming.
   const uint64_t reserve = now.vm_size + (arenas + 1) * kArenaAddressSpace + uint64_t(threads) * stack_bytes;
   const uint64_t limit = uint64_t(as.rlim_cur);
@@ -38,7 +43,7 @@ StatusOr<uint64_t> AddressSpaceLeft(int threads, const ProcessMemory& now) {
     return ResourceExhaustedError(
         "the address space limit (ulimit -v) of " + std::to_string(limit / kMiB) +
         " MiB leaves no memory budget: the process maps " + std::to_string(now.vm_size / kMiB) +
-        " MiB now, and " + std::to_string(threads) + " threads' allocator arenas and stacks reserve " +
+        " MiB now, and its allocator arenas and " + std::to_string(threads) + " threads' stacks reserve " +
         std::to_string((reserve - now.vm_size) / kMiB) + " MiB more; give it at least " +
         std::to_string((reserve + 64 * kMiB) / kMiB) + " MiB");
   return limit - reserve;

@@ -7,9 +7,9 @@
 // MemAvailable when that is smaller or there is no cgroup limit (the rest is
 // left to other processes and the kernel); 4 GiB when neither is known.
 // Under an address space limit (RLIMIT_AS, `ulimit -v`) it is at most what
-// the limit leaves once the process's mappings now, glibc's per-thread
-// arenas (64 MiB of address space each) and the threads' stacks are
-// counted. What the process already holds at the start (its resident set
+// the limit leaves once the process's mappings now, glibc's arenas (64 MiB
+// of address space each; capped at 2 besides the main one under such a
+// limit, mallopt M_ARENA_MAX) and the threads' stacks are counted. What the process already holds at the start (its resident set
 // beyond the 24 MiB a bare process is counted as: a Python session's arrays)
 // is taken off: the limit is the whole process's. SplitMemoryBudget keeps
 // 1/8 of it as headroom and 24 MiB for the process itself.
