@@ -77,8 +77,10 @@ StatusOr<ProcessBudget> ChooseProcessBudget(uint64_t explicit_bytes, int threads
     b.bytes = b.address_space;
     b.source = "ulimit -v, less the process's mappings, arenas and stacks";
   }
-  // What the process holds beyond a bare process's share is not the budget's.
-  b.held = now.rss > BudgetInputs::kDefaultProcessBase ? now.rss - BudgetInputs::kDefaultProcessBase : 0;
+  // What the process holds beyond a bare process's share is not the budget's
+  // (a detected limit is the whole process's; --memory-mb is the render's own).
+  if (explicit_bytes == 0 && now.rss > BudgetInputs::kDefaultProcessBase)
+    b.held = now.rss - BudgetInputs::kDefaultProcessBase;
   if (b.held != 0) {
     if (b.held + 16 * kMiB >= b.bytes)
       return ResourceExhaustedError("memory budget of " + std::to_string(b.bytes / kMiB) + " MiB (" +

@@ -11,7 +11,8 @@
 // of address space each; capped at 2 besides the main one under such a
 // limit, mallopt M_ARENA_MAX) and the threads' stacks are counted. What the process already holds at the start (its resident set
 // beyond the 24 MiB a bare process is counted as: a Python session's arrays)
-// is taken off: the limit is the whole process's. SplitMemoryBudget keeps
+// is taken off a detected limit, which is the whole process's (--memory-mb
+// is taken as the render's own budget). SplitMemoryBudget keeps
 // 1/8 of it as headroom and 24 MiB for the process itself.
 //
 // The brick cache's decoded bricks and the threads' pins live in the
