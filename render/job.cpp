@@ -20,6 +20,7 @@
 #include "render/scene.h"
 #include "core/util/atomic_file.h"
 #include "core/util/file.h"
+#include "storage/buffer_pool.h"
 #include "storage/lod.h"
 #include "core/util/memory_budget.h"
 #include "core/util/path_identity.h"
@@ -317,6 +318,9 @@ std::string JobStatsJson(const JobRun& run, int number, const Renderer& renderer
   memory["io_threads"] = run.io_threads;
   memory["max_brick_bytes"] = stores.base->brick_sizes().max_decoded;
   memory["process"] = nlohmann::json::parse(ReadProcessMemory().ToJson());
+  memory["brick_pool"] = nlohmann::json::parse(ReadBrickPoolStats().ToJson());
+  memory["held_at_start"] = run.process.held;
+  memory["address_space_left"] = run.process.address_space;
   memory["heap_watch"] = {{"target", HeapWatch::Process().target()},
                           {"given_up", HeapWatch::Process().given_up()},
                           {"anon_at_start", run.anon_at_start}};
@@ -481,7 +485,12 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
 
   // The store and its pyramid, opened once for every frame.
   const uint64_t anon_at_start = ReadProcessMemory().rss_anon;
-  VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(options.memory_bytes));
+  // Counted against an address space limit: the render threads, the main
+  // thread, and --prefetch's scout and I/O threads.
+  const int job_threads =
+      (options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()))) + 2 +
+      (options.prefetch ? options.io_threads : 0);
+  VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(options.memory_bytes, job_threads));
   const int io_threads = IoThreadsFor(options, process);
   OpenOptions open;
   // The budget bounds the cache (BudgetStore sets it once the resident top

@@ -6,8 +6,18 @@
 // (Slurm --mem, a container; core/util/memory_budget.h finds it), or 3/4 of
 // MemAvailable when that is smaller or there is no cgroup limit (the rest is
 // left to other processes and the kernel); 4 GiB when neither is known.
-// SplitMemoryBudget keeps 1/16 of it as headroom and 24 MiB for the process
-// itself.
+// Under an address space limit (RLIMIT_AS, `ulimit -v`) it is at most what
+// the limit leaves once the process's mappings now, glibc's arenas (64 MiB
+// of address space each; capped at 2 besides the main one under such a
+// limit, mallopt M_ARENA_MAX) and the threads' stacks are counted. What the process already holds at the start (its resident set
+// beyond the 24 MiB a bare process is counted as: a Python session's arrays)
+// is taken off a detected limit, which is the whole process's (--memory-mb
+// is taken as the render's own budget). SplitMemoryBudget keeps
+// 1/8 of it as headroom and 24 MiB for the process itself.
+//
+// The brick cache's decoded bricks and the threads' pins live in the
+// process's brick pool (storage/buffer_pool.h), mapped once at the budget's
+// size for them, so the heap does not fragment under a churning cache.
 //
 // Thread safety: free functions; BudgetStore must not race with the store's
 // readers (call it after open, before reading bricks).
@@ -26,6 +36,8 @@ namespace vox {
 
 struct ProcessBudget {
   uint64_t bytes = 0;
+  uint64_t held = 0;           // taken off for what the process held at the start
+  uint64_t address_space = 0;  // what RLIMIT_AS leaves (0: no such limit)
   std::string source;  // where it came from, e.g. "--memory-mb", "cgroup /sys/fs/...", "3/4 of MemAvailable"
   std::string ToString() const;  // "768 MiB (cgroup ...)"
 };
@@ -33,8 +45,10 @@ struct ProcessBudget {
 inline constexpr uint64_t kFallbackMemoryBudget = uint64_t(4) << 30;
 
 // `explicit_bytes` > 0: that (from --memory-mb); 0: detected as above.
-// Errors: an unparseable cgroup or meminfo file (named).
-StatusOr<ProcessBudget> ChooseProcessBudget(uint64_t explicit_bytes);
+// `threads`: the threads the process will run (0: the cores, plus one).
+// Errors: an unparseable cgroup or meminfo file (named); ResourceExhausted
+// when what the process holds, or its address space limit, leaves nothing.
+StatusOr<ProcessBudget> ChooseProcessBudget(uint64_t explicit_bytes, int threads = 0);
 
 // Splits `total` for a reader of `store` (in's store fields are filled in
 // from it: resident bytes, brick sizes) and sets the store's cache capacity

@@ -207,6 +207,8 @@ ProcessMemory ReadProcessMemory() {
     while (std::fgets(line, sizeof(line), f) != nullptr) {
       if (std::sscanf(line, "VmHWM: %llu kB", &kb) == 1) m.peak_rss = uint64_t(kb) << 10;
       if (std::sscanf(line, "RssAnon: %llu kB", &kb) == 1) m.rss_anon = uint64_t(kb) << 10;
+      if (std::sscanf(line, "VmRSS: %llu kB", &kb) == 1) m.rss = uint64_t(kb) << 10;
+      if (std::sscanf(line, "VmSize: %llu kB", &kb) == 1) m.vm_size = uint64_t(kb) << 10;
     }
     std::fclose(f);
   }
@@ -259,7 +261,8 @@ uint64_t HeapWatch::Absorb(uint64_t anon) {
 
 std::string ProcessMemory::ToJson() const {
   std::ostringstream o;
-  o << "{\"peak_rss\": " << peak_rss << ", \"rss_anon\": " << rss_anon
+  o << "{\"peak_rss\": " << peak_rss << ", \"rss\": " << rss << ", \"vm_size\": " << vm_size
+    << ", \"rss_anon\": " << rss_anon
     << ", \"heap_held\": " << heap_held << ", \"heap_in_use\": " << heap_in_use << "}";
   return o.str();
 }

@@ -50,13 +50,15 @@ struct MemoryLimit {
 StatusOr<MemoryLimit> DetectMemoryLimit(const std::string& root = "/");
 
 // What the process holds now, to set against its budget: the kernel's view
-// (/proc/self/status: VmHWM, the peak resident set, and RssAnon, the
-// anonymous part now) and the allocator's (glibc mallinfo2: bytes it holds
+// (/proc/self/status: VmHWM, the peak resident set, VmRSS and VmSize now,
+// and RssAnon, the anonymous part now) and the allocator's (glibc mallinfo2: bytes it holds
 // from the system and bytes in live allocations; the difference is free
 // memory it keeps, the fragmentation a churning cache leaves). A field is 0
 // where it cannot be read.
 struct ProcessMemory {
   uint64_t peak_rss = 0;
+  uint64_t rss = 0;       // VmRSS: the resident set now
+  uint64_t vm_size = 0;   // VmSize: the address space mapped now (what RLIMIT_AS limits)
   uint64_t rss_anon = 0;
   uint64_t heap_held = 0;
   uint64_t heap_in_use = 0;

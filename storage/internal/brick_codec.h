@@ -20,6 +20,7 @@
 
 #include "core/octree.h"
 #include "core/util/status.h"
+#include "storage/buffer_pool.h"
 #include "storage/internal/format.h"
 #include "storage/meta.h"
 
@@ -54,47 +55,30 @@ void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std:
 std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,
                            int depth, uint8_t flags, int normal_bits = 16);
 
-// An allocator whose value-initialising construct (vector::resize) leaves
-// trivial elements uninitialised: for buffers a decoder fills completely.
-template <class T>
-struct UninitializedAllocator : std::allocator<T> {
-  template <class U>
-  struct rebind {
-    using other = UninitializedAllocator<U>;
-  };
-  UninitializedAllocator() = default;
-  template <class U>
-  UninitializedAllocator(const UninitializedAllocator<U>&) noexcept {}
-  template <class U>
-  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-};
-
 // A decoded brick as the cache holds it: its pool in traversal form.
 struct DecodedBrick {
-  std::vector<CompactCell> cells;
+  // Both arrays live in the process's brick pool (storage/buffer_pool.h)
+  // when one is reserved, else on the heap.
+  std::vector<CompactCell, BrickAllocator<CompactCell>> cells;
   // Written whole by DecodeBrickRaw straight from the decompressed record
   // (delta decoding and copying in one pass), so never zeroed first.
-  std::vector<uint8_t, UninitializedAllocator<uint8_t>> attr_planes;
+  std::vector<uint8_t, BrickAllocator<uint8_t>> attr_planes;
   uint32_t voxel_count = 0;
   uint8_t flags = 0;
-  // What it costs in memory: this struct, its two heap blocks (capacity, as
-  // allocated), and the shared_ptr control block make_shared puts beside it.
-  // (The cache adds its own per-entry overhead; see ShardedPageCache.)
+  // What it costs in memory: this struct, its two blocks (a pool block's
+  // whole size, or the heap block's capacity), and the shared_ptr control
+  // block make_shared puts beside it. (The cache adds its own per-entry
+  // overhead; see ShardedPageCache.)
   size_t charge() const {
-    return sizeof(DecodedBrick) + cells.capacity() * sizeof(CompactCell) +
-           attr_planes.capacity() + kOverheadBytes;
+    return sizeof(DecodedBrick) + BrickBlockBytes(cells.data(), cells.capacity() * sizeof(CompactCell)) +
+           BrickBlockBytes(attr_planes.data(), attr_planes.capacity()) + kOverheadBytes;
   }
-  // Bookkeeping beside the data: the shared_ptr control block make_shared
-  // puts in front of this struct (16), a malloc header on each of the three
-  // allocations (3 x 16), and the cache's entry: a hash-map node holding the
-  // key, the shared_ptr, the charge and the LRU iterator (64 with the malloc
-  // header), its bucket pointer (8), and the LRU list node (32).
+  // The most charge() can be for a brick of `cells` cells and `attr_bytes`
+  // attribute bytes (both arrays in pool blocks).
+  static size_t MaxCharge(uint64_t cells, uint64_t attr_bytes) {
+    return sizeof(DecodedBrick) + BufferPool::BlockSize(cells * sizeof(CompactCell)) +
+           BufferPool::BlockSize(attr_bytes) + kOverheadBytes;
+  }
   static constexpr size_t kOverheadBytes = 16 + 3 * 16 + 64 + 8 + 32;
 };
 

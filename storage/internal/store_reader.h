@@ -163,6 +163,9 @@ class StoreImpl : public Store {
   }
 
   const TablePages& table() const { return *table_; }
+  // The decoded bricks' part of the capacity SetCacheCapacity last set (the
+  // rest is the record windows').
+  uint64_t decoded_capacity() const { return budget_capacity_.load(); }
 
  private:
   // Load's check of the top octree (`top_b`) and the top attributes
@@ -207,12 +210,10 @@ class StoreImpl : public Store {
     given_to_heap_.fetch_add(now - next, std::memory_order_relaxed);
   }
 
-  // What the cache charges for the brick of entry `e` once decoded
-  // (DecodedBrick::charge() of its cells and attribute planes).
+  // The most the cache charges for the brick of entry `e` once decoded
+  // (DecodedBrick::MaxCharge: its arrays in whole pool blocks).
   uint64_t DecodedCharge(const BrickEntry& e) const {
-    // As DecodedBrick::charge() counts a decoded brick (its capacities are its sizes).
-    return sizeof(DecodedBrick) + uint64_t(e.num_cells) * sizeof(CompactCell) +
-           uint64_t(e.voxel_count) * AttrBytesPerVoxel(flags_) + DecodedBrick::kOverheadBytes;
+    return DecodedBrick::MaxCharge(e.num_cells, uint64_t(e.voxel_count) * AttrBytesPerVoxel(flags_));
   }
   // A brick is decoded only if it fits what the budget gives one brick: the
   // brick cache's capacity, or kMinBrickAllowance if that is smaller (a tiny

@@ -268,6 +268,36 @@ TEST(GenRough, TheSpheresVoxelsWithJitteredNormalsAndColoursInABiggerStore) {
   EXPECT_FALSE(shape->get()->Color(glm::dvec3(1, 2, 3)) == shape->get()->Color(glm::dvec3(1, 2, 4)));
 }
 
+TEST(GenPair, TheSameTwoSpheresInEveryGrid) {
+  // One sphere of radius 250 with band 3, counted voxel by voxel: each of the pair holds as many.
+  uint64_t one = 0;
+  for (int64_t x = -252; x <= 252; ++x)
+    for (int64_t y = -252; y <= 252; ++y)
+      for (int64_t z = -252; z <= 252; ++z) {
+        const double d = std::sqrt(double(x * x + y * y + z * z)) - 250.0;
+        one += d > -3 && d <= 0 ? 1 : 0;
+      }
+  TempDir t;
+  uint64_t bricks = 0;
+  for (uint64_t size : {uint64_t(2048), uint64_t(8192), uint64_t(65536)}) {
+    SCOPED_TRACE(size);
+    gen::GenerateOptions o = Options("pair", size, t / ("p" + std::to_string(size)));
+    o.lod = false;
+    auto st = gen::Generate(o);
+    ASSERT_TRUE(st.ok()) << st.status().ToString();
+    EXPECT_EQ(st->voxels, 2 * one);
+    if (bricks == 0) bricks = st->bricks;
+    EXPECT_EQ(st->bricks, bricks) << "the same bricks: the spheres lie at brick-aligned centres";
+  }
+  auto shape = gen::MakeShape("pair", 8192);
+  ASSERT_TRUE(shape.ok());
+  EXPECT_NEAR((*shape)->Distance(glm::dvec3(-2048 + 250, 0, 0)), 0.0, 1e-12);
+  EXPECT_NEAR((*shape)->Distance(glm::dvec3(2048, 0, -250)), 0.0, 1e-12);
+  EXPECT_NEAR((*shape)->Distance(glm::dvec3(0, 0, 0)), 2048.0 - 250.0, 1e-9);
+  EXPECT_EQ((*shape)->Normal(glm::dvec3(2048, 0, -250)), glm::dvec3(0, 0, -1));
+  EXPECT_FALSE(gen::MakeShape("pair", 1024).ok()) << "the spheres would not fit";
+}
+
 TEST(GenStore, SameOptionsGiveByteIdenticalStores) {
   TempDir t;
   for (const char* shape : {"sphere", "bumpy", "rough"}) {

@@ -191,7 +191,14 @@ def run(argv, limit_mib=None, cold=False, stdout=None, stderr=None, timeout=None
     sampler = threading.Thread(target=sample_rss, args=(p.pid, peaks, done)) if rss else None
     if sampler:
         sampler.start()
+    io = {}
     try:
+        # The exited child's I/O counters (read syscalls, bytes), read before it is reaped.
+        os.waitid(os.P_PID, p.pid, os.WEXITED | os.WNOWAIT)
+        try:
+            io = dict(l.split(": ") for l in open(f"/proc/{p.pid}/io").read().split("\n") if l)
+        except (OSError, ValueError):
+            pass
         _, status, ru = os.wait4(p.pid, 0)
     except BaseException:  # interrupted: leave no child or cgroup behind
         p.kill()
@@ -214,7 +221,7 @@ def run(argv, limit_mib=None, cold=False, stdout=None, stderr=None, timeout=None
          "signal": os.WTERMSIG(status) if os.WIFSIGNALED(status) else None, "timeout": timed_out,
          "maxrss_bytes": ru.ru_maxrss * 1024, "inblock_bytes": ru.ru_inblock * 512,
          "cpu_s": ru.ru_utime + ru.ru_stime, "rss_anon": peaks.get("RssAnon"),
-         "rss_file": peaks.get("RssFile")}
+         "rss_file": peaks.get("RssFile"), "syscr": int(io["syscr"]) if "syscr" in io else None}
     if cg:
         r["peak_bytes"], r["failcnt"], oom = cg.finish()
         r["oom"] = r["signal"] == signal.SIGKILL and not timed_out and (oom > 0 or r["failcnt"] > 0)

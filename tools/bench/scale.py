@@ -29,7 +29,7 @@ CAMERAS = {"full": ((0, 0, 3), (0, 0, 0), 40), "close": ((0, 0, 1.05), (0, 0, 0.
 MODES = {"default": [], "exact": ["--lod", "0"]}
 FIELDS = ["bin", "shape", "mode", "grid", "camera", "limit", "limit_bytes", "phase", "run",
           "store_bytes", "wall_s", "exit", "signal", "oom", "timeout", "peak_bytes", "failcnt",
-          "bricks", "read_bytes", "render_s", "identical", "cross_mode", "loadavg"]
+          "bricks", "read_bytes", "render_s", "identical", "cross_mode", "loadavg", "cpu_s", "syscr"]
 
 
 def add_arguments(p):
@@ -190,10 +190,28 @@ class Scale:
                 rep.raw[f"{shape}.{n}.close_identical"] = bool(cross) and all(x == "yes" for x in cross)
             rep.add(f"**{shape}**", "")
             rep.table(hdr, rows)
+            self.law(rep, shape, lim)
             self.goals(rep, shape)
             self.limits(rep, shape)
         rep.write()
         return rep.raw
+
+    def law(self, rep, shape, lim):
+        """The default full view, cold, per grid: bytes read, read syscalls, CPU and wall time (medians)."""
+        rows, prev = [], None
+        for n in self.grids:
+            sel = self.mine(shape=shape, grid=n, mode="default", camera="full", limit=lim, phase="cold")
+            if not sel:
+                continue
+            v = {k: self.value(sel, k) for k in ("read_bytes", "syscr", "cpu_s", "wall_s")}
+            ratio = lambda k: f"{v[k] / prev[k]:.2f}" if prev and v[k] and prev[k] else "–"
+            rows.append((f"{n}^3", f"{(v['read_bytes'] or 0) / H.MiB:.1f}", ratio("read_bytes"),
+                         f"{v['syscr'] or 0:.0f}", ratio("syscr"), f"{v['cpu_s'] or 0:.2f}", ratio("cpu_s"),
+                         f"{v['wall_s'] or 0:.2f}", ratio("wall_s")))
+            prev = v
+        if rows:
+            rep.add("Default full view, cold, medians (ratios: against the grid before):", "")
+            rep.table(["grid", "MiB read", "x", "read syscalls", "x", "CPU s", "x", "wall s", "x"], rows)
 
     def goals(self, rep, shape):
         g = [n for n in self.grids if rep.raw.get(f"{shape}.{n}.default.full.cold_s")]

@@ -197,11 +197,11 @@ StatusOr<Levels> ChooseLevels(std::string_view text, int n) {
 
 Status ValidateOptions(const GenerateOptions& o) {
   if (o.shape.empty()) return InvalidArgumentError("no shape given");
-  VOX_RETURN_IF_ERROR(MakeShape(o.shape, 2).status());
   if (o.size < 2 || o.size > (uint64_t(1) << kMaxSizeLog2) || (o.size & (o.size - 1)) != 0)
     return InvalidArgumentError("--size " + std::to_string(o.size) +
                                 ": must be a power of two from 2 to 2^" +
                                 std::to_string(kMaxSizeLog2) + " (1048576)");
+  VOX_RETURN_IF_ERROR(MakeShape(o.shape, o.size).status());  // the name, and whether the size suits it
   VOX_RETURN_IF_ERROR(ChooseLevels(o.levels, Log2Exact(o.size)).status());
   if (!(o.band > 0) || !(o.band <= double(o.size)))
     return InvalidArgumentError("--band " + FormatDouble(o.band) +

@@ -50,8 +50,10 @@ const vox::CommandLineSpec kCommandLine{
     "  bumpy   that sphere displaced by fixed multi-octave noise (fine detail)\n"
     "  rough   the sphere's voxels with jittered normals and speckled colours (~10 B/voxel\n"
     "          on disk against the sphere's 1: big stores, fast)\n"
-    "All are the unit sphere, 15/16 of the grid across, centred on index 0 (world about\n"
-    "[-1,1]^3, voxel size 32/(15 N)); occupied voxels are those whose centre's signed distance\n"
+    "  pair    two spheres of 250 voxels radius half the grid apart, the rest empty (a\n"
+    "          sparse volume: --size 2048 and up)\n"
+    "The first three are the unit sphere, 15/16 of the grid across, centred on index 0 (world\n"
+    "about [-1,1]^3); all have voxel size 32/(15 N); occupied voxels are those whose centre's signed distance\n"
     "d (voxels) has -W < d <= 0, with normals. Exit codes: 0 done, 1 the generation failed or\n"
     "was interrupted, 2 bad command line.\n"};
 

@@ -40,6 +40,30 @@ class Sphere : public Shape {
   double r_;
 };
 
+// Two spheres of kPairRadius voxels centred half the grid apart, at index
+// (-N/4, 0, 0) and (N/4, 0, 0): the same content in any grid from 2048^3 up,
+// the rest of the grid empty (a sparse volume whose cost must not grow with
+// its index space).
+class Pair : public Shape {
+ public:
+  static constexpr double kPairRadius = 250;
+  explicit Pair(uint64_t size) : sphere_(kPairRadius), c_(double(size) / 4, 0, 0) {}
+  double Distance(const glm::dvec3& p) const override {
+    return std::min(sphere_.Distance(p + c_), sphere_.Distance(p - c_));
+  }
+  glm::dvec3 Normal(const glm::dvec3& p) const override {
+    const bool left = sphere_.Distance(p + c_) <= sphere_.Distance(p - c_);
+    return left ? sphere_.Normal(p + c_) : sphere_.Normal(p - c_);
+  }
+  bool MayOccupy(const glm::dvec3& lo, const glm::dvec3& hi, double band) const override {
+    return sphere_.MayOccupy(lo + c_, hi + c_, band) || sphere_.MayOccupy(lo - c_, hi - c_, band);
+  }
+
+ private:
+  Sphere sphere_;
+  glm::dvec3 c_;
+};
+
 // splitmix64: a fixed stream, so every run builds the same waves.
 uint64_t SplitMix(uint64_t* s);
 double Uniform(uint64_t* s);
@@ -169,7 +193,7 @@ class Bumpy : public Shape {
 }  // namespace
 
 const std::vector<std::string>& ShapeNames() {
-  static const std::vector<std::string> names = {"sphere", "bumpy", "rough"};
+  static const std::vector<std::string> names = {"sphere", "bumpy", "rough", "pair"};
   return names;
 }
 
@@ -177,6 +201,12 @@ double VoxelSize(uint64_t size) { return 32.0 / (15.0 * double(size)); }
 
 StatusOr<std::unique_ptr<Shape>> MakeShape(const std::string& name, uint64_t size) {
   if (name == "sphere") return std::unique_ptr<Shape>(new Sphere(RadiusVoxels(size)));
+  if (name == "pair") {
+    if (size < 2048)
+      return InvalidArgumentError("shape 'pair' needs --size 2048 or more (two spheres of " +
+                                  std::to_string(int(Pair::kPairRadius)) + " voxels radius, half the grid apart)");
+    return std::unique_ptr<Shape>(new Pair(size));
+  }
   if (name == "rough") return std::unique_ptr<Shape>(new Rough(RadiusVoxels(size)));
   if (name == "bumpy")
     return std::unique_ptr<Shape>(new Bumpy(RadiusVoxels(size), VoxelSize(size)));

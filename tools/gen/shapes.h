@@ -59,6 +59,9 @@ double VoxelSize(uint64_t size);
 //   that hardly compress (about 10 bytes per voxel on disk against the
 //   sphere's 1), for stores larger than RAM written in a fraction of the
 //   sphere's time.
+// "pair": two spheres of 250 voxels radius (exact distance) centred at
+//   index (-N/4, 0, 0) and (N/4, 0, 0), half the grid apart: the same
+//   content in every grid from 2048^3 up, the rest empty (a sparse series).
 StatusOr<std::unique_ptr<Shape>> MakeShape(const std::string& name, uint64_t size);
 
 }  // namespace vox::gen
