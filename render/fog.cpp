@@ -122,9 +122,9 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
   if (!ok) return glm::dvec3(0.0);
   // Trilinear in the logarithm: exact where the light decays exponentially
   // across the block, as in fog of even density. Where the corners' light
-  // differs by more than a factor kMaxLatticeRatio (the block straddles a
-  // shadow's edge or the rim of thick fog), or a corner has none, the
-  // sample has its own rays.
+  // differs by more than e^kMaxLatticeLogRatio (the block straddles a
+  // shadow's edge or the rim of thick fog), or a corner has none where
+  // others have some, the sample has its own rays.
   glm::dvec3 out;
   for (int k = 0; k < 3; ++k) {
     double v[8], lo = kInf, hi = -kInf;
@@ -152,8 +152,9 @@ namespace {
 // along it and interpolated in between: geometrically where both samples
 // have light (exact where the light is attenuated along the ray at a
 // constant rate, as behind fog of even density), linearly otherwise.
-// light_at(t, h): the light at t, for samples h apart there. Integrate() gives a cell's in-scattered light exactly for that model, one
-// sample interval at a time. Samples start where the ray enters the fog, and
+// light_at(t, h): the light at t, for samples h apart there. Integrate()
+// gives a cell's in-scattered light exactly for that model, one sample
+// interval at a time. Samples start where the ray enters the fog, and
 // again at the first cell after a gap longer than a step; an interval chosen
 // for thinner fog is cut short at the first cell of higher extinction (a ray
 // entering fog through its thin rim must not carry the rim's light deep into
@@ -189,7 +190,8 @@ class LightAlongRay {
         const double h = step(ta_);
         SetB(ta_ + h, h);
       }
-      const double e = std::min(t1, tb_), len = e - t;
+      // (a step lost below t's precision ends the cell with this interval)
+      const double e = tb_ > t ? std::min(t1, tb_) : t1, len = e - t;
       const double piece_trans = std::exp(-st * len);
       for (int k = 0; k < 3; ++k) {
         double in;
