@@ -67,6 +67,14 @@ struct Hit {
   const void* brick_data = nullptr;
 };
 
+// A traversal visitor's answer to a hit, when `true` (go on) and `false`
+// (stop) are not enough. kSkipBrick: go on after the hit's second-step grid
+// (the first-step voxel it lies in) without reporting its other voxels, as
+// after a second step without a hit; in a single-step walk it is kNext.
+enum class Visit { kNext, kStop, kSkipBrick };
+inline Visit AsVisit(bool go_on) { return go_on ? Visit::kNext : Visit::kStop; }
+inline Visit AsVisit(Visit v) { return v; }
+
 struct TraceCounters {
   uint64_t rays = 0;
   uint64_t moves[3] = {0, 0, 0};  // DDA moves along x, y, z

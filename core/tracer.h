@@ -130,7 +130,8 @@ class Tracer {
   bool single_step() const { return n2_ == 0; }
 
   // Visits the occupied voxels the ray meets, in order along the ray, calling
-  // `visit(const Hit&) -> bool` for each until it returns false. Returns an
+  // `visit(const Hit&) -> bool` (or -> Visit, core/ray.h) for each until it
+  // returns false (Visit::kStop). Returns an
   // error for an invalid ray or a brick that cannot be fetched.
   // `start` (may be null): a StartPlane the ray satisfies.
   template <class Visitor>

@@ -3,34 +3,111 @@
 #include <algorithm>
 #include <cmath>
 
+#include "render/internal/fog_math.h"
 #include "render/internal/tracing.h"
 #include "render/renderer.h"
 
 namespace vox {
 
+using render_internal::ExpNeg;
+using render_internal::ExpNegShare;
 using render_internal::ForEachLight;
 using render_internal::kInf;
 using render_internal::kMaxLightLatticeLevel;
 using render_internal::kMaxOpticalDepth;
 using render_internal::kMaxShadowOpticalDepth;
 
+namespace {
+
+// Renderer::Density's way for volumes without PinnedDensity (a memory
+// volume, the top pool).
+[[gnu::noinline]] Status DensityOfAttributes(Volume* v, const Hit& h, double* rho) {
+  VOX_ASSIGN_OR_RETURN(VoxelAttributes a, v->HitAttributes(h));
+  *rho = a.density;
+  return OkStatus();
+}
+
+}  // namespace
+
+// The density of fog voxel `h` (stops the frame with the error on failure).
+bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume,
+                       int* uniform_levels) const {
+  ++cx.c->attribute_lookups;
+  Volume* v = volume != nullptr ? volume : volume_;
+  float d;
+  int levels = -1;
+  if (v->PinnedDensity(h, &d, &levels)) {  // (called by visitors: h's brick is pinned)
+    *rho = d;
+    if (uniform_levels != nullptr) *uniform_levels = levels;
+    return true;
+  }
+  if (uniform_levels != nullptr) *uniform_levels = -1;
+  Status s = DensityOfAttributes(v, h, rho);
+  if (s.ok()) return true;
+  cx.Fail(s);
+  return false;
+}
+
+namespace {
+
+// Fog crosses a brick whose voxels are all occupied and of one density (the
+// inside of a fog volume) as one cell: the integral over the brick is the
+// same, and the walk skips the brick's other voxels (Visit::kSkipBrick, a
+// second-step grid at a time) without reading them.
+class UniformBricks {
+ public:
+  // Hit h of level `level` lies in the brick last entered whole.
+  bool Covers(const Hit& h, int level) const {
+    return h.brick_data == data_ && h.brick == brick_ && level == level_ && h.brick_data != nullptr;
+  }
+  // Where the ray leaves hit h's brick of 2^levels cells a side (level
+  // `level`'s cells, 2^level voxels a side; gr in voxels), at most t_end;
+  // later hits in the brick are covered.
+  double Enter(const Ray& gr, const Hit& h, int level, int levels, double t_end) {
+    data_ = h.brick_data;
+    brick_ = h.brick;
+    level_ = level;
+    const double s = std::ldexp(1.0, -(level + levels));
+    const glm::i64vec3 box(h.voxel.x >> levels, h.voxel.y >> levels, h.voxel.z >> levels);
+    return std::min(t_end, VoxelExitT(Ray{gr.origin * s, gr.dir * s}, box));
+  }
+  // The walk's answer in a covered brick: skip the second-step grid (n2
+  // levels) when it lies inside the brick, else go on to the next hit.
+  static Visit Skip(int n2, int levels) { return n2 <= levels ? Visit::kSkipBrick : Visit::kNext; }
+
+ private:
+  const void* data_ = nullptr;
+  uint32_t brick_ = kNoBrick;
+  int level_ = -1;
+};
+
+}  // namespace
+
 double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone) const {
   ++cx.c->rays[kRayVolume];
   const double sigma_t = scene_.volume.absorption + scene_.volume.scattering;
   const bool has_density = volume_->meta().has_density;
   double tau = 0.0;
+  UniformBricks uniform;
+  Visit uniform_skip = Visit::kNext;  // in the brick `uniform` covers
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     // Level of detail: each coarse cell's mean density over its segment.
     Status s = lod_->Traverse(
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
-          if (seg.t0 >= t_max) return false;
-          const double t1 = std::min(seg.t1, t_max);
-          double rho = 1.0;
-          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume))
-            return false;
-          tau += sigma_t * rho * std::max(0.0, t1 - seg.t0);
-          return tau <= kMaxShadowOpticalDepth;
+          if (seg.t0 >= t_max) return Visit::kStop;
+          if (uniform.Covers(seg.hit, seg.level)) return uniform_skip;
+          double t1 = seg.t1, rho = 1.0;
+          int levels = -1;
+          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume, &levels))
+            return Visit::kStop;
+          if (levels >= 0) {
+            t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.t_end);
+            uniform_skip = UniformBricks::Skip(seg.n2, levels);
+          }
+          tau += sigma_t * rho * std::max(0.0, std::min(t1, t_max) - seg.t0);
+          if (!(tau <= kMaxShadowOpticalDepth)) return Visit::kStop;
+          return levels >= 0 ? uniform_skip : Visit::kNext;
         },
         &cx.c->trace);
     if (!s.ok()) cx.Fail(s);
@@ -39,28 +116,23 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
   Status s = cx.tracer->Traverse(
       gr,
       [&](const Hit& h) {
-        if (h.t >= t_max) return false;
-        double t1 = std::min(VoxelExitT(gr, h.voxel), t_max);
+        if (h.t >= t_max) return Visit::kStop;
+        if (uniform.Covers(h, 0)) return uniform_skip;
         double rho = 1.0;
-        if (has_density && !Density(h, cx, &rho)) return false;
-        tau += sigma_t * rho * std::max(0.0, t1 - h.t);
-        return tau <= kMaxShadowOpticalDepth;
+        int levels = -1;
+        if (has_density && !Density(h, cx, &rho, nullptr, &levels)) return Visit::kStop;
+        double t1 = VoxelExitT(gr, h.voxel);
+        if (levels >= 0) {
+          t1 = uniform.Enter(gr, h, 0, levels, kInf);
+          uniform_skip = UniformBricks::Skip(cx.tracer->n2(), levels);
+        }
+        tau += sigma_t * rho * std::max(0.0, std::min(t1, t_max) - h.t);
+        if (!(tau <= kMaxShadowOpticalDepth)) return Visit::kStop;
+        return levels >= 0 ? uniform_skip : Visit::kNext;
       },
       &cx.c->trace);
   if (!s.ok()) cx.Fail(s);
   return std::exp(-tau);
-}
-
-// The density of fog voxel `h` (stops the frame with the error on failure).
-bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume) const {
-  ++cx.c->attribute_lookups;
-  auto a = (volume != nullptr ? volume : volume_)->HitAttributes(h);  // called by visitors: h's brick is pinned
-  if (!a.ok()) {
-    cx.Fail(a.status());
-    return false;
-  }
-  *rho = a->density;
-  return true;
 }
 
 glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone) const {
@@ -192,19 +264,28 @@ class LightAlongRay {
       }
       // (a step lost below t's precision ends the cell with this interval)
       const double e = tb_ > t ? std::min(t1, tb_) : t1, len = e - t;
-      const double piece_trans = std::exp(-st * len);
-      for (int k = 0; k < 3; ++k) {
-        double in;
-        if (geometric_) {
+      const double piece_tau = st * len, piece_trans = ExpNeg(piece_tau);
+      if (geometric_) {
+        // The light at t, carried from where it was last known at its
+        // decay rate (a cell's exit is the next one's entry, up to rounding).
+        // A white light in grey fog: one channel computed for three.
+        const int channels = grey_ ? 1 : 3;
+        glm::dvec3 in;
+        for (int k = 0; k < channels; ++k) {
           const double kappa = rate_[k];  // the light's decay rate along the ray
-          const double l = la_[k] * std::exp(-kappa * (t - ta_));
-          const double x = st + kappa;
-          in = l * (std::abs(x * len) < 1e-12 ? st * len : -st * std::expm1(-x * len) / x);
-        } else {
-          const double w = tb_ > ta_ ? std::clamp((t + 0.5 * len - ta_) / (tb_ - ta_), 0.0, 1.0) : 0.0;
-          in = (1.0 - piece_trans) * (la_[k] + w * (lb_[k] - la_[k]));
+          if (!(lt_ == t)) l_[k] = lt_ == -kInf ? la_[k] * ExpNeg(kappa * (t - ta_))
+                                                : l_[k] * ExpNeg(kappa * (t - lt_));
+          in[k] = l_[k] * piece_tau * ExpNegShare(piece_tau + kappa * len);
+          l_[k] *= ExpNeg(kappa * len);
         }
-        sum[k] += trans * in;
+        if (grey_) in[1] = in[2] = in[0], l_[1] = l_[2] = l_[0];
+        sum += trans * in;
+        lt_ = e;
+      } else {
+        for (int k = 0; k < 3; ++k) {
+          const double w = tb_ > ta_ ? std::clamp((t + 0.5 * len - ta_) / (tb_ - ta_), 0.0, 1.0) : 0.0;
+          sum[k] += trans * (1.0 - piece_trans) * (la_[k] + w * (lb_[k] - la_[k]));
+        }
       }
       trans *= piece_trans;
       t = e;
@@ -221,12 +302,18 @@ class LightAlongRay {
       geometric_ = geometric_ && la_[k] > 0 && lb_[k] > 0;
       if (geometric_) rate_[k] = std::log(la_[k] / lb_[k]) / (tb_ - ta_);
     }
+    grey_ = geometric_ && rate_[0] == rate_[1] && rate_[0] == rate_[2] && la_[0] == la_[1] &&
+            la_[0] == la_[2];
+    lt_ = -kInf;  // l_ is recomputed from la_ at the new rates
   }
 
   LightAt light_at_;
   double ta_ = -kInf, tb_ = -kInf, ext_ = 0.0;  // ext_: the extinction [ta, tb] was chosen for
   glm::dvec3 la_{0.0}, lb_{0.0}, rate_{0.0};
-  bool geometric_ = false;
+  // The light at lt_ (-inf: not known since the rates changed).
+  glm::dvec3 l_{0.0};
+  double lt_ = -kInf;
+  bool geometric_ = false, grey_ = false;
 };
 
 }  // namespace
@@ -259,7 +346,7 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
     const double st = sigma_t * rho;
     if (st <= 0) return true;
     const double seg_tau = st * len;
-    const double seg_trans = std::exp(-seg_tau);
+    const double seg_trans = ExpNeg(seg_tau);
     if (passes_.scattering) {
       const glm::dvec3 in_cell =
           light.Integrate(t0, t1, st, [&](double t) { return step_from(t, st); });
@@ -269,24 +356,41 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
     trans *= seg_trans;
     return !cx.failed() && tau <= kMaxOpticalDepth;
   };
+  UniformBricks uniform;
+  Visit uniform_skip = Visit::kNext;  // in the brick `uniform` covers
   Status s;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     s = lod_->Traverse(
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
-          double rho = 1.0;
-          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume))
-            return false;
-          return cell(seg.t0, seg.t1, rho);
+          if (uniform.Covers(seg.hit, seg.level)) return uniform_skip;
+          double t1 = seg.t1, rho = 1.0;
+          int levels = -1;
+          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume, &levels))
+            return Visit::kStop;
+          if (levels >= 0) {
+            t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.t_end);
+            uniform_skip = UniformBricks::Skip(seg.n2, levels);
+          }
+          if (!cell(seg.t0, t1, rho)) return Visit::kStop;
+          return levels >= 0 ? uniform_skip : Visit::kNext;
         },
         &cx.c->trace);
   } else {
     s = cx.tracer->Traverse(
         gr,
         [&](const Hit& h) {
+          if (uniform.Covers(h, 0)) return uniform_skip;
           double rho = 1.0;
-          if (has_density && !Density(h, cx, &rho)) return false;
-          return cell(h.t, VoxelExitT(gr, h.voxel), rho);
+          int levels = -1;
+          if (has_density && !Density(h, cx, &rho, nullptr, &levels)) return Visit::kStop;
+          double t1 = VoxelExitT(gr, h.voxel);
+          if (levels >= 0) {
+            t1 = uniform.Enter(gr, h, 0, levels, kInf);
+            uniform_skip = UniformBricks::Skip(cx.tracer->n2(), levels);
+          }
+          if (!cell(h.t, t1, rho)) return Visit::kStop;
+          return levels >= 0 ? uniform_skip : Visit::kNext;
         },
         &cx.c->trace);
   }

@@ -89,6 +89,8 @@ struct LodSegment {
   int level = 0;        // 0: a base voxel
   Hit hit;              // as level `level`'s tracer reports it (voxel in that level's grid)
   double t0 = 0, t1 = 0;  // where the ray (unscaled) enters and leaves it, clipped to the segment
+  double t_end = 0;       // where the ray's segment at this level ends (infinite for the last)
+  int n2 = 0;             // the second-step levels of this level's walk (Visit::kSkipBrick's reach)
   Volume* volume = nullptr;  // level `level`'s volume (HitAttributes while visiting)
 };
 
@@ -151,7 +153,9 @@ class LodTracer {
   std::unique_ptr<LodThread> NewThread(int slot_bits) const;
 
   // Visits the occupied cells along the ray in order, level by level,
-  // until `visit` (bool(const LodSegment&)) returns false. `base` traces
+  // until `visit` (bool(const LodSegment&), or Visit) returns false
+  // (Visit::kStop; Visit::kSkipBrick skips the rest of the segment's
+  // second-step grid, seg.n2 levels). `base` traces
   // level 0 (the caller's tracer of the base volume, e.g. with a per-thread
   // brick table); `thread` (optional) the coarse levels. `start` (may be
   // null): a beam StartPlane the ray satisfies in the base volume
@@ -202,17 +206,20 @@ Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, 
     const double t_b = l < top ? LevelStart(cone, l + 1) : kInf;
     LodSegment seg;
     seg.level = l;
+    seg.t_end = t_b;
     if (l == 0) {
       seg.volume = base_;
+      seg.n2 = base.n2();
       VOX_RETURN_IF_ERROR(base.Traverse(
           gr,
           [&](const Hit& h) {
-            if (h.t >= t_b) return false;  // the segment ends
+            if (h.t >= t_b) return Visit::kStop;  // the segment ends
             seg.hit = h;
             seg.t0 = h.t;
             seg.t1 = std::min(VoxelExitT(gr, h.voxel), t_b);
-            if (!visit(seg)) stopped = true;
-            return !stopped;
+            const Visit v = AsVisit(visit(seg));
+            stopped = v == Visit::kStop;
+            return v;
           },
           counters, start));
     } else {
@@ -223,16 +230,18 @@ Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, 
       seg.volume = levels_[size_t(l - 1)];
       const LodLevelTracer& tracer =
           thread != nullptr ? thread->level(l) : tracers_[size_t(l - 1)];
+      seg.n2 = tracer.n2();
       VOX_RETURN_IF_ERROR(tracer.Traverse(
           cr,
           [&](const Hit& h) {
             const double t0 = start + h.t;
-            if (t0 >= t_b) return false;
+            if (t0 >= t_b) return Visit::kStop;
             seg.hit = h;
             seg.t0 = t0;
             seg.t1 = std::min(start + VoxelExitT(cr, h.voxel), t_b);
-            if (!visit(seg)) stopped = true;
-            return !stopped;
+            const Visit v = AsVisit(visit(seg));
+            stopped = v == Visit::kStop;
+            return v;
           },
           counters));
     }

@@ -314,7 +314,9 @@ class Renderer {
   // `cone`: trace with LOD (nullptr: exactly).
   glm::dvec3 Fog(const Ray& gr, TraceContext& cx, double* transmittance, double* first_t,
                  const Cone* cone = nullptr) const;
-  bool Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume = nullptr) const;
+  // *uniform_levels (when given): see Volume::PinnedDensity (-1: not known).
+  bool Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume = nullptr,
+               int* uniform_levels = nullptr) const;
   double Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone = nullptr) const;
   // The light reaching fog at grid point p_g (cone: with LOD), through
   // transmittance rays to the shadowing lights.

@@ -54,6 +54,14 @@ class Volume {
   virtual StatusOr<VoxelAttributes> HitAttributes(const Hit& hit) {
     return Attributes(hit.brick, hit.payload);
   }
+  // HitAttributes(hit).density read straight from the hit's pinned brick,
+  // for fog's inner loop; false when this volume cannot (then ask
+  // HitAttributes, which also gives the error). *uniform_levels: when every
+  // voxel of the hit's brick is occupied and of this density, the brick's
+  // levels (it spans 2^levels voxels a side, aligned), else -1.
+  virtual bool PinnedDensity(const Hit& /*hit*/, float* /*density*/, int* /*uniform_levels*/) {
+    return false;
+  }
   // Brick cache counters (zero for volumes without a cache).
   virtual CacheStats cache_stats() const { return {}; }
   // Where the volume comes from, for EXR headers ("memory", a store path).

@@ -26,7 +26,8 @@
 
 namespace vox::internal {
 
-enum class Flow { kLeft, kStop, kError };
+// kSkip: a visitor's Visit::kSkipBrick, ending a second step's walk.
+enum class Flow { kLeft, kStop, kError, kSkip };
 
 // A step's packed-register geometry: x, y, z in fields of n + 1 bits.
 struct StepLayout {

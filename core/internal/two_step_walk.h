@@ -22,8 +22,8 @@ namespace vox::internal {
 
 // Traces `ray` through `tree`, split into n1 first-step levels and n2 =
 // tree.levels - n1 second-step levels (n2 == 0: a single step over the whole
-// grid), calling `visit(const Hit&) -> bool` for each occupied voxel the ray
-// meets, in order, until it returns false. Adds to `*counters` when given.
+// grid), calling `visit(const Hit&) -> bool` (or -> Visit) for each occupied
+// voxel the ray meets, in order, until it returns false (Visit::kStop). Adds to `*counters` when given.
 // Returns an error for an invalid ray or a brick that cannot be fetched.
 //
 // PerRay is one ray's state, made by the tracer for each call; it must provide
@@ -68,10 +68,14 @@ Status TraceTwoSteps(const OctreeView& tree, int n1, int n2, const Ray& ray, Per
   auto leaf = [&](const StepLayout& lay, const int64_t base[3], uint32_t child, bool in_brick,
                   uint64_t xyz) {
     Hit h = LeafHit(ray, lay, base, xyz, child, in_brick, pinner);
-    return visit(h) ? Flow::kLeft : Flow::kStop;
+    const Visit v = AsVisit(visit(h));
+    return v == Visit::kNext ? Flow::kLeft : v == Visit::kStop ? Flow::kStop : Flow::kSkip;
   };
   auto occupied1 = [&](uint32_t child, uint64_t xyz, uint64_t prev, const Dda& d1) -> Flow {
-    if (n2 == 0) return leaf(l1, base0, child, top1 > 0, xyz);
+    if (n2 == 0) {
+      const Flow f = leaf(l1, base0, child, top1 > 0, xyz);
+      return f == Flow::kSkip ? Flow::kLeft : f;
+    }
     // An occupied first-step voxel: trace the second step in it; a miss
     // there skips it and the first step goes on with its state untouched.
     CompactCell c2;
@@ -86,7 +90,7 @@ Status TraceTwoSteps(const OctreeView& tree, int n1, int n2, const Ray& ray, Per
     };
     Flow f = WalkStep(l2, xyz2, d2, c2, top2, pinner, occupied2, &stats);
     per_ray.AddMoves(d2, &c);
-    return f;
+    return f == Flow::kSkip ? Flow::kLeft : f;  // (skipped: the first step goes on)
   };
   Flow f = WalkStep(l1, xyz1, dda, tree.top[0], top1, pinner, occupied1, &stats);
   per_ray.AddMoves(dda, &c);

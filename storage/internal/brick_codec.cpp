@@ -202,6 +202,18 @@ VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t fl
   return a;
 }
 
+float UniformDensity(const uint8_t* planes, uint32_t count, uint8_t flags) {
+  if (!(flags & kAttrDensity) || count == 0) return -1.0f;
+  const uint8_t* p = planes + ((flags & kAttrNormal) ? size_t(4) * count : 0);
+  for (int b = 0; b < 4; ++b, p += count) {
+    const uint8_t first = p[0];
+    for (uint32_t i = 1; i < count; ++i)
+      if (p[i] != first) return -1.0f;
+  }
+  const float d = ReadDensity(planes, count, flags, 0);
+  return d >= 0 && std::isfinite(d) ? d : -1.0f;
+}
+
 void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
                      int normal_bits) {
   const uint32_t count = uint32_t(attrs.size());
@@ -358,6 +370,8 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
   UndeltaPlanes(planes, b->attr_planes.data(), voxel_count, flags);
   b->voxel_count = voxel_count;
   b->flags = flags;
+  if (depth * 3 < 32 && voxel_count == uint32_t(1) << (3 * depth))
+    b->uniform_density = UniformDensity(b->attr_planes.data(), voxel_count, flags);
   return b;
 }
 

@@ -7,6 +7,7 @@
 #define VOX_STORAGE_INTERNAL_BRICK_CODEC_H_
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -46,6 +47,17 @@ inline float DecodeCoverage(uint16_t q) { return float(q) / 65535.0f; }
 // A voxel's attributes from planar attribute bytes (`count` voxels).
 VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
                                uint32_t index);
+// The density all `count` voxels share, or -1 when they differ (or carry none).
+float UniformDensity(const uint8_t* planes, uint32_t count, uint8_t flags);
+// The same voxel's density alone (0 without kAttrDensity): fog reads one per
+// cell it crosses, so this skips the other attributes.
+inline float ReadDensity(const uint8_t* planes, uint32_t count, uint8_t flags, uint32_t index) {
+  if (!(flags & kAttrDensity)) return 0.0f;
+  const uint8_t* p = planes + ((flags & kAttrNormal) ? size_t(4) * count : 0) + index;
+  const uint32_t bits = uint32_t(p[0]) | uint32_t(p[count]) << 8 | uint32_t(p[size_t(2) * count]) << 16 |
+                        uint32_t(p[size_t(3) * count]) << 24;
+  return std::bit_cast<float>(bits);
+}
 // Appends the planar attribute bytes of `attrs` (in payload order).
 void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
                      int normal_bits = 16);
@@ -65,6 +77,10 @@ struct DecodedBrick {
   std::vector<uint8_t, BrickAllocator<uint8_t>> attr_planes;
   uint32_t voxel_count = 0;
   uint8_t flags = 0;
+  // Every voxel of the brick's grid occupied, all of one density (the
+  // inside of a fog volume): that density, else -1. A ray crosses such a
+  // brick as one cell.
+  float uniform_density = -1.0f;
   // What it costs in memory: this struct, its two blocks (a pool block's
   // whole size, or the heap block's capacity), and the shared_ptr control
   // block make_shared puts beside it. (The cache adds its own per-entry

@@ -86,6 +86,19 @@ class StoreImpl : public Store {
                            hit.payload);
   }
 
+  bool PinnedDensity(const Hit& hit, float* density, int* uniform_levels) override {
+    const auto* b = static_cast<const DecodedBrick*>(hit.brick_data);
+    if (b == nullptr || hit.brick == kNoBrick || hit.payload >= b->voxel_count) return false;
+    if (b->uniform_density >= 0) {
+      *density = b->uniform_density;
+      *uniform_levels = depth_;
+    } else {
+      *density = ReadDensity(b->attr_planes.data(), b->voxel_count, b->flags, hit.payload);
+      *uniform_levels = -1;
+    }
+    return true;
+  }
+
   CacheStats cache_stats() const override {
     PageCacheCounters c = cache_.counters();
     CacheStats s;
