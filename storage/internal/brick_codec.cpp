@@ -149,6 +149,25 @@ void UndeltaComponent(const uint8_t* src, uint8_t* dst, uint32_t count) {
     prev = T(_mm_extract_epi16(carry, 0));
   }
 #endif
+  if constexpr (W == 4) {
+    // Densities: the planes through restrict pointers held in registers
+    // (through the arrays above, every byte store would reload them).
+    const uint8_t* __restrict p0 = p[0];
+    const uint8_t* __restrict p1 = p[1];
+    const uint8_t* __restrict p2 = p[2];
+    const uint8_t* __restrict p3 = p[3];
+    uint8_t* __restrict q0 = q[0];
+    uint8_t* __restrict q1 = q[1];
+    uint8_t* __restrict q2 = q[2];
+    uint8_t* __restrict q3 = q[3];
+    for (; i < count; ++i) {
+      prev += uint32_t(p0[i]) | uint32_t(p1[i]) << 8 | uint32_t(p2[i]) << 16 | uint32_t(p3[i]) << 24;
+      q0[i] = uint8_t(prev);
+      q1[i] = uint8_t(prev >> 8);
+      q2[i] = uint8_t(prev >> 16);
+      q3[i] = uint8_t(prev >> 24);
+    }
+  }
   for (; i < count; ++i) {
     T d = 0;
     for (int b = 0; b < W; ++b) d = T(d | (T(p[b][i]) << (8 * b)));
@@ -205,11 +224,8 @@ VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t fl
 float UniformDensity(const uint8_t* planes, uint32_t count, uint8_t flags) {
   if (!(flags & kAttrDensity) || count == 0) return -1.0f;
   const uint8_t* p = planes + ((flags & kAttrNormal) ? size_t(4) * count : 0);
-  for (int b = 0; b < 4; ++b, p += count) {
-    const uint8_t first = p[0];
-    for (uint32_t i = 1; i < count; ++i)
-      if (p[i] != first) return -1.0f;
-  }
+  for (int b = 0; b < 4; ++b, p += count)
+    if (std::memcmp(p, p + 1, count - 1) != 0) return -1.0f;  // (each byte equals the next)
   const float d = ReadDensity(planes, count, flags, 0);
   return d >= 0 && std::isfinite(d) ? d : -1.0f;
 }
