@@ -307,12 +307,12 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file,
                              const ImageSize* size_if_missing) {
   namespace jf = json_fields;
   VOX_ASSIGN_OR_RETURN(nlohmann::json j, jf::Parse(json_text, file));
-  VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(
-      j,
-      {"position", "look_at", "up", "camera_to_world", "row_major", "fov_deg", "fov_axis",
-       "focal_length_mm", "sensor_width_mm", "aperture_mm", "width", "height", "projection",
-       "ortho_width"},
-      file, ""));
+  VOX_RETURN_IF_ERROR(
+      jf::CheckKnownKeys(j,
+                         {"position", "look_at", "up", "camera_to_world", "row_major", "fov_deg",
+                          "fov_axis", "focal_length_mm", "sensor_width_mm", "aperture_mm", "width",
+                          "height", "projection", "ortho_width"},
+                         file, ""));
   Camera cam;
   std::string projection = "perspective";
   VOX_RETURN_IF_ERROR(jf::GetString(j, "projection", file, "", false, &projection));
@@ -359,7 +359,8 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file,
   }
   for (const char* k : {"width", "height"})
     if (!j.contains(k) && size_if_missing == nullptr)
-      return jf::FieldError(file, k, "is missing (give width and height, or vox-render --size WxH)");
+      return jf::FieldError(file, k,
+                            "is missing (give width and height, or vox-render --size WxH)");
   if (size_if_missing != nullptr) {
     cam.width = size_if_missing->width;
     cam.height = size_if_missing->height;
@@ -372,7 +373,8 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file,
       return jf::FieldError(file, "ortho_width", "only applies to an orthographic projection");
   } else {
     VOX_RETURN_IF_ERROR(jf::GetNumber(j, "ortho_width", file, "", true, &cam.ortho_width));
-    for (const char* k : {"fov_deg", "fov_axis", "focal_length_mm", "sensor_width_mm", "aperture_mm"})
+    for (const char* k :
+         {"fov_deg", "fov_axis", "focal_length_mm", "sensor_width_mm", "aperture_mm"})
       if (j.contains(k))
         return jf::FieldError(file, k, "only applies to a perspective projection");
   }

@@ -26,7 +26,8 @@
 // shear, no mirror) and the last row 0 0 0 1. The same camera given both
 // ways renders the same image, bit for bit.
 // "up" defaults to [0,1,0] and "projection" to "perspective"; the other
-// fields are required (width and height may come from vox-render --size). Unknown fields are refused (they are usually typos).
+// fields are required (width and height may come from vox-render --size). Unknown fields are
+// refused (they are usually typos).
 //
 // Thread safety: a Camera is an immutable value once Finalize()d; PixelRay is
 // const and thread-safe.

@@ -455,8 +455,7 @@ Status RefuseVdbFile(const std::string& dir) {
                          magic[2] == 0x44 && magic[3] == 0x56;
   const bool vdb_name = dir.size() > 4 && dir.compare(dir.size() - 4, 4, ".vdb") == 0;
   if (!vdb_magic && !vdb_name) return OkStatus();
-  const std::string store =
-      (vdb_name ? dir.substr(0, dir.size() - 4) : dir) + "_store";
+  const std::string store = (vdb_name ? dir.substr(0, dir.size() - 4) : dir) + "_store";
   return InvalidArgumentError("'" + dir +
                               "' is an OpenVDB file, not a vox store: vox-render reads stores. "
                               "Make one first with\n  vox-ingest " + dir + " " + store +

@@ -39,8 +39,8 @@
 //         traces its own transmittance rays),
 //     "normals": "smooth" | "flat",  level sets' shading normals: "smooth"
 //         (default) blends the stored normals of the 3x3x3 voxels around
-//         the hit point (quadratic B-spline weights); "flat" shades each voxel with its own normal (the
-//         hit is the same voxel either way),
+//         the hit point (quadratic B-spline weights); "flat" shades each voxel with its own normal
+//         (the hit is the same voxel either way),
 //     "max_depth": D,          reflection/refraction generations (0..16)
 //     "samples_per_pixel": S   (1..1024)
 //   }

@@ -111,8 +111,11 @@ StatusOr<bool> VoxelNormal(const OctreeView& view, BrickSource* bricks, Volume* 
                            unsigned(((v.z >> shift) & 1) << 2);
     const ChildRef ref = ChildOf(pool[cell], digit, depth, view);
     switch (ref.kind) {
-      case ChildRef::kEmpty: return false;
-      case ChildRef::kCell: cell = ref.index; break;
+      case ChildRef::kEmpty:
+        return false;
+      case ChildRef::kCell:
+        cell = ref.index;
+        break;
       case ChildRef::kBrick:
         if (bricks == nullptr) return CorruptionError("a brick reference without bricks");
         if (*last_id != ref.index || last->cells == nullptr) {

@@ -271,7 +271,8 @@ TEST_F(CameraWorkflowTest, FovAxis) {
 // A lens as DCCs give it: focal length and the sensor's (film back's) width,
 // spanning the image's width: the rays of fov = 2 atan(sensor / (2 focal)).
 TEST_F(CameraWorkflowTest, FocalLengthAndSensorWidth) {
-  const std::string pose = R"({"position":[3,4,17], "look_at":[0.5,-0.25,0], "width":64, "height":48, )";
+  const std::string pose =
+      R"({"position":[3,4,17], "look_at":[0.5,-0.25,0], "width":64, "height":48, )";
   const double fov = 2 * std::atan(36.0 / (2 * 50.0)) * 180 / M_PI;
   auto by_fov = ParseCamera(pose + "\"fov_deg\":" + std::to_string(fov) + "}", "fov");
   auto lens = ParseCamera(pose + R"("focal_length_mm":50, "sensor_width_mm":36})", "lens");
@@ -286,8 +287,9 @@ TEST_F(CameraWorkflowTest, FocalLengthAndSensorWidth) {
   ASSERT_TRUE(vdb.ok());
   EXPECT_NEAR(vdb->HorizontalFovDeg(), 44.8, 0.05);
   // The same image as the fov_deg it stands for, saved as such.
-  Run a = Render({{"--cam", Write("lens.json", pose + R"("focal_length_mm":50, "sensor_width_mm":36})")},
-                  {"--save-cam", Path("lens_used.json")}});
+  Run a = Render(
+      {{"--cam", Write("lens.json", pose + R"("focal_length_mm":50, "sensor_width_mm":36})")},
+       {"--save-cam", Path("lens_used.json")}});
   ASSERT_TRUE(a.status.ok()) << a.status.ToString();
   Run b = Render({{"--cam", Path("lens_used.json")}});
   ASSERT_TRUE(b.status.ok()) << b.status.ToString();
@@ -303,10 +305,14 @@ TEST_F(CameraWorkflowTest, FocalLengthAndSensorWidth) {
   refuse(pose + R"("sensor_width_mm":36, "fov_deg":40})", "needs focal_length_mm");
   refuse(pose + R"("focal_length_mm":50, "sensor_width_mm":36, "fov_deg":40})", "give one");
   refuse(pose + R"("focal_length_mm":50, "sensor_width_mm":36, "aperture_mm":36})", "give one");
-  refuse(pose + R"("focal_length_mm":0, "sensor_width_mm":36})", "'focal_length_mm' must be a positive");
-  refuse(pose + R"("focal_length_mm":50, "sensor_width_mm":-1})", "'sensor_width_mm' must be a positive");
-  refuse(pose + R"("projection":"orthographic", "ortho_width":2, "focal_length_mm":50, "sensor_width_mm":36})",
-         "only applies to a perspective projection");
+  refuse(pose + R"("focal_length_mm":0, "sensor_width_mm":36})",
+         "'focal_length_mm' must be a positive");
+  refuse(pose + R"("focal_length_mm":50, "sensor_width_mm":-1})",
+         "'sensor_width_mm' must be a positive");
+  refuse(
+      pose +
+          R"("projection":"orthographic", "ortho_width":2, "focal_length_mm":50, "sensor_width_mm":36})",
+      "only applies to a perspective projection");
 }
 
 // Houdini's matrices act on row vectors (the position in the last row): with
@@ -338,11 +344,12 @@ TEST_F(CameraWorkflowTest, RowMajorMatrix) {
   ASSERT_FALSE(wrong_flag.ok());
   EXPECT_NE(wrong_flag.status().message().find("leave row_major out"), std::string::npos)
       << wrong_flag.status().ToString();
-  auto no_matrix = ParseCamera(
-      R"({"position":[0,0,20], "look_at":[0,0,0], "row_major":true)" + rest, "n.json");
+  auto no_matrix =
+      ParseCamera(R"({"position":[0,0,20], "look_at":[0,0,0], "row_major":true)" + rest, "n.json");
   ASSERT_FALSE(no_matrix.ok());
   EXPECT_NE(no_matrix.status().message().find("'row_major' only applies to camera_to_world"),
-            std::string::npos) << no_matrix.status().ToString();
+            std::string::npos)
+      << no_matrix.status().ToString();
 }
 
 // --size gives the size of a camera JSON without width and height (one
@@ -355,18 +362,24 @@ TEST_F(CameraWorkflowTest, SizeFillsAMissingWidthAndHeight) {
   EXPECT_EQ(r.out.height, 30);
   EXPECT_GT(Hits(r.out), 100);
   // The same image as the camera with the size written in.
-  Run full = Render({{"--cam", Write("sized.json", R"({"position":[3,4,17], "look_at":[0.5,-0.25,0], "fov_deg":38, "width":40, "height":30})")}});
+  Run full = Render(
+      {{"--cam",
+        Write(
+            "sized.json",
+            R"({"position":[3,4,17], "look_at":[0.5,-0.25,0], "fov_deg":38, "width":40, "height":30})")}});
   ASSERT_TRUE(full.status.ok());
   EXPECT_TRUE(SameImage(r.out, full.out));
   Run seq = Render({{"--cam", Write("sizeless_seq.json", "[" + sizeless + "," + sizeless + "]")},
-                    {"--size", "24x16"}, {"--frames", "2"}});
+                    {"--size", "24x16"},
+                    {"--frames", "2"}});
   ASSERT_TRUE(seq.status.ok()) << seq.status.ToString();
   EXPECT_EQ(seq.out.width, 24);
   Run missing = Render({{"--cam", Write("sizeless2.json", sizeless)}});
   ASSERT_FALSE(missing.status.ok());
   EXPECT_NE(missing.status.message().find(
                 "field 'width' is missing (give width and height, or vox-render --size WxH)"),
-            std::string::npos) << missing.status.ToString();
+            std::string::npos)
+      << missing.status.ToString();
   EXPECT_NE(missing.status.message().find(Path("sizeless2.json")), std::string::npos);
 }
 

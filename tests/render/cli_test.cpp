@@ -332,8 +332,8 @@ TEST_F(CliTest, VdbFileSaysToRunVoxIngest) {
 TEST_F(CliTest, SizeFillsACameraWithoutOne) {
   const std::string cam =
       Write("sizeless.json", R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40})");
-  RunResult r = testing::RunCommand(Render("--cam " + cam + " --size 32x24 -o " + Path("s.exr") +
-                                           " --quiet"));
+  RunResult r = testing::RunCommand(
+      Render("--cam " + cam + " --size 32x24 -o " + Path("s.exr") + " --quiet"));
   ASSERT_EQ(r.code, 0) << r.output;
   auto info = ReadExrInfo(Path("s.exr"));
   ASSERT_TRUE(info.ok());
@@ -343,7 +343,8 @@ TEST_F(CliTest, SizeFillsACameraWithoutOne) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find(cam + ": field 'width' is missing (give width and height, or "
                                 "vox-render --size WxH)"),
-            std::string::npos) << r.output;
+            std::string::npos)
+      << r.output;
   EXPECT_FALSE(fs::exists(Path("n.exr")));
 }
 
