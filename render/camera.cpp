@@ -46,6 +46,40 @@ StatusOr<std::array<double, 16>> ReadMatrix(const nlohmann::json& v, std::string
   return m;
 }
 
+// A perspective camera's lens: fov_deg, or focal_length_mm with the sensor's
+// (film back's) width, sensor_width_mm or aperture_mm, spanning the image's
+// width: fov = 2 atan(sensor / (2 focal)).
+Status ReadLens(const nlohmann::json& j, std::string_view file, Camera* cam) {
+  namespace jf = json_fields;
+  if (!j.contains("focal_length_mm")) {
+    for (const char* k : {"sensor_width_mm", "aperture_mm"})
+      if (j.contains(k)) return jf::FieldError(file, k, "needs focal_length_mm");
+    return jf::GetNumber(j, "fov_deg", file, "", true, &cam->fov_deg);
+  }
+  for (const char* k : {"fov_deg", "fov_axis"})
+    if (j.contains(k))
+      return jf::FieldError(file, k,
+                            "and focal_length_mm both give the field of view; give one (the "
+                            "sensor width spans the image's width)");
+  const bool sensor = j.contains("sensor_width_mm"), aperture = j.contains("aperture_mm");
+  if (sensor == aperture)
+    return jf::FieldError(file, "focal_length_mm",
+                          sensor ? "takes sensor_width_mm or aperture_mm (the same width); give one"
+                                 : "needs the sensor's width: sensor_width_mm (or aperture_mm, "
+                                   "the horizontal aperture), e.g. 36");
+  double focal = 0, width = 0;
+  const char* width_key = sensor ? "sensor_width_mm" : "aperture_mm";
+  VOX_RETURN_IF_ERROR(jf::GetNumber(j, "focal_length_mm", file, "", true, &focal));
+  VOX_RETURN_IF_ERROR(jf::GetNumber(j, width_key, file, "", true, &width));
+  if (!(focal > 0) || !std::isfinite(focal))
+    return jf::FieldError(file, "focal_length_mm", "must be a positive number of millimetres");
+  if (!(width > 0) || !std::isfinite(width))
+    return jf::FieldError(file, width_key, "must be a positive number of millimetres");
+  cam->fov_axis = FovAxis::kX;
+  cam->fov_deg = 2.0 * std::atan(width / (2.0 * focal)) * 180.0 / M_PI;
+  return OkStatus();
+}
+
 }  // namespace
 
 Status Camera::ComputeFrame(std::string_view source) {
@@ -56,8 +90,14 @@ Status Camera::ComputeFrame(std::string_view source) {
     const std::array<double, 16>& m = *camera_to_world;
     for (double v : m)
       if (!std::isfinite(v)) return err("camera_to_world", "must be finite");
-    if (m[12] != 0 || m[13] != 0 || m[14] != 0 || m[15] != 1)
+    if (m[12] != 0 || m[13] != 0 || m[14] != 0 || m[15] != 1) {
+      if (m[3] == 0 && m[7] == 0 && m[11] == 0 && m[15] == 1)
+        return err("camera_to_world",
+                   "must have the last row 0 0 0 1, but its last column is 0 0 0 1: it looks "
+                   "transposed (a matrix for row vectors, as Houdini's): transpose it, or set "
+                   "\"row_major\": true");
       return err("camera_to_world", "must have the last row 0 0 0 1");
+    }
     glm::dvec3 axis[3];
     for (int c = 0; c < 3; ++c) {
       axis[c] = glm::dvec3(m[c], m[4 + c], m[8 + c]);
@@ -263,14 +303,16 @@ ExrCameraAttributes StandardCameraAttributes(const Camera& cam) {
   return a;
 }
 
-StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) {
+StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file,
+                             const ImageSize* size_if_missing) {
   namespace jf = json_fields;
   VOX_ASSIGN_OR_RETURN(nlohmann::json j, jf::Parse(json_text, file));
-  VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(j,
-                                         {"position", "look_at", "up", "camera_to_world", "fov_deg",
-                                          "fov_axis", "width", "height", "projection",
-                                          "ortho_width"},
-                                         file, ""));
+  VOX_RETURN_IF_ERROR(
+      jf::CheckKnownKeys(j,
+                         {"position", "look_at", "up", "camera_to_world", "row_major", "fov_deg",
+                          "fov_axis", "focal_length_mm", "sensor_width_mm", "aperture_mm", "width",
+                          "height", "projection", "ortho_width"},
+                         file, ""));
   Camera cam;
   std::string projection = "perspective";
   VOX_RETURN_IF_ERROR(jf::GetString(j, "projection", file, "", false, &projection));
@@ -287,7 +329,21 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) 
       if (j.contains(k))
         return jf::FieldError(file, k, "and camera_to_world both place the camera; give one");
     VOX_ASSIGN_OR_RETURN(cam.camera_to_world, ReadMatrix(*it, file));
+    bool row_major = false;
+    VOX_RETURN_IF_ERROR(jf::GetBool(j, "row_major", file, "", &row_major));
+    if (row_major) {
+      // For row vectors (p' = p M): the translation is the last row.
+      std::array<double, 16>& m = *cam.camera_to_world;
+      if (m[3] != 0 || m[7] != 0 || m[11] != 0 || m[15] != 1)
+        return jf::FieldError(file, "camera_to_world",
+                              "must have the last column 0 0 0 1 with \"row_major\": true (a "
+                              "matrix for row vectors); for column vectors, leave row_major out");
+      for (int r = 0; r < 4; ++r)
+        for (int c = r + 1; c < 4; ++c) std::swap(m[size_t(4 * r + c)], m[size_t(4 * c + r)]);
+    }
   } else {
+    if (j.contains("row_major"))
+      return jf::FieldError(file, "row_major", "only applies to camera_to_world");
     VOX_RETURN_IF_ERROR(jf::GetVec3(j, "position", file, "", true, &cam.position));
     VOX_RETURN_IF_ERROR(jf::GetVec3(j, "look_at", file, "", true, &cam.look_at));
     VOX_RETURN_IF_ERROR(jf::GetVec3(j, "up", file, "", false, &cam.up));
@@ -301,15 +357,24 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) 
   } else if (axis != "x") {
     return jf::FieldError(file, "fov_axis", "is '" + axis + "'; it must be 'x', 'y' or 'smaller'");
   }
-  VOX_RETURN_IF_ERROR(jf::GetInt(j, "width", file, "", true, 1, kMaxImageSide, &cam.width));
-  VOX_RETURN_IF_ERROR(jf::GetInt(j, "height", file, "", true, 1, kMaxImageSide, &cam.height));
+  for (const char* k : {"width", "height"})
+    if (!j.contains(k) && size_if_missing == nullptr)
+      return jf::FieldError(file, k,
+                            "is missing (give width and height, or vox-render --size WxH)");
+  if (size_if_missing != nullptr) {
+    cam.width = size_if_missing->width;
+    cam.height = size_if_missing->height;
+  }
+  VOX_RETURN_IF_ERROR(jf::GetInt(j, "width", file, "", false, 1, kMaxImageSide, &cam.width));
+  VOX_RETURN_IF_ERROR(jf::GetInt(j, "height", file, "", false, 1, kMaxImageSide, &cam.height));
   if (cam.projection == Projection::kPerspective) {
-    VOX_RETURN_IF_ERROR(jf::GetNumber(j, "fov_deg", file, "", true, &cam.fov_deg));
+    VOX_RETURN_IF_ERROR(ReadLens(j, file, &cam));
     if (j.contains("ortho_width"))
       return jf::FieldError(file, "ortho_width", "only applies to an orthographic projection");
   } else {
     VOX_RETURN_IF_ERROR(jf::GetNumber(j, "ortho_width", file, "", true, &cam.ortho_width));
-    for (const char* k : {"fov_deg", "fov_axis"})
+    for (const char* k :
+         {"fov_deg", "fov_axis", "focal_length_mm", "sensor_width_mm", "aperture_mm"})
       if (j.contains(k))
         return jf::FieldError(file, k, "only applies to a perspective projection");
   }
@@ -317,9 +382,9 @@ StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file) 
   return cam;
 }
 
-StatusOr<Camera> LoadCamera(const std::string& path) {
+StatusOr<Camera> LoadCamera(const std::string& path, const ImageSize* size_if_missing) {
   VOX_ASSIGN_OR_RETURN(std::string text, ReadTextFile(path));
-  return ParseCamera(text, path);
+  return ParseCamera(text, path, size_if_missing);
 }
 
 Camera DefaultCamera(const glm::dvec3& lo, const glm::dvec3& hi, int width, int height) {

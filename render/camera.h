@@ -12,16 +12,22 @@
 // only. The image plane follows vdb_render's camera (pixel (i, j) maps to
 // screen ((2(i + 0.5)/W - 1) sx, (1 - 2(j + 0.5)/H) sy), sx / sy = W / H),
 // so row 0 is the top row.
+// Instead of fov_deg, "focal_length_mm" with "sensor_width_mm" (or
+// "aperture_mm", the horizontal aperture) gives the lens as DCCs do: the
+// sensor spans the image's width, fov_deg = 2 atan(sensor / (2 focal)).
 // Instead of position, look_at and up, "camera_to_world" may give the
 // camera's pose as a 4x4 row-major matrix (16 numbers, or 4 rows of 4) acting
-// on column vectors, as Blender's matrix_world and Mitsuba's to_world: its
+// on column vectors, as Blender's matrix_world and Mitsuba's to_world (with
+// "row_major": true, a matrix acting on row vectors, as Houdini's, with the
+// position in its last row: it is transposed first): its
 // columns are the camera's x (right), y (up) and z axes and its position in
 // world space; the camera looks along its local -Z (Blender, OpenGL,
 // Mitsuba). The rotation must be orthonormal (columns are normalised; no
 // shear, no mirror) and the last row 0 0 0 1. The same camera given both
 // ways renders the same image, bit for bit.
 // "up" defaults to [0,1,0] and "projection" to "perspective"; the other
-// fields are required. Unknown fields are refused (they are usually typos).
+// fields are required (width and height may come from vox-render --size). Unknown fields are
+// refused (they are usually typos).
 //
 // Thread safety: a Camera is an immutable value once Finalize()d; PixelRay is
 // const and thread-safe.
@@ -121,11 +127,19 @@ struct ExrCameraAttributes {
 // REQUIRES: cam.Finalize().
 ExrCameraAttributes StandardCameraAttributes(const Camera& cam);
 
+// The image size for a cam.json without width and height (vox-render
+// --size): each one missing is taken from it.
+struct ImageSize {
+  int width = 0, height = 0;
+};
+
 // Parses cam.json text; `file` names it in every error ("cam.json: field
-// 'width' must be a positive integer").
-StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file);
+// 'width' must be a positive integer"). Without `size_if_missing`, width and
+// height are required.
+StatusOr<Camera> ParseCamera(std::string_view json_text, std::string_view file,
+                             const ImageSize* size_if_missing = nullptr);
 // Reads and parses a cam.json file.
-StatusOr<Camera> LoadCamera(const std::string& path);
+StatusOr<Camera> LoadCamera(const std::string& path, const ImageSize* size_if_missing = nullptr);
 
 // How far a camera may be from the volume it renders, in sizes of the
 // volume's world box: hit points are computed from the camera position, and

@@ -121,10 +121,11 @@ std::string ExpandFramePattern(const std::string& path, int frame) {
   return out;
 }
 
-StatusOr<std::vector<Camera>> ParseCameras(std::string_view json_text, std::string_view file) {
+StatusOr<std::vector<Camera>> ParseCameras(std::string_view json_text, std::string_view file,
+                                           const ImageSize* size_if_missing) {
   VOX_ASSIGN_OR_RETURN(const nlohmann::json j, json_fields::Parse(json_text, file, /*allow_array=*/true));
   if (!j.is_array()) {
-    VOX_ASSIGN_OR_RETURN(Camera camera, ParseCamera(json_text, file));
+    VOX_ASSIGN_OR_RETURN(Camera camera, ParseCamera(json_text, file, size_if_missing));
     return std::vector<Camera>{camera};
   }
   if (j.empty())
@@ -139,15 +140,16 @@ StatusOr<std::vector<Camera>> ParseCameras(std::string_view json_text, std::stri
     const std::string name = std::string(file) + "[" + std::to_string(i) + "]";
     if (!j[i].is_object())
       return InvalidArgumentError(name + ": expected a camera object");
-    VOX_ASSIGN_OR_RETURN(Camera camera, ParseCamera(j[i].dump(), name));
+    VOX_ASSIGN_OR_RETURN(Camera camera, ParseCamera(j[i].dump(), name, size_if_missing));
     cameras.push_back(camera);
   }
   return cameras;
 }
 
-StatusOr<std::vector<Camera>> LoadCameras(const std::string& path) {
+StatusOr<std::vector<Camera>> LoadCameras(const std::string& path,
+                                          const ImageSize* size_if_missing) {
   VOX_ASSIGN_OR_RETURN(std::string text, ReadTextFile(path));
-  return ParseCameras(text, path);
+  return ParseCameras(text, path, size_if_missing);
 }
 
 glm::dvec3 TurntableAxis(const Camera& camera) {

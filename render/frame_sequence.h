@@ -70,11 +70,13 @@ Status CheckFrameOutputs(const std::vector<NamedPath>& inputs,
 
 // The cameras of cam.json text: one camera object, or a non-empty array of
 // them (a sequence). Errors name `file` and, in an array, the element
-// ("cams.json[2]: field 'width' ...").
-StatusOr<std::vector<Camera>> ParseCameras(std::string_view json_text, std::string_view file);
+// ("cams.json[2]: field 'width' ..."). `size_if_missing`: as ParseCamera's.
+StatusOr<std::vector<Camera>> ParseCameras(std::string_view json_text, std::string_view file,
+                                           const ImageSize* size_if_missing = nullptr);
 
 // Reads and parses a cam.json file of one camera or an array of them.
-StatusOr<std::vector<Camera>> LoadCameras(const std::string& path);
+StatusOr<std::vector<Camera>> LoadCameras(const std::string& path,
+                                          const ImageSize* size_if_missing = nullptr);
 
 // The axis a turntable (and --view) turns about: `camera`'s up, or for a
 // camera_to_world camera the world axis nearest its own up. Unit length.

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <charconv>
 #include <malloc.h>
+#include <sys/stat.h>
 #include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -441,11 +442,32 @@ Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera
   return OkStatus();
 }
 
+// An OpenVDB file given where a store belongs: an error that says how to
+// make the store (OkStatus for anything else, which Store::Open judges).
+Status RefuseVdbFile(const std::string& dir) {
+  struct stat st;
+  if (stat(dir.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) return OkStatus();
+  // OpenVDB files start with the magic number 0x56444220 (little-endian).
+  char magic[4] = {};
+  std::ifstream in(dir, std::ios::binary);
+  in.read(magic, 4);
+  const bool vdb_magic = in.gcount() == 4 && magic[0] == 0x20 && magic[1] == 0x42 &&
+                         magic[2] == 0x44 && magic[3] == 0x56;
+  const bool vdb_name = dir.size() > 4 && dir.compare(dir.size() - 4, 4, ".vdb") == 0;
+  if (!vdb_magic && !vdb_name) return OkStatus();
+  const std::string store = (vdb_name ? dir.substr(0, dir.size() - 4) : dir) + "_store";
+  return InvalidArgumentError("'" + dir +
+                              "' is an OpenVDB file, not a vox store: vox-render reads stores. "
+                              "Make one first with\n  vox-ingest " + dir + " " + store +
+                              "\nand render it: vox-render " + store + " ...");
+}
+
 }  // namespace
 
 StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<double> lod,
                                         const OpenOptions& open) {
   RenderStores stores;
+  VOX_RETURN_IF_ERROR(RefuseVdbFile(dir));
   VOX_ASSIGN_OR_RETURN(stores.base, Store::Open(dir, open));
   stores.lod_default = !lod.has_value();
   if (lod) {

@@ -144,11 +144,14 @@ Status CheckFrameSize(const RenderJobOptions& options, const std::string& exr_pa
 // which holds one frame.
 StatusOr<JobSequence> PlanSequence(const RenderJobOptions& options, bool keep) {
   JobSequence seq;
+  // --size: the size of cameras that give none (and, in JobCamera, of all).
+  const ImageSize size{options.default_width, options.default_height};
+  const ImageSize* fill = options.size_given ? &size : nullptr;
   if (!options.camera_path.empty()) {
-    VOX_ASSIGN_OR_RETURN(seq.given, LoadCameras(options.camera_path));
+    VOX_ASSIGN_OR_RETURN(seq.given, LoadCameras(options.camera_path, fill));
     seq.source = options.camera_path;
   } else if (!options.camera_json.empty()) {
-    VOX_ASSIGN_OR_RETURN(seq.given, ParseCameras(options.camera_json, "camera"));
+    VOX_ASSIGN_OR_RETURN(seq.given, ParseCameras(options.camera_json, "camera", fill));
     seq.source = "camera";
   }
   const std::string cameras = std::to_string(seq.given.size()) + " cameras";

@@ -147,6 +147,7 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
   p.refraction = !r->fog_ && SceneRefracts(s);
   p.scattering = r->fog_ && any_light && s.volume.scattering > 0;
   r->needs_normal_ = any_light || p.reflection || p.refraction || options.layers.normal;
+  r->smooth_normals_ = s.smooth_normals && !r->fog_ && meta.has_normal;
   r->needs_attributes_ =
       meta.has_color || any_light || p.reflection || p.refraction || options.layers.normal;
   r->eps_t_ = 1e-7 * std::max(meta.voxel_size, 1e-300);

@@ -7,8 +7,12 @@
 //   - volume:      fog volumes only (level sets are never integrated);
 //   - scattering:  fog with scattering > 0 and a light.
 // Surfaces are shaded from the stored normals (index-space gradients taken to
-// world space by the inverse transpose of index_to_world); a voxel without a
-// normal uses the face its ray entered through.
+// world space by the inverse transpose of index_to_world), interpolated
+// between the voxels around the hit point unless the scene asks for flat
+// normals; a voxel without a normal uses the face its ray entered through. A
+// normal facing away from the ray (a voxel seen past its silhouette) is
+// mirrored across the plane perpendicular to the ray: it keeps its side
+// towards the lights instead of turning into the surface.
 //
 // Every secondary ray (shadow, reflection, refraction, transmittance) is made
 // by SpawnRay. Rays leaving a surface (shadow, reflection, a refracted ray's
@@ -281,6 +285,14 @@ class Renderer {
   // `level`: the hit is a cell of that LOD level (its voxel in that grid).
   glm::dvec3 WorldNormal(const Ray& gr, const Hit& h, const VoxelAttributes& a,
                          int level = 0) const;
+  // The shading normal of a level-0 hit at grid point p_g (index space, not
+  // unit): the stored normals of the occupied voxels among the 3x3x3 around
+  // the voxel whose centre is nearest p_g, weighted by the quadratic
+  // B-spline of their centres' offsets from p_g (smooth across voxels,
+  // unoccupied voxels left out); the hit voxel's own `a` where they cancel.
+  // An error (a brick not read) goes to cx.
+  glm::dvec3 SmoothNormal(const glm::dvec3& p_g, const Hit& h, const VoxelAttributes& a,
+                          TraceContext& cx) const;
   // `attrs`: the hit voxel's attributes (default ones when the scene needs
   // none: unlit, no stored colour, no normal layer).
   glm::dvec3 ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
@@ -342,6 +354,8 @@ class Renderer {
   // Surfaces: something reads the shading normal (a light, a reflection or
   // refraction, or the normal layer); without, hits are shaded without it.
   bool needs_normal_ = true;
+  // Level sets with scene.smooth_normals: ShadeSurface interpolates normals.
+  bool smooth_normals_ = false;
   double eps_t_ = 1e-9;           // t tolerance for "touching" voxels, in world units
   std::optional<LodTracer> lod_;  // --lod
   Cone primary_cone_;             // the primary rays' cone (pixel width), when lod_

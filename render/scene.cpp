@@ -102,7 +102,7 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
   VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(j,
                                          {"background", "background_in_exr", "ambient", "lights",
                                           "material", "materials", "volume", "max_depth",
-                                          "samples_per_pixel"},
+                                          "samples_per_pixel", "normals"},
                                          file, ""));
   Scene s;
   if (auto it = j.find("background"); it != j.end()) {
@@ -184,6 +184,11 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
     VOX_RETURN_IF_ERROR(
         jf::GetBool(*it, "light_lattice", file, "volume", &s.volume.light_lattice));
   }
+  std::string normals = "smooth";
+  VOX_RETURN_IF_ERROR(jf::GetString(j, "normals", file, "", false, &normals));
+  if (normals != "smooth" && normals != "flat")
+    return jf::FieldError(file, "normals", "is '" + normals + "'; it must be 'smooth' or 'flat'");
+  s.smooth_normals = normals == "smooth";
   VOX_RETURN_IF_ERROR(jf::GetInt(j, "max_depth", file, "", false, 0, 16, &s.max_depth));
   VOX_RETURN_IF_ERROR(
       jf::GetInt(j, "samples_per_pixel", file, "", false, 1, 1024, &s.samples_per_pixel));
@@ -245,6 +250,7 @@ std::string Scene::ToJson() const {
                  {"light_optical_depth", volume.light_optical_depth},
                  {"shadow_lod", volume.shadow_lod},
                  {"light_lattice", volume.light_lattice}};
+  j["normals"] = smooth_normals ? "smooth" : "flat";
   j["max_depth"] = max_depth;
   j["samples_per_pixel"] = samples_per_pixel;
   return j.dump();

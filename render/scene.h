@@ -37,6 +37,10 @@
 //         lie far apart the light is kept on a lattice shared by
 //         neighbouring pixels (L true, the default; false: every sample
 //         traces its own transmittance rays),
+//     "normals": "smooth" | "flat",  level sets' shading normals: "smooth"
+//         (default) blends the stored normals of the 3x3x3 voxels around
+//         the hit point (quadratic B-spline weights); "flat" shades each voxel with its own normal
+//         (the hit is the same voxel either way),
 //     "max_depth": D,          reflection/refraction generations (0..16)
 //     "samples_per_pixel": S   (1..1024)
 //   }
@@ -112,6 +116,9 @@ struct Scene {
   Material material;
   std::vector<MaterialRegion> regions;
   VolumeMedium volume;
+  // Level sets: shading normals interpolated from the voxels around the hit
+  // point ("normals": "smooth"); false: the hit voxel's own ("flat").
+  bool smooth_normals = true;
   int max_depth = 4;
   int samples_per_pixel = 1;
 

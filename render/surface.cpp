@@ -90,6 +90,117 @@ glm::dvec3 Renderer::WorldNormal(const Ray& gr, const Hit& h, const VoxelAttribu
   return len > 0 ? w / len : glm::dvec3(0.0, 1.0, 0.0);
 }
 
+namespace {
+
+// The stored normal of grid voxel v, found from the root of `view` (bricks
+// through `bricks`; `last` keeps the last brick fetched, for the next call).
+// False: v is unoccupied or outside the grid.
+StatusOr<bool> VoxelNormal(const OctreeView& view, BrickSource* bricks, Volume* volume,
+                           const glm::i64vec3& v, BrickView* last, uint32_t* last_id,
+                           glm::dvec3* n) {
+  const int64_t side = int64_t(1) << view.levels;
+  if (v.x < 0 || v.y < 0 || v.z < 0 || v.x >= side || v.y >= side || v.z >= side ||
+      view.top_cells == 0)
+    return false;
+  const CompactCell* pool = view.top;
+  uint32_t cell = 0, brick = kNoBrick;
+  const void* data = nullptr;
+  for (int depth = 0; depth < view.levels; ++depth) {
+    const int shift = view.levels - depth - 1;
+    const unsigned digit = unsigned((v.x >> shift) & 1) | unsigned(((v.y >> shift) & 1) << 1) |
+                           unsigned(((v.z >> shift) & 1) << 2);
+    const ChildRef ref = ChildOf(pool[cell], digit, depth, view);
+    switch (ref.kind) {
+      case ChildRef::kEmpty:
+        return false;
+      case ChildRef::kCell:
+        cell = ref.index;
+        break;
+      case ChildRef::kBrick:
+        if (bricks == nullptr) return CorruptionError("a brick reference without bricks");
+        if (*last_id != ref.index || last->cells == nullptr) {
+          VOX_ASSIGN_OR_RETURN(*last, bricks->FetchBrick(ref.index));
+          *last_id = ref.index;
+        }
+        pool = last->cells;
+        data = last->data;
+        cell = 0;
+        brick = ref.index;
+        break;
+      case ChildRef::kPayload: {
+        Hit h;
+        h.voxel = v;
+        h.brick = brick;
+        h.payload = ref.index;
+        h.brick_data = data;
+        VOX_ASSIGN_OR_RETURN(VoxelAttributes a, volume->HitAttributes(h));
+        *n = glm::dvec3(a.normal);
+        return glm::dot(*n, *n) > 0;
+      }
+    }
+  }
+  return false;
+}
+
+// `n` facing the ray's origin (dot(n, dir) <= 0): one facing away is
+// mirrored across the plane perpendicular to dir. A normal just past the
+// silhouette stays nearly perpendicular to the ray, on its side towards the
+// lights; negating it instead would turn it into the surface, away from
+// every light in front (a black pixel one voxel off the silhouette).
+glm::dvec3 FacingRay(const glm::dvec3& n, const glm::dvec3& dir) {
+  const double d = glm::dot(n, dir);
+  if (!(d > 0)) return n;
+  const glm::dvec3 m = n - 2.0 * d * dir;
+  const double len = glm::length(m);
+  return len > 0 ? m / len : -n;
+}
+
+}  // namespace
+
+glm::dvec3 Renderer::SmoothNormal(const glm::dvec3& p_g, const Hit& h, const VoxelAttributes& a,
+                                  TraceContext& cx) const {
+  const glm::dvec3 own(a.normal);
+  // The hit point, kept in its voxel (the ray's entry point may round outside it).
+  const glm::dvec3 lo(h.voxel), p = glm::clamp(p_g, lo, lo + 1.0);
+  // Quadratic B-spline weights over the 3x3x3 voxels around the one whose
+  // centre is nearest: per axis 0.5 (0.5 - f)^2, 0.75 - f^2, 0.5 (0.5 + f)^2
+  // with f in [-0.5, 0.5] the point's offset from that centre.
+  const glm::dvec3 q = p - 0.5;
+  const glm::dvec3 c = glm::floor(q + 0.5), f = q - c;
+  const glm::i64vec3 centre(c);
+  double wt[3][3];
+  for (int a = 0; a < 3; ++a) {
+    wt[a][0] = 0.5 * (0.5 - f[a]) * (0.5 - f[a]);
+    wt[a][1] = 0.75 - f[a] * f[a];
+    wt[a][2] = 0.5 * (0.5 + f[a]) * (0.5 + f[a]);
+  }
+  const OctreeView view = volume_->view();
+  BrickSource* bricks = cx.bricks != nullptr ? cx.bricks : view.bricks;
+  BrickView last;
+  uint32_t last_id = kNoBrick;
+  glm::dvec3 sum(0.0);
+  for (int k = 0; k < 27; ++k) {
+    const glm::i64vec3 o(k % 3, (k / 3) % 3, k / 9);
+    const glm::i64vec3 v = centre + o - glm::i64vec3(1);
+    const double w = wt[0][o.x] * wt[1][o.y] * wt[2][o.z];
+    if (!(w > 0)) continue;
+    glm::dvec3 n;
+    if (v == h.voxel) {
+      n = own;
+    } else {
+      ++cx.c->attribute_lookups;
+      StatusOr<bool> found = VoxelNormal(view, bricks, volume_, v, &last, &last_id, &n);
+      if (!found.ok()) {
+        cx.Fail(found.status());
+        return own;
+      }
+      if (!*found) continue;
+    }
+    sum += w * n;
+  }
+  return glm::dot(sum, sum) > 1e-12 ? sum : own;
+}
+
 glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const Hit& h,
                                   const VoxelAttributes& attrs, int depth, TraceContext& cx,
                                   glm::dvec3* normal_out, const LodRay* lod) const {
@@ -102,8 +213,10 @@ glm::dvec3 Renderer::ShadeSurface(const Ray& gr, const glm::dvec3& dir_w, const 
   const Cone cone = lod != nullptr ? SecondaryCone(lod->cone, h.t) : Cone{};
   glm::dvec3 n(0.0);  // unused without lights, reflection, refraction and the normal layer
   if (needs_normal_) {
-    const glm::dvec3 n_out = WorldNormal(gr, h, attrs, lod != nullptr ? lod->level : 0);
-    n = glm::dot(n_out, dir_w) > 0 ? -n_out : n_out;  // facing the viewer
+    VoxelAttributes a = attrs;
+    if (smooth_normals_ && lod == nullptr && glm::dot(a.normal, a.normal) > 0)
+      a.normal = glm::vec3(SmoothNormal(p_g, h, attrs, cx));
+    n = FacingRay(WorldNormal(gr, h, a, lod != nullptr ? lod->level : 0), dir_w);
   }
   if (normal_out) *normal_out = n;
   const Material& m = scene_.MaterialAt(p_w);

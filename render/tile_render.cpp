@@ -210,6 +210,7 @@ Status Renderer::RenderTile(const TileRect& rect, TileBuffer* buf, RenderCounter
   if (ts != nullptr) {
     cx.lod = ts->lod.get();
     cx.light_cache = &ts->light_cache;
+    cx.bricks = ts->bricks.get();
   }
   TileRays rays(*this, rect);
   // Each pixel's stop level, for the silhouette test (antialias() only).

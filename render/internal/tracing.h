@@ -30,6 +30,9 @@ struct Renderer::TraceContext {
   Status error;
   const LodThread* lod = nullptr;  // --lod: the thread's coarse tracers (optional)
   render_internal::FogLightCache* light_cache = nullptr;  // fog: the thread's (optional)
+  // Where smooth normals read neighbouring voxels' bricks: the thread's
+  // pinned-brick table, or the volume's source (null: the volume's).
+  BrickSource* bricks = nullptr;
   bool failed() const { return !error.ok(); }
   void Fail(const Status& s) {
     if (error.ok()) error = s;

@@ -268,5 +268,120 @@ TEST_F(CameraWorkflowTest, FovAxis) {
   EXPECT_EQ(used->width, 32);
 }
 
+// A lens as DCCs give it: focal length and the sensor's (film back's) width,
+// spanning the image's width: the rays of fov = 2 atan(sensor / (2 focal)).
+TEST_F(CameraWorkflowTest, FocalLengthAndSensorWidth) {
+  const std::string pose =
+      R"({"position":[3,4,17], "look_at":[0.5,-0.25,0], "width":64, "height":48, )";
+  const double fov = 2 * std::atan(36.0 / (2 * 50.0)) * 180 / M_PI;
+  auto by_fov = ParseCamera(pose + "\"fov_deg\":" + std::to_string(fov) + "}", "fov");
+  auto lens = ParseCamera(pose + R"("focal_length_mm":50, "sensor_width_mm":36})", "lens");
+  auto aperture = ParseCamera(pose + R"("focal_length_mm":50, "aperture_mm":36})", "aperture");
+  ASSERT_TRUE(by_fov.ok() && lens.ok() && aperture.ok()) << lens.status().ToString();
+  EXPECT_NEAR(lens->fov_deg, 39.5977, 1e-4);  // Blender's 50 mm on its 36 mm sensor
+  EXPECT_DOUBLE_EQ(lens->scale_x(), 36.0 / 100.0);
+  EXPECT_EQ(lens->scale_x(), aperture->scale_x());
+  EXPECT_NEAR(lens->scale_x(), by_fov->scale_x(), 1e-6);
+  // vdb_render's default lens (-focal 50 -aperture 41.2) is its default -fov 44.8.
+  auto vdb = ParseCamera(pose + R"("focal_length_mm":50, "aperture_mm":41.2})", "vdb");
+  ASSERT_TRUE(vdb.ok());
+  EXPECT_NEAR(vdb->HorizontalFovDeg(), 44.8, 0.05);
+  // The same image as the fov_deg it stands for, saved as such.
+  Run a = Render(
+      {{"--cam", Write("lens.json", pose + R"("focal_length_mm":50, "sensor_width_mm":36})")},
+       {"--save-cam", Path("lens_used.json")}});
+  ASSERT_TRUE(a.status.ok()) << a.status.ToString();
+  Run b = Render({{"--cam", Path("lens_used.json")}});
+  ASSERT_TRUE(b.status.ok()) << b.status.ToString();
+  EXPECT_GT(Hits(a.out), 300);
+  EXPECT_TRUE(SameImage(a.out, b.out));
+  auto refuse = [&](const std::string& json, const std::string& what) {
+    auto c = ParseCamera(json, "c.json");
+    ASSERT_FALSE(c.ok()) << json;
+    EXPECT_NE(c.status().message().find(what), std::string::npos) << c.status().ToString();
+    EXPECT_NE(c.status().message().find("c.json"), std::string::npos) << c.status().ToString();
+  };
+  refuse(pose + R"("focal_length_mm":50})", "needs the sensor's width: sensor_width_mm");
+  refuse(pose + R"("sensor_width_mm":36, "fov_deg":40})", "needs focal_length_mm");
+  refuse(pose + R"("focal_length_mm":50, "sensor_width_mm":36, "fov_deg":40})", "give one");
+  refuse(pose + R"("focal_length_mm":50, "sensor_width_mm":36, "aperture_mm":36})", "give one");
+  refuse(pose + R"("focal_length_mm":0, "sensor_width_mm":36})",
+         "'focal_length_mm' must be a positive");
+  refuse(pose + R"("focal_length_mm":50, "sensor_width_mm":-1})",
+         "'sensor_width_mm' must be a positive");
+  refuse(
+      pose +
+          R"("projection":"orthographic", "ortho_width":2, "focal_length_mm":50, "sensor_width_mm":36})",
+      "only applies to a perspective projection");
+}
+
+// Houdini's matrices act on row vectors (the position in the last row): with
+// "row_major": true they are the transpose of the column-vector matrix and
+// render its image bit for bit; without it the error says to transpose.
+TEST_F(CameraWorkflowTest, RowMajorMatrix) {
+  const std::string rest = R"(, "fov_deg":40, "width":48, "height":48})";
+  const std::string column = R"({"camera_to_world":[0,0,1,20, 0,1,0,0, -1,0,0,0, 0,0,0,1])";
+  const std::string row = R"({"camera_to_world":[0,0,-1,0, 0,1,0,0, 1,0,0,0, 20,0,0,1])";
+  auto c = ParseCamera(column + rest, "column");
+  auto r = ParseCamera(row + R"(, "row_major":true)" + rest, "row");
+  ASSERT_TRUE(c.ok()) << c.status().ToString();
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_EQ(r->forward(), glm::dvec3(-1, 0, 0));
+  EXPECT_EQ(r->position, glm::dvec3(20, 0, 0));
+  EXPECT_EQ(r->ToJson(), c->ToJson());
+  Run a = Render({{"--cam", Write("column.json", column + rest)}});
+  Run b = Render({{"--cam", Write("row.json", row + R"(, "row_major":true)" + rest)}});
+  ASSERT_TRUE(a.status.ok() && b.status.ok()) << b.status.ToString();
+  EXPECT_GT(Hits(a.out), 100);
+  EXPECT_TRUE(SameImage(a.out, b.out));
+  auto transposed = ParseCamera(row + rest, "h.json");
+  ASSERT_FALSE(transposed.ok());
+  EXPECT_NE(transposed.status().message().find("h.json"), std::string::npos);
+  EXPECT_NE(transposed.status().message().find("transpose it, or set \"row_major\": true"),
+            std::string::npos)
+      << transposed.status().ToString();
+  auto wrong_flag = ParseCamera(column + R"(, "row_major":true)" + rest, "w.json");
+  ASSERT_FALSE(wrong_flag.ok());
+  EXPECT_NE(wrong_flag.status().message().find("leave row_major out"), std::string::npos)
+      << wrong_flag.status().ToString();
+  auto no_matrix =
+      ParseCamera(R"({"position":[0,0,20], "look_at":[0,0,0], "row_major":true)" + rest, "n.json");
+  ASSERT_FALSE(no_matrix.ok());
+  EXPECT_NE(no_matrix.status().message().find("'row_major' only applies to camera_to_world"),
+            std::string::npos)
+      << no_matrix.status().ToString();
+}
+
+// --size gives the size of a camera JSON without width and height (one
+// camera or an array); without --size the error names both ways.
+TEST_F(CameraWorkflowTest, SizeFillsAMissingWidthAndHeight) {
+  const std::string sizeless = R"({"position":[3,4,17], "look_at":[0.5,-0.25,0], "fov_deg":38})";
+  Run r = Render({{"--cam", Write("sizeless.json", sizeless)}, {"--size", "40x30"}});
+  ASSERT_TRUE(r.status.ok()) << r.status.ToString();
+  EXPECT_EQ(r.out.width, 40);
+  EXPECT_EQ(r.out.height, 30);
+  EXPECT_GT(Hits(r.out), 100);
+  // The same image as the camera with the size written in.
+  Run full = Render(
+      {{"--cam",
+        Write(
+            "sized.json",
+            R"({"position":[3,4,17], "look_at":[0.5,-0.25,0], "fov_deg":38, "width":40, "height":30})")}});
+  ASSERT_TRUE(full.status.ok());
+  EXPECT_TRUE(SameImage(r.out, full.out));
+  Run seq = Render({{"--cam", Write("sizeless_seq.json", "[" + sizeless + "," + sizeless + "]")},
+                    {"--size", "24x16"},
+                    {"--frames", "2"}});
+  ASSERT_TRUE(seq.status.ok()) << seq.status.ToString();
+  EXPECT_EQ(seq.out.width, 24);
+  Run missing = Render({{"--cam", Write("sizeless2.json", sizeless)}});
+  ASSERT_FALSE(missing.status.ok());
+  EXPECT_NE(missing.status.message().find(
+                "field 'width' is missing (give width and height, or vox-render --size WxH)"),
+            std::string::npos)
+      << missing.status.ToString();
+  EXPECT_NE(missing.status.message().find(Path("sizeless2.json")), std::string::npos);
+}
+
 }  // namespace
 }  // namespace vox

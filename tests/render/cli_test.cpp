@@ -302,5 +302,51 @@ TEST_F(CliTest, BadFlagsAndMissingStore) {
   EXPECT_NE(missing.output.find("nostore"), std::string::npos) << missing.output;
 }
 
+// An OpenVDB file given for the store: exit 1, and the vox-ingest command
+// that makes the store from it (docs/usage.md).
+TEST_F(CliTest, VdbFileSaysToRunVoxIngest) {
+  // OpenVDB's magic number, then anything: the name and the bytes both tell.
+  const std::string vdb = Write("bunny.vdb", std::string(" BDV", 4) + std::string(60, '\0'));
+  RunResult r = testing::RunCommand(std::string(VOX_RENDER_BIN) + " " + vdb + " -o " +
+                                    Path("v.exr") + " --quiet");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("is an OpenVDB file, not a vox store"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("vox-ingest " + vdb + " " + Path("bunny_store")), std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(Path("v.exr")));
+  const std::string renamed = Write("volume.bin", std::string(" BDV", 4) + std::string(60, '\0'));
+  r = testing::RunCommand(std::string(VOX_RENDER_BIN) + " " + renamed + " --quiet");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("vox-ingest " + renamed + " " + renamed + "_store"), std::string::npos)
+      << r.output;
+  // Another file is still "not a store directory".
+  r = testing::RunCommand(std::string(VOX_RENDER_BIN) + " " + Write("notes.txt", "hello") +
+                          " --quiet");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("is not a store directory"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("vox-ingest"), std::string::npos) << r.output;
+}
+
+// A camera without width and height renders at --size; without --size the
+// error names the field and the flag.
+TEST_F(CliTest, SizeFillsACameraWithoutOne) {
+  const std::string cam =
+      Write("sizeless.json", R"({"position":[0,3,20], "look_at":[0,0,0], "fov_deg":40})");
+  RunResult r = testing::RunCommand(
+      Render("--cam " + cam + " --size 32x24 -o " + Path("s.exr") + " --quiet"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  auto info = ReadExrInfo(Path("s.exr"));
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info->width, 32);
+  EXPECT_EQ(info->height, 24);
+  r = testing::RunCommand(Render("--cam " + cam + " -o " + Path("n.exr") + " --quiet"));
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find(cam + ": field 'width' is missing (give width and height, or "
+                                "vox-render --size WxH)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(Path("n.exr")));
+}
+
 }  // namespace
 }  // namespace vox

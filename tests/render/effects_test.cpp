@@ -136,10 +136,12 @@ TEST(EffectsTest, ExactlyOneShadowRayPerLitHitPixel) {
   auto vol = MakeVolume(TestMeta(5, GridClass::kLevelSet), {Slab()});
   ASSERT_TRUE(vol);
   Camera cam = Ortho({16, 16, 30}, {16, 16, 0}, {0, 1, 0}, 32, 32, 32);
-  // The light comes from the camera's side: every hit is lit.
+  // The light comes from the camera's side: every hit is lit. Flat normals:
+  // one attribute look-up per hit (smooth ones read the neighbours' too).
   Rendered r = Render(vol.get(), cam,
                       ParseOrDie(R"({"lights":[{"type":"directional","direction":[0.2,0.1,-1]},
-                                               {"type":"point","position":[16,16,50],"shadows":false}]})"));
+                                               {"type":"point","position":[16,16,50],"shadows":false}],
+                                    "normals":"flat"})"));
   EXPECT_TRUE(r.passes.shadows);
   EXPECT_EQ(CountAlpha(r.img, 1.0f), 256);
   EXPECT_EQ(r.counters.hit_pixels, 256u);
