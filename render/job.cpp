@@ -469,7 +469,56 @@ StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<do
   return stores;
 }
 
-Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
+StatusOr<std::unique_ptr<RenderSession>> OpenRenderSession(const RenderJobOptions& options) {
+  const Stopwatch open_time;
+  auto session = std::make_unique<RenderSession>();
+  session->anon_at_start = ReadProcessMemory().rss_anon;
+  // Counted against an address space limit: the render threads, the main
+  // thread, and --prefetch's scout and I/O threads.
+  const int job_threads =
+      (options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()))) + 2 +
+      (options.prefetch ? options.io_threads : 0);
+  VOX_ASSIGN_OR_RETURN(session->process, ChooseProcessBudget(options.memory_bytes, job_threads));
+  session->io_threads = IoThreadsFor(options, session->process);
+  OpenOptions open;
+  // The budget bounds the cache (BudgetStore sets it once the resident top
+  // is known); opening with it gives the cache its number of shards.
+  open.cache_bytes = options.cache_mb > 0 ? options.cache_mb << 20 : session->process.bytes;
+  open.io_threads = std::max(session->io_threads, 1);
+  open.read_windows = options.read_windows;
+  open.budget_bytes = session->process.bytes;
+  VOX_ASSIGN_OR_RETURN(session->stores, OpenRenderStores(options.store_dir, options.lod, open));
+  session->all_levels = session->stores.levels;
+  session->open_seconds = open_time.Seconds();
+  return session;
+}
+
+namespace {
+
+// The session's stores set for a job's --lod, as OpenRenderStores chooses:
+// the pyramid opened now if this job is the first to need it.
+Status SetSessionLod(const RenderJobOptions& options, RenderSession* session) {
+  RenderStores& stores = session->stores;
+  stores.lod_default = !options.lod.has_value();
+  stores.lod = options.lod ? *options.lod : stores.pyramid != nullptr ? kDefaultLodFactor : 0.0;
+  if (stores.lod > 0 && stores.pyramid == nullptr) {
+    OpenOptions open;
+    open.cache_bytes = session->process.bytes;
+    open.budget_bytes = session->process.bytes;
+    auto pyramid = LodPyramid::Open(options.store_dir, *stores.base, open);
+    if (!pyramid.ok()) return pyramid.status().WithContext("--lod");
+    stores.pyramid = std::move(pyramid).value();
+    for (int l = 1; l <= stores.pyramid->max_level(); ++l)
+      session->all_levels.push_back(stores.pyramid->level(l));
+  }
+  stores.levels = stores.lod > 0 ? session->all_levels : std::vector<Store*>{};
+  return OkStatus();
+}
+
+}  // namespace
+
+Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out,
+                    RenderSession* session) {
   using namespace job_internal;
   // Each frame sets the heap watch's target from its budget; once the job
   // ends, stores opened outside a job (the Python module's) are not watched.
@@ -477,42 +526,34 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
     ~UnwatchHeap() { HeapWatch::Process().SetTarget(0); }
   } unwatch_heap;
   // The options, the frames and every frame's outputs, before any work.
-  const Stopwatch open_time;
   VOX_RETURN_IF_ERROR(CheckJobOptions(options));
   const bool keep = options.keep_image && out != nullptr;
   VOX_ASSIGN_OR_RETURN(JobSequence sequence, PlanSequence(options, keep));
   VOX_RETURN_IF_ERROR(CheckJobOutputs(options, sequence));
 
-  // The store and its pyramid, opened once for every frame.
-  const uint64_t anon_at_start = ReadProcessMemory().rss_anon;
-  // Counted against an address space limit: the render threads, the main
-  // thread, and --prefetch's scout and I/O threads.
-  const int job_threads =
-      (options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()))) + 2 +
-      (options.prefetch ? options.io_threads : 0);
-  VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(options.memory_bytes, job_threads));
-  const int io_threads = IoThreadsFor(options, process);
-  OpenOptions open;
-  // The budget bounds the cache (BudgetStore sets it once the resident top
-  // is known); opening with it gives the cache its number of shards.
-  open.cache_bytes = options.cache_mb > 0 ? options.cache_mb << 20 : process.bytes;
-  open.io_threads = std::max(io_threads, 1);
-  open.read_windows = options.read_windows;
-  open.budget_bytes = process.bytes;
-  VOX_ASSIGN_OR_RETURN(RenderStores stores, OpenRenderStores(options.store_dir, options.lod, open));
-  const double open_seconds = open_time.Seconds();
+  // The store and its pyramid, opened once for every frame (or kept open by
+  // the caller's session).
+  std::unique_ptr<RenderSession> own;
+  const bool opened_now = session == nullptr;
+  if (opened_now) {
+    VOX_ASSIGN_OR_RETURN(own, OpenRenderSession(options));
+    session = own.get();
+  }
+  VOX_RETURN_IF_ERROR(SetSessionLod(options, session));
+  const RenderStores& stores = session->stores;
+  const double open_seconds = opened_now ? session->open_seconds : 0.0;
 
   // The cameras (every frame of the run checked) and the scene, then the
   // frames in order, each frame's camera and paths made when it comes.
   VOX_RETURN_IF_ERROR(PrepareCameras(options, stores.base->meta(), &sequence));
   VOX_ASSIGN_OR_RETURN(const Scene scene, JobScene(options));
-  JobRun run{options, sequence, stores, scene, process};
+  JobRun run{options, sequence, stores, scene, session->process};
   run.threads =
       options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-  run.io_threads = io_threads;
+  run.io_threads = session->io_threads;
   run.keep = keep;
   run.out = out;
-  run.anon_at_start = anon_at_start;
+  run.anon_at_start = session->anon_at_start;
   for (int n = sequence.range.first; n <= sequence.range.last; ++n) {
     const FrameOutputs files = FrameFiles(options, sequence, n);
     VOX_RETURN_IF_ERROR(CheckFrameFiles(options, sequence, files));
