@@ -68,7 +68,7 @@ try:
     profile = os.path.join(tmp, "profile")
     chrome = subprocess.Popen([chromium, "--headless=new", "--no-sandbox", "--disable-gpu",
                                "--remote-debugging-port=0", f"--user-data-dir={profile}",
-                               "--window-size=900,500", url],
+                               "--window-size=900,560", url],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     procs.append(chrome)
     port_file = os.path.join(profile, "DevToolsActivePort")
@@ -181,6 +181,7 @@ try:
         fail(f"the refined frame stopped at no coarse level: {stops}")
     page_rgba = page_float()
     if shot:
+        js("probe(256, 192)")  # the panel's voxel
         data = cdp("Page.captureScreenshot", format="png")["data"]
         open(shot, "wb").write(base64.b64decode(data))
     # Save scene: the files under fresh names, the command run as written.

@@ -40,7 +40,10 @@ class Page:
     """Chromium on vox-view's page, driven over the DevTools protocol."""
 
     def __init__(self, url, tmp):
-        import websocket  # python3-websocket
+        try:
+            import websocket  # python3-websocket
+        except ImportError:
+            H.fail("the view question needs python3-websocket (Debian's, for /usr/bin/python3)")
         chromium = shutil.which("chromium") or H.fail("chromium is not installed")
         profile = os.path.join(tmp, "profile")
         self.proc = subprocess.Popen([chromium, "--headless=new", "--no-sandbox", "--disable-gpu",
@@ -107,9 +110,10 @@ def main(h, a):
     server = subprocess.Popen([view_tool, store, "--threads", str(h.threads), "--out", out_dir],
                               stdout=subprocess.PIPE, text=True, preexec_fn=pre)
     url = server.stdout.readline().split()[-1]
-    page = Page(url + f"?w={a.width}&h={a.height}", tmp)
+    page = None
     rep = H.Report(h, "view", "vox-view's latency")
     try:
+        page = Page(url + f"?w={a.width}&h={a.height}", tmp)
         page.wait("cv.dataset.refined === '1'", "first frame")
         x, y = 300, 300
 
@@ -156,7 +160,8 @@ def main(h, a):
         orbit_moves = drag_steps(0, until=time.monotonic() + a.orbit_seconds)
         alive = server.poll() is None
     finally:
-        page.close()
+        if page:
+            page.close()
         server.terminate()
         server.wait()
         peak, failcnt, oom = cg.finish() if cg else (None, None, None)
