@@ -155,6 +155,7 @@ def main(h, a):
                 H.fail(f"vox-render failed: {saved['command']}")
             rs = json.load(open(stats))["timings"]["render_seconds"]
             rows.append({"page_ms": t["request_to_paint"], "page_render_ms": t["render_ms"],
+                         "page_data_ms": t["request_to_data"],
                          "vox_render_wall_ms": runs[1]["wall_s"] * 1e3,
                          "vox_render_render_ms": rs * 1e3})
         orbit_moves = drag_steps(0, until=time.monotonic() + a.orbit_seconds)

@@ -131,6 +131,7 @@ json PanelOf(const json& stats) {
   const json& cache = stats["cache"];
   json p;
   p["ms"] = stats["timings"].value("render_seconds", 0.0) * 1e3;
+  p["job_ms"] = stats["timings"].value("total_seconds", 0.0) * 1e3;
   p["lod"] = lod.value("factor", 0.0);
   p["stops_by_level"] = lod.value("stops_by_level", json::object());
   p["bricks_read"] = lod.contains("bricks_paged_total") ? lod["bricks_paged_total"]
