@@ -143,7 +143,10 @@ int IoThreadsFor(const RenderJobOptions& options, const ProcessBudget& process) 
 // stop at get no more than the minimum cache (a full view of a huge volume
 // uses none of the base's bricks), unless the scene refracts (refraction is
 // exact); silhouette antialiasing stops G times finer.
+// `open_levels`: every pyramid level open, budgeted even when this frame is
+// exact (a session keeps them, and their caches, between frames).
 StatusOr<MemoryBudget> JobBudget(const RenderJobOptions& options, const RenderStores& stores,
+                                 const std::vector<Store*>& open_levels,
                                  const Camera& camera, const Scene& scene,
                                  const ProcessBudget& process, int threads, int io_threads) {
   BudgetInputs inputs;
@@ -170,7 +173,7 @@ StatusOr<MemoryBudget> JobBudget(const RenderJobOptions& options, const RenderSt
     if (options.silhouette_grid > 0)
       first_level = std::max(0, first_level - std::ilogb(options.silhouette_grid));
   }
-  return BudgetStores(stores.base.get(), stores.levels, process.bytes, inputs, first_level);
+  return BudgetStores(stores.base.get(), open_levels, process.bytes, inputs, first_level);
 }
 
 StatusOr<RenderOptions> JobRenderOptions(const RenderJobOptions& options, const RenderStores& stores,
@@ -286,6 +289,7 @@ struct JobRun {
   bool keep = false;  // the image goes into `out` (one frame)
   RenderJobOutput* out = nullptr;
   uint64_t anon_at_start = 0;  // the process's anonymous memory before the stores opened
+  const std::vector<Store*>* open_levels = nullptr;  // RenderSession::all_levels
 };
 
 // The heap watch's target for a frame with `budget`: the budget less its
@@ -383,8 +387,8 @@ Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera
   RenderJobOptions budgeted = options;
   budgeted.keep_image = run.keep;
   VOX_ASSIGN_OR_RETURN(const MemoryBudget budget,
-                       JobBudget(budgeted, run.stores, camera, run.scene, run.process, run.threads,
-                                 run.io_threads));
+                       JobBudget(budgeted, run.stores, *run.open_levels, camera, run.scene,
+                                 run.process, run.threads, run.io_threads));
   if (say && first)
     fprintf(options.log, "vox-render: memory %s; %s\n", run.process.ToString().c_str(),
             budget.ToString().c_str());
@@ -469,6 +473,22 @@ StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<do
   return stores;
 }
 
+namespace {
+
+// How a session's stores open.
+OpenOptions SessionOpenOptions(const RenderJobOptions& options, const RenderSession& session) {
+  OpenOptions open;
+  // The budget bounds the cache (BudgetStore sets it once the resident top
+  // is known); opening with it gives the cache its number of shards.
+  open.cache_bytes = options.cache_mb > 0 ? options.cache_mb << 20 : session.process.bytes;
+  open.io_threads = std::max(session.io_threads, 1);
+  open.read_windows = options.read_windows;
+  open.budget_bytes = session.process.bytes;
+  return open;
+}
+
+}  // namespace
+
 StatusOr<std::unique_ptr<RenderSession>> OpenRenderSession(const RenderJobOptions& options) {
   const Stopwatch open_time;
   auto session = std::make_unique<RenderSession>();
@@ -480,14 +500,8 @@ StatusOr<std::unique_ptr<RenderSession>> OpenRenderSession(const RenderJobOption
       (options.prefetch ? options.io_threads : 0);
   VOX_ASSIGN_OR_RETURN(session->process, ChooseProcessBudget(options.memory_bytes, job_threads));
   session->io_threads = IoThreadsFor(options, session->process);
-  OpenOptions open;
-  // The budget bounds the cache (BudgetStore sets it once the resident top
-  // is known); opening with it gives the cache its number of shards.
-  open.cache_bytes = options.cache_mb > 0 ? options.cache_mb << 20 : session->process.bytes;
-  open.io_threads = std::max(session->io_threads, 1);
-  open.read_windows = options.read_windows;
-  open.budget_bytes = session->process.bytes;
-  VOX_ASSIGN_OR_RETURN(session->stores, OpenRenderStores(options.store_dir, options.lod, open));
+  VOX_ASSIGN_OR_RETURN(session->stores, OpenRenderStores(options.store_dir, options.lod,
+                                                         SessionOpenOptions(options, *session)));
   session->all_levels = session->stores.levels;
   session->open_seconds = open_time.Seconds();
   return session;
@@ -502,10 +516,8 @@ Status SetSessionLod(const RenderJobOptions& options, RenderSession* session) {
   stores.lod_default = !options.lod.has_value();
   stores.lod = options.lod ? *options.lod : stores.pyramid != nullptr ? kDefaultLodFactor : 0.0;
   if (stores.lod > 0 && stores.pyramid == nullptr) {
-    OpenOptions open;
-    open.cache_bytes = session->process.bytes;
-    open.budget_bytes = session->process.bytes;
-    auto pyramid = LodPyramid::Open(options.store_dir, *stores.base, open);
+    auto pyramid =
+        LodPyramid::Open(options.store_dir, *stores.base, SessionOpenOptions(options, *session));
     if (!pyramid.ok()) return pyramid.status().WithContext("--lod");
     stores.pyramid = std::move(pyramid).value();
     for (int l = 1; l <= stores.pyramid->max_level(); ++l)
@@ -554,6 +566,7 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out,
   run.keep = keep;
   run.out = out;
   run.anon_at_start = session->anon_at_start;
+  run.open_levels = &session->all_levels;
   for (int n = sequence.range.first; n <= sequence.range.last; ++n) {
     const FrameOutputs files = FrameFiles(options, sequence, n);
     VOX_RETURN_IF_ERROR(CheckFrameFiles(options, sequence, files));
