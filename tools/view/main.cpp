@@ -10,15 +10,15 @@
 // traces the ray under the cursor with vox-probe's Prober over the same
 // store; /save gives (and with --out writes) the last refined frame's
 // cam.json, scene.json and vox-render command line (tools/view/saves.h).
+#include <httplib.h>
+
 #include <atomic>
 #include <cstdio>
 #include <memory>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <httplib.h>
-#include <nlohmann/json.hpp>
 
 #include "core/ray_text.h"
 #include "render/camera.h"
@@ -65,8 +65,7 @@ vox::Status ApplyViewFlag(vox::RenderJobOptions* o, ViewFlags* f, const std::str
 }
 
 const vox::CommandLineSpec kCommandLine{
-    "vox-view",
-    "vox-view STORE_DIR [options]",
+    "vox-view", "vox-view STORE_DIR [options]",
     "Serves a web page on 127.0.0.1 that renders the vox store STORE_DIR as the mouse and the "
     "keyboard move the camera, and gives the cam.json, scene.json and vox-render command line "
     "of the view. Prints the page's address.",
@@ -134,8 +133,8 @@ json PanelOf(const json& stats) {
   p["job_ms"] = stats["timings"].value("total_seconds", 0.0) * 1e3;
   p["lod"] = lod.value("factor", 0.0);
   p["stops_by_level"] = lod.value("stops_by_level", json::object());
-  p["bricks_read"] = lod.contains("bricks_paged_total") ? lod["bricks_paged_total"]
-                                                        : cache["misses"];
+  p["bricks_read"] =
+      lod.contains("bricks_paged_total") ? lod["bricks_paged_total"] : cache["misses"];
   p["bytes_read"] = lod.contains("brick_bytes_read_total") ? lod["brick_bytes_read_total"]
                                                            : stats["io"]["brick_bytes_read"];
   p["cache_resident"] = cache["bytes_resident"];
@@ -181,9 +180,9 @@ void ServeFrame(Viewer* v, const httplib::Request& req, httplib::Response& res) 
   res.set_header("X-Vox-Lod", rec.lod);
   res.set_header("X-Vox-Camera", rec.camera);
   res.set_header("X-Vox-Panel", PanelOf(stats).dump());
-  res.set_content(std::string(reinterpret_cast<const char*>(out.rgba.data()),
-                              out.rgba.size() * sizeof(float)),
-                  "application/octet-stream");
+  res.set_content(
+      std::string(reinterpret_cast<const char*>(out.rgba.data()), out.rgba.size() * sizeof(float)),
+      "application/octet-stream");
 }
 
 // /probe?x=X&y=Y: the ray through image position (X, Y) (pixels of the last
@@ -204,8 +203,9 @@ void ServeProbe(Viewer* v, const httplib::Request& req, httplib::Response& res) 
   auto cam = vox::ParseCamera(camera_text, "camera");
   if (!cam.ok()) return Reply(res, 500, cam.status().ToString());
   if (!(x >= 0 && y >= 0 && x <= cam->width && y <= cam->height))
-    return Reply(res, 400, "x and y must lie in the last frame (" + std::to_string(cam->width) +
-                               "x" + std::to_string(cam->height) + ")");
+    return Reply(res, 400,
+                 "x and y must lie in the last frame (" + std::to_string(cam->width) + "x" +
+                     std::to_string(cam->height) + ")");
   const vox::WorldRay w = cam->PixelRay(x, y);
   vox::Ray ray;
   ray.origin = v->grid.WorldToGrid(w.origin) + glm::dvec3(v->origin);  // grid -> index space
@@ -276,8 +276,7 @@ static int RunTool(int argc, char** argv) {
   };
   if (auto exit_code = vox::ParseCommandLine(kCommandLine, argc, argv, apply, &stores))
     return *exit_code;
-  if (stores.size() != 1)
-    return vox::UsageError(kCommandLine.program, "give exactly one store");
+  if (stores.size() != 1) return vox::UsageError(kCommandLine.program, "give exactly one store");
   o.store_dir = stores[0];
   o.exr_path.clear();
   o.keep_image = true;
@@ -299,9 +298,8 @@ static int RunTool(int argc, char** argv) {
   server.Get("/probe", [&v](const httplib::Request& req, httplib::Response& res) {
     ServeProbe(&v, req, res);
   });
-  server.Post("/save", [&v](const httplib::Request&, httplib::Response& res) {
-    ServeSave(&v, res);
-  });
+  server.Post("/save",
+              [&v](const httplib::Request&, httplib::Response& res) { ServeSave(&v, res); });
   server.Get("/info", [&v](const httplib::Request&, httplib::Response& res) {
     res.set_content(Info(v), "application/json");
   });

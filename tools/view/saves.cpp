@@ -5,9 +5,8 @@
 
 #include <cstdio>
 #include <memory>
-#include <vector>
-
 #include <nlohmann/json.hpp>
+#include <vector>
 
 #include "core/util/atomic_file.h"
 #include "core/util/path_identity.h"
@@ -21,8 +20,8 @@ using json = nlohmann::json;
 std::string ShellWord(const std::string& s) {
   bool plain = !s.empty();
   for (char c : s)
-    plain = plain && (isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' ||
-                      c == '/' || c == '-' || c == '+' || c == ',' || c == '=');
+    plain = plain && (isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' || c == '/' ||
+                      c == '-' || c == '+' || c == ',' || c == '=');
   if (plain) return s;
   std::string q = "'";
   for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -83,15 +82,15 @@ StatusOr<std::string> SaveView(const SaveTarget& t, const std::string& camera_js
     exr = base + ".exr";
     script = base + ".sh";
   }
-  const std::string command = "vox-render " + ShellWord(t.store_dir) + " --cam " +
-                              ShellWord(cam) + " --scene " + ShellWord(scene) + " --lod " + lod +
-                              " --float -o " + ShellWord(exr);
+  const std::string command = "vox-render " + ShellWord(t.store_dir) + " --cam " + ShellWord(cam) +
+                              " --scene " + ShellWord(scene) + " --lod " + lod + " --float -o " +
+                              ShellWord(exr);
   const std::string camera_text = json::parse(camera_json).dump(2) + "\n";
   if (!t.out_dir.empty()) {
     std::vector<NamedPath> inputs = StoreInputs(t.store_dir);
     if (!t.scene_path.empty()) inputs.push_back({"--scene", t.scene_path});
-    VOX_RETURN_IF_ERROR(CheckDistinctPaths(
-        inputs, {{"camera", cam}, {"scene", scene}, {"command", script}}));
+    VOX_RETURN_IF_ERROR(
+        CheckDistinctPaths(inputs, {{"camera", cam}, {"scene", scene}, {"command", script}}));
     OutputGroup outputs;
     VOX_RETURN_IF_ERROR(outputs.AddBytes(cam, camera_text));
     VOX_RETURN_IF_ERROR(outputs.AddBytes(scene, scene_json));
