@@ -144,7 +144,10 @@ int IoThreadsFor(const RenderJobOptions& options, const ProcessBudget& process) 
 // stop at get no more than the minimum cache (a full view of a huge volume
 // uses none of the base's bricks), unless the scene refracts (refraction is
 // exact); silhouette antialiasing stops G times finer.
+// `open_levels`: every pyramid level open, budgeted even when this frame is
+// exact (a session keeps them, and their caches, between frames).
 StatusOr<MemoryBudget> JobBudget(const RenderJobOptions& options, const RenderStores& stores,
+                                 const std::vector<Store*>& open_levels,
                                  const Camera& camera, const Scene& scene,
                                  const ProcessBudget& process, int threads, int io_threads) {
   BudgetInputs inputs;
@@ -171,7 +174,7 @@ StatusOr<MemoryBudget> JobBudget(const RenderJobOptions& options, const RenderSt
     if (options.silhouette_grid > 0)
       first_level = std::max(0, first_level - std::ilogb(options.silhouette_grid));
   }
-  return BudgetStores(stores.base.get(), stores.levels, process.bytes, inputs, first_level);
+  return BudgetStores(stores.base.get(), open_levels, process.bytes, inputs, first_level);
 }
 
 StatusOr<RenderOptions> JobRenderOptions(const RenderJobOptions& options, const RenderStores& stores,
@@ -287,6 +290,7 @@ struct JobRun {
   bool keep = false;  // the image goes into `out` (one frame)
   RenderJobOutput* out = nullptr;
   uint64_t anon_at_start = 0;  // the process's anonymous memory before the stores opened
+  const std::vector<Store*>* open_levels = nullptr;  // RenderSession::all_levels
 };
 
 // The heap watch's target for a frame with `budget`: the budget less its
@@ -384,8 +388,8 @@ Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera
   RenderJobOptions budgeted = options;
   budgeted.keep_image = run.keep;
   VOX_ASSIGN_OR_RETURN(const MemoryBudget budget,
-                       JobBudget(budgeted, run.stores, camera, run.scene, run.process, run.threads,
-                                 run.io_threads));
+                       JobBudget(budgeted, run.stores, *run.open_levels, camera, run.scene,
+                                 run.process, run.threads, run.io_threads));
   if (say && first)
     fprintf(options.log, "vox-render: memory %s; %s\n", run.process.ToString().c_str(),
             budget.ToString().c_str());
@@ -491,7 +495,64 @@ StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<do
   return stores;
 }
 
-Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
+namespace {
+
+// How a session's stores open.
+OpenOptions SessionOpenOptions(const RenderJobOptions& options, const RenderSession& session) {
+  OpenOptions open;
+  // The budget bounds the cache (BudgetStore sets it once the resident top
+  // is known); opening with it gives the cache its number of shards.
+  open.cache_bytes = options.cache_mb > 0 ? options.cache_mb << 20 : session.process.bytes;
+  open.io_threads = std::max(session.io_threads, 1);
+  open.read_windows = options.read_windows;
+  open.budget_bytes = session.process.bytes;
+  return open;
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<RenderSession>> OpenRenderSession(const RenderJobOptions& options) {
+  const Stopwatch open_time;
+  auto session = std::make_unique<RenderSession>();
+  session->anon_at_start = ReadProcessMemory().rss_anon;
+  // Counted against an address space limit: the render threads, the main
+  // thread, and --prefetch's scout and I/O threads.
+  const int job_threads =
+      (options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()))) + 2 +
+      (options.prefetch ? options.io_threads : 0);
+  VOX_ASSIGN_OR_RETURN(session->process, ChooseProcessBudget(options.memory_bytes, job_threads));
+  session->io_threads = IoThreadsFor(options, session->process);
+  VOX_ASSIGN_OR_RETURN(session->stores, OpenRenderStores(options.store_dir, options.lod,
+                                                         SessionOpenOptions(options, *session)));
+  session->all_levels = session->stores.levels;
+  session->open_seconds = open_time.Seconds();
+  return session;
+}
+
+namespace {
+
+// The session's stores set for a job's --lod, as OpenRenderStores chooses:
+// the pyramid opened now if this job is the first to need it.
+Status SetSessionLod(const RenderJobOptions& options, RenderSession* session) {
+  RenderStores& stores = session->stores;
+  stores.lod_default = !options.lod.has_value();
+  stores.lod = options.lod ? *options.lod : stores.pyramid != nullptr ? kDefaultLodFactor : 0.0;
+  if (stores.lod > 0 && stores.pyramid == nullptr) {
+    auto pyramid =
+        LodPyramid::Open(options.store_dir, *stores.base, SessionOpenOptions(options, *session));
+    if (!pyramid.ok()) return pyramid.status().WithContext("--lod");
+    stores.pyramid = std::move(pyramid).value();
+    for (int l = 1; l <= stores.pyramid->max_level(); ++l)
+      session->all_levels.push_back(stores.pyramid->level(l));
+  }
+  stores.levels = stores.lod > 0 ? session->all_levels : std::vector<Store*>{};
+  return OkStatus();
+}
+
+}  // namespace
+
+Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out,
+                    RenderSession* session) {
   using namespace job_internal;
   // Each frame sets the heap watch's target from its budget; once the job
   // ends, stores opened outside a job (the Python module's) are not watched.
@@ -499,42 +560,35 @@ Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* out) {
     ~UnwatchHeap() { HeapWatch::Process().SetTarget(0); }
   } unwatch_heap;
   // The options, the frames and every frame's outputs, before any work.
-  const Stopwatch open_time;
   VOX_RETURN_IF_ERROR(CheckJobOptions(options));
   const bool keep = options.keep_image && out != nullptr;
   VOX_ASSIGN_OR_RETURN(JobSequence sequence, PlanSequence(options, keep));
   VOX_RETURN_IF_ERROR(CheckJobOutputs(options, sequence));
 
-  // The store and its pyramid, opened once for every frame.
-  const uint64_t anon_at_start = ReadProcessMemory().rss_anon;
-  // Counted against an address space limit: the render threads, the main
-  // thread, and --prefetch's scout and I/O threads.
-  const int job_threads =
-      (options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()))) + 2 +
-      (options.prefetch ? options.io_threads : 0);
-  VOX_ASSIGN_OR_RETURN(const ProcessBudget process, ChooseProcessBudget(options.memory_bytes, job_threads));
-  const int io_threads = IoThreadsFor(options, process);
-  OpenOptions open;
-  // The budget bounds the cache (BudgetStore sets it once the resident top
-  // is known); opening with it gives the cache its number of shards.
-  open.cache_bytes = options.cache_mb > 0 ? options.cache_mb << 20 : process.bytes;
-  open.io_threads = std::max(io_threads, 1);
-  open.read_windows = options.read_windows;
-  open.budget_bytes = process.bytes;
-  VOX_ASSIGN_OR_RETURN(RenderStores stores, OpenRenderStores(options.store_dir, options.lod, open));
-  const double open_seconds = open_time.Seconds();
+  // The store and its pyramid, opened once for every frame (or kept open by
+  // the caller's session).
+  std::unique_ptr<RenderSession> own;
+  const bool opened_now = session == nullptr;
+  if (opened_now) {
+    VOX_ASSIGN_OR_RETURN(own, OpenRenderSession(options));
+    session = own.get();
+  }
+  VOX_RETURN_IF_ERROR(SetSessionLod(options, session));
+  const RenderStores& stores = session->stores;
+  const double open_seconds = opened_now ? session->open_seconds : 0.0;
 
   // The cameras (every frame of the run checked) and the scene, then the
   // frames in order, each frame's camera and paths made when it comes.
   VOX_RETURN_IF_ERROR(PrepareCameras(options, stores.base->meta(), &sequence));
   VOX_ASSIGN_OR_RETURN(const Scene scene, JobScene(options));
-  JobRun run{options, sequence, stores, scene, process};
+  JobRun run{options, sequence, stores, scene, session->process};
   run.threads =
       options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-  run.io_threads = io_threads;
+  run.io_threads = session->io_threads;
   run.keep = keep;
   run.out = out;
-  run.anon_at_start = anon_at_start;
+  run.anon_at_start = session->anon_at_start;
+  run.open_levels = &session->all_levels;
   for (int n = sequence.range.first; n <= sequence.range.last; ++n) {
     const FrameOutputs files = FrameFiles(options, sequence, n);
     VOX_RETURN_IF_ERROR(CheckFrameFiles(options, sequence, files));

@@ -29,6 +29,7 @@
 #include "render/tiles.h"
 #include "storage/lod.h"
 #include "storage/store.h"
+#include "storage/store_budget.h"
 
 namespace vox {
 
@@ -140,8 +141,26 @@ struct RenderStores {
 StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<double> lod,
                                         const OpenOptions& open);
 
-// `output` may be null.
-Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* output = nullptr);
+// What stays open from one job to the next (vox-view): the store, its
+// pyramid when it has one (or --lod asked for it), their brick caches and the
+// process budget chosen when it opened, from the opening options'
+// store_dir, memory_bytes, cache_mb, threads, prefetch, io_threads and
+// read_windows. A job given a session renders with these and its own
+// camera, scene, size and --lod; a second identical frame reads no brick.
+struct RenderSession {
+  RenderStores stores;            // lod, lod_default and levels are set per job
+  std::vector<Store*> all_levels; // the pyramid's levels, when it is open
+  ProcessBudget process;
+  uint64_t anon_at_start = 0;  // the process's anonymous memory before the stores opened
+  int io_threads = 0;
+  double open_seconds = 0.0;
+};
+StatusOr<std::unique_ptr<RenderSession>> OpenRenderSession(const RenderJobOptions& options);
+
+// `output` may be null. With `session`, the job opens nothing: it renders
+// over the session's stores and budget (RenderSession).
+Status RunRenderJob(const RenderJobOptions& options, RenderJobOutput* output = nullptr,
+                    RenderSession* session = nullptr);
 
 }  // namespace vox
 

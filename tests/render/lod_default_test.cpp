@@ -43,6 +43,8 @@ class LodDefault : public ::testing::Test {
     delete dir_;
   }
   static std::string Path(const std::string& name) { return (*dir_ / name).string(); }
+  // Render's jobs run over this session when set (vox-view's warm frames).
+  static inline RenderSession* session_ = nullptr;
 
   // A view from `z` voxels in front of the shell's centre, `size`^2 pixels.
   static std::string CameraJson(double z, int size, double y = 64.5) {
@@ -72,7 +74,7 @@ class LodDefault : public ::testing::Test {
     o.lod = lod;
     o.silhouette_grid = grid;
     Frame f;
-    const Status s = RunRenderJob(o, &f.out);
+    const Status s = RunRenderJob(o, &f.out, session_);
     EXPECT_TRUE(s.ok()) << s.ToString();
     if (s.ok()) f.stats = nlohmann::json::parse(f.out.stats_json);
     return f;
@@ -253,6 +255,38 @@ TEST_F(LodDefault, HeaderNamesTheSettingAndMergeRefusesMixedParts) {
   r = testing::RunCommand(merge + Path("p1.exr") + " " + Path("p2lod.exr") + " -o " +
                           Path("whole.exr"));
   EXPECT_EQ(r.code, 0) << r.output;
+}
+
+// A RenderSession keeps the store, its pyramid and their caches open across
+// jobs: a second identical frame reads no brick, and every frame, default or
+// exact in any order, is bit for bit the frame of a job that opens the store.
+TEST_F(LodDefault, SessionKeepsTheStoresWarmAndFramesTheSame) {
+  const std::string far = CameraJson(400, 96), near = CameraJson(60, 64);
+  const Frame fresh_default = Render("store", far, std::nullopt);
+  const Frame fresh_exact = Render("store", near, 0.0);
+  ASSERT_GT(fresh_default.stats["lod"]["bricks_paged_total"].get<uint64_t>(), 0u);
+  RenderJobOptions o;
+  o.store_dir = Path("store");
+  o.threads = 2;
+  auto session = OpenRenderSession(o);
+  ASSERT_TRUE(session.ok()) << session.status().ToString();
+  session_ = session->get();
+  const Frame a = Render("store", far, std::nullopt);
+  const Frame b = Render("store", far, std::nullopt);
+  const Frame exact = Render("store", near, 0.0);
+  const Frame exact_again = Render("store", near, 0.0);
+  const Frame c = Render("store", far, std::nullopt);
+  session_ = nullptr;
+  EXPECT_GT(a.stats["lod"]["bricks_paged_total"].get<uint64_t>(), 0u);
+  EXPECT_EQ(b.stats["lod"]["bricks_paged_total"].get<uint64_t>(), 0u);
+  EXPECT_EQ(b.stats["cache"]["misses"].get<uint64_t>(), 0u);
+  EXPECT_EQ(exact_again.stats["cache"]["misses"].get<uint64_t>(), 0u);
+  EXPECT_EQ(exact.stats["lod"]["factor"].get<double>(), 0.0);
+  EXPECT_EQ(b.stats["lod"]["factor"], fresh_default.stats["lod"]["factor"]);
+  EXPECT_EQ(b.stats["timings"]["open_seconds"].get<double>(), 0.0);
+  for (const Frame* f : {&a, &b, &c}) ExpectIdentical(*f, fresh_default);
+  ExpectIdentical(exact, fresh_exact);
+  ExpectIdentical(exact_again, fresh_exact);
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
   precision  the accuracy study: every traversal variant against the exact reference
   paper      the paper's split: two steps against one, per grid and image size
   lod        level of detail against the exact frame: time, bytes and error
+  view       vox-view in headless Chromium: coarse and refined frames, an orbit in a memory limit
   figures    re-measures every figure the docs quote (tools/bench/figures.tsv)
 
 Volumes and stores are made in the scratch directory (--scratch, or $SCRATCH) and kept for
@@ -31,10 +32,12 @@ import memory  # noqa: E402
 import peers  # noqa: E402
 import scale  # noqa: E402
 import study  # noqa: E402
+import view  # noqa: E402
 
 QUESTIONS = {
     "peers": peers, "scale": scale, "cold": memory.Cold, "turntable": memory.Turntable,
     "ingest": memory.Ingest, "precision": study.Precision, "paper": study.Paper, "lod": study.Lod,
+    "view": view,
 }
 FIGURES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "figures.tsv")
 

@@ -28,7 +28,8 @@ Status EmplaceTracer(const OctreeView& view, int n1, Variant* out) {
 
 struct Prober::Impl {
   std::unique_ptr<MemoryOctree> memory;
-  std::unique_ptr<Store> store;
+  std::unique_ptr<Store> owned;
+  Store* store = nullptr;  // `owned`, or OpenOn's
   glm::i64vec3 origin{0};
   // --fixed 128, 64, auto; with --tracer long-double, then render (double).
   std::variant<Tracer<Fixed128, long double>, DefaultTracer, AutoTracer<long double>,
@@ -45,18 +46,23 @@ Prober::Prober(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Prober::~Prober() = default;
 
 StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
+  return OpenOn(nullptr, opt);
+}
+
+StatusOr<std::unique_ptr<Prober>> Prober::OpenOn(Store* open_store, const ProbeOptions& opt) {
   // Messages as vox-probe prints them: some with the status code, some without.
   auto fail = [](const Status& s, bool with_code) {
     return Status(s.code(), with_code ? s.ToString() : s.message());
   };
-  if (opt.generate.empty() == opt.store.empty())
+  if (open_store == nullptr && opt.generate.empty() == opt.store.empty())
     return InvalidArgumentError("give either --generate SHAPE or a store directory");
   if (opt.fixed != 0 && opt.fixed != 64 && opt.fixed != 128)
     return InvalidArgumentError("--fixed takes auto, 64 or 128");
   if ((opt.cone_rad >= 0 || opt.cone_width > 0) && opt.lod == 0)
     return InvalidArgumentError("--cone-rad and --cone-width need --lod F");
   if (opt.lod > 0) {
-    if (opt.store.empty()) return InvalidArgumentError("--lod needs a store with a level-of-detail pyramid");
+    if (opt.store.empty() && open_store == nullptr)
+      return InvalidArgumentError("--lod needs a store with a level-of-detail pyramid");
     if (opt.cone_rad < 0) return InvalidArgumentError("--lod needs --cone-rad R (the cone's spread, radians)");
   }
   auto impl = std::make_unique<Impl>();
@@ -69,6 +75,10 @@ StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
     if (!tree.ok()) return fail(tree.status(), false);
     impl->memory = std::move(tree).value();
     view = impl->memory->view();
+  } else if (open_store != nullptr) {
+    impl->store = open_store;
+    view = impl->store->view();
+    impl->origin = impl->store->meta().origin;
   } else {
     auto budget = ChooseProcessBudget(opt.memory_bytes);
     if (!budget.ok()) return fail(budget.status(), true);
@@ -76,8 +86,9 @@ StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
     oo.cache_bytes = opt.cache_mb > 0 ? opt.cache_mb << 20 : budget->bytes;
     auto s = Store::Open(opt.store, oo);
     if (!s.ok()) return fail(s.status(), true);
-    impl->store = std::move(s).value();
-    auto split = BudgetReader(impl->store.get(), budget->bytes, uint64_t(opt.cache_mb) << 20);
+    impl->owned = std::move(s).value();
+    impl->store = impl->owned.get();
+    auto split = BudgetReader(impl->store, budget->bytes, uint64_t(opt.cache_mb) << 20);
     if (!split.ok()) return fail(split.status(), true);
     view = impl->store->view();
     impl->origin = impl->store->meta().origin;
@@ -90,7 +101,7 @@ StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
     impl->pyramid = std::move(p).value();
     std::vector<Volume*> levels;
     for (int l = 1; l <= impl->pyramid->max_level(); ++l) levels.push_back(impl->pyramid->level(l));
-    auto lt = LodTracer::Create(impl->store.get(), levels, opt.lod);
+    auto lt = LodTracer::Create(impl->store, levels, opt.lod);
     if (!lt.ok()) return fail(lt.status(), false);
     impl->lod = *lt;
     auto bt = LodLevelTracer::Create(view, DefaultFirstStepLevels(view.levels));

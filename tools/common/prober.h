@@ -16,6 +16,10 @@
 #include "tools/common/options.h"
 
 namespace vox {
+class Store;
+}  // namespace vox
+
+namespace vox {
 
 // vox-probe's volume (a store under the memory budget, or a generated shape)
 // and tracer (split, fixed-point word), ready to trace index-space rays.
@@ -23,6 +27,10 @@ class Prober {
  public:
   // Errors carry, as their message, the line vox-probe prints.
   static StatusOr<std::unique_ptr<Prober>> Open(const ProbeOptions& options);
+  // A Prober over `store`, already open and outliving it (vox-view's, shared
+  // with its renders: its brick cache and budget), tracing as Open's would
+  // over the same store; `options`' store, memory and cache fields are unused.
+  static StatusOr<std::unique_ptr<Prober>> OpenOn(Store* store, const ProbeOptions& options);
   ~Prober();
   // The first hit of an index-space ray (voxel in index coordinates, t along
   // the ray); nullopt on a miss. Errors: the ray is invalid (ValidateRay).
