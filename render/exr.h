@@ -197,6 +197,11 @@ struct ExrImage {
 };
 StatusOr<ExrImage> ReadExr(const std::string& path);
 
+// Reads every tile of `path` (one channel, a row of tiles at a time: memory
+// of a row of tiles, whatever the image size): an error names the file when
+// a tile is missing or does not decode (a truncated or damaged file).
+Status VerifyExrTiles(const std::string& path);
+
 // The background behind pixel (x, y) (whole pixel coordinates from the
 // top-left), linear RGB, for composing a premultiplied image over it.
 using PreviewBackground = std::function<void(int x, int y, float rgb[3])>;
