@@ -127,6 +127,8 @@ constexpr OptionSpec kIngestOptions[] = {
     {"--threshold", kValue, "F", kInputGroup,
      "fog volumes: occupied when active and density > F (default 0)"},
     {"--color", kValue, "GRID", kInputGroup, "a vec3s/vec3d grid sampled as each voxel's RGB colour"},
+    {"--source", kValue, "TEXT", kInputGroup,
+     "what the store records as its source (vox-info's source; default: the input file)"},
     {"--max-voxels", kValue, "N", kInputGroup,
      "the most voxels active tiles may expand to (default 1e10); a grid whose occupied tiles "
      "cover more is refused"},
@@ -176,6 +178,8 @@ Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::str
     o.levels = v;
   } else if (flag == "--color") {
     o.color_grid = v;
+  } else if (flag == "--source") {
+    o.source = v;
   } else if (flag == "--normal-bits") {
     if (!ParseInt(v, 8, 16, &o.normal_bits))
       return InvalidArgumentError("--normal-bits " + v +
