@@ -28,8 +28,8 @@
 // output ZIP at zlib's fastest level. A part of `--tiles I/N` holds only its
 // own tiles (the others are missing): it is an input of vox-merge, not an
 // image for other tools.
-// Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
-// vox:part ("I/N"), vox:tileOrder, vox:storeId (the store's store_id, hex),
+// Header: string attributes vox:camera, vox:scene, vox:store, vox:split, vox:part ("I/N"),
+// vox:frame ("N/COUNT"), vox:tileOrder, vox:storeId (the store's store_id, hex),
 // plus renderTimeSeconds (float, as pbrt) and vox:timings (JSON), which are
 // patched in place after the last tile. With the camera's
 // ExrCameraAttributes (render/camera.h, StandardCameraAttributes: the frame

@@ -103,8 +103,7 @@ class BrickEnumerator {
 class BrickFiller {
  public:
   BrickFiller(const Shape& shape, int levels, int depth, double band)
-      : shape_(shape), depth_(depth), band_(band),
-        half_(double(uint64_t(1) << (levels - 1))) {}
+      : shape_(shape), depth_(depth), band_(band), half_(double(uint64_t(1) << (levels - 1))) {}
 
   std::vector<BrickVoxel> Fill(const glm::u64vec3& brick) const {
     std::vector<BrickVoxel> out;
@@ -297,9 +296,9 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   // is at the target only when the store is complete.
   std::error_code ec;
   const bool existed = std::filesystem::exists(o.output, ec);
-  const Status interrupted = IoError(
-      existed ? "interrupted; no store written: '" + o.output + "' is as it was before"
-              : "interrupted; no store written at '" + o.output + "', nothing left behind");
+  const Status interrupted =
+      IoError(existed ? "interrupted; no store written: '" + o.output + "' is as it was before"
+                      : "interrupted; no store written at '" + o.output + "', nothing left behind");
   VOX_ASSIGN_OR_RETURN(std::unique_ptr<StoreWriter> writer,
                        StoreWriter::Create(o.output, meta, wo));
   if (o.lod) {
@@ -375,7 +374,10 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   if (progress && first_error.ok()) {
     progress({bricks.Total(), bricks.Total(), stats.bricks, stats.voxels});
   }
-  if (!first_error.ok()) return first_error;  // the writer's destructor removes its temp dir
+  // The writer's destructor removes its temporary directory. Interrupted,
+  // whichever step noticed first (the pyramid's reduction polls the flag
+  // too), the whole store is abandoned.
+  if (!first_error.ok()) return o.cancel != nullptr && o.cancel->load() ? interrupted : first_error;
   const double t2 = Now();
   if (Status s = writer->Finish(); !s.ok()) {
     // Interrupted while the index or the pyramid was written: the store as

@@ -42,8 +42,8 @@ constexpr vox::OptionSpec kOptions[] = {
 
 const vox::CommandLineSpec kCommandLine{
     "vox-gen", "vox-gen SHAPE store/ --size N [options]",
-    "Writes a procedural level-set shape or fog field as the vox store store/, brick by brick, in memory "
-    "independent of the store's size.",
+    "Writes a procedural level-set shape or fog field as the vox store store/, brick by brick, "
+    "in memory independent of the store's size.",
     kOptions,
     "SHAPE is one of:\n"
     "  sphere  a level-set sphere shell (like vdb_tool -sphere)\n"
@@ -166,9 +166,9 @@ static int RunTool(int argc, char** argv) {
   auto stats = quiet ? vox::gen::Generate(o) : vox::gen::Generate(o, progress);
   if (!stats.ok()) {
     // An interrupted run's message says what was kept, as it is.
+    const vox::Status& status = stats.status();
     std::fprintf(stderr, "vox-gen: %s\n",
-                 g_cancel.load() ? stats.status().message().c_str()
-                                 : stats.status().ToString().c_str());
+                 g_cancel.load() ? status.message().c_str() : status.ToString().c_str());
     return 1;
   }
   if (!quiet) {
