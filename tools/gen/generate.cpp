@@ -377,7 +377,8 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   // The writer's destructor removes its temporary directory. Interrupted,
   // whichever step noticed first (the pyramid's reduction polls the flag
   // too), the whole store is abandoned.
-  if (!first_error.ok()) return o.cancel != nullptr && o.cancel->load() ? interrupted : first_error;
+  if (!first_error.ok())
+    return o.cancel != nullptr && o.cancel->load() ? interrupted : first_error;
   const double t2 = Now();
   if (Status s = writer->Finish(); !s.ok()) {
     // Interrupted while the index or the pyramid was written: the store as
