@@ -155,7 +155,7 @@ StatusOr<openvdb::GridBase::Ptr> ChooseGrid(const IngestOptions& o,
 // occupancy rule, placement, build options. `where` names the grid.
 Status DescribeGrid(const IngestOptions& o, const openvdb::GridBase& grid,
                     const std::string& where, StoreMeta* meta) {
-  meta->source_file = o.input;
+  meta->source_file = o.source.empty() ? o.input : o.source;
   meta->grid_name = grid.getName();
   switch (grid.getGridClass()) {
     case openvdb::GRID_LEVEL_SET:

@@ -57,6 +57,9 @@ struct IngestOptions {
   // is published (vox-ingest --no-lod: false).
   bool lod = true;
   std::string command_line; // recorded in the store's build_options
+  // Recorded as the store's source (StoreMeta::source_file); empty: input.
+  // An array ingested through a temporary .vdb names the array here.
+  std::string source;
 };
 
 struct IngestStats {

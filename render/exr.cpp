@@ -417,6 +417,32 @@ StatusOr<ExrImage> ReadExr(const std::string& path) {
   }
 }
 
+Status VerifyExrTiles(const std::string& path) {
+  VOX_RETURN_IF_ERROR(CheckExrHeaders(path));
+  try {
+    Imf::TiledInputFile in(path.c_str());
+    VOX_RETURN_IF_ERROR(CheckSquareTiles(in, path));
+    if (!in.isComplete())
+      return CorruptionError(path + ": EXR is missing tiles (a partial render?)");
+    const auto& dw = in.header().dataWindow();
+    const std::string channel = in.header().channels().begin().name();
+    const size_t w = size_t(dw.max.x - dw.min.x + 1), tile = size_t(in.tileYSize());
+    std::vector<float> row(w * tile);
+    for (int ty = 0; ty < in.numYTiles(); ++ty) {
+      const ptrdiff_t y0 = ptrdiff_t(dw.min.y) + ptrdiff_t(ty) * ptrdiff_t(tile);
+      char* base = reinterpret_cast<char*>(row.data()) -
+                   (ptrdiff_t(dw.min.x) + y0 * ptrdiff_t(w)) * ptrdiff_t(sizeof(float));
+      Imf::FrameBuffer fb;
+      fb.insert(channel, Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * w));
+      in.setFrameBuffer(fb);
+      in.readTiles(0, in.numXTiles() - 1, ty, ty);
+    }
+    return OkStatus();
+  } catch (const std::exception& e) {
+    return IoError(path + ": cannot read EXR: " + e.what());
+  }
+}
+
 namespace {
 
 uint8_t ToSrgb8(float v) {

@@ -28,8 +28,8 @@
 // output ZIP at zlib's fastest level. A part of `--tiles I/N` holds only its
 // own tiles (the others are missing): it is an input of vox-merge, not an
 // image for other tools.
-// Header: string attributes vox:camera, vox:scene, vox:store, vox:split,
-// vox:part ("I/N"), vox:tileOrder, vox:storeId (the store's store_id, hex),
+// Header: string attributes vox:camera, vox:scene, vox:store, vox:split, vox:part ("I/N"),
+// vox:frame ("N/COUNT"), vox:tileOrder, vox:storeId (the store's store_id, hex),
 // plus renderTimeSeconds (float, as pbrt) and vox:timings (JSON), which are
 // patched in place after the last tile. With the camera's
 // ExrCameraAttributes (render/camera.h, StandardCameraAttributes: the frame
@@ -196,6 +196,11 @@ struct ExrImage {
   std::map<std::string, std::vector<float>> pixels;
 };
 StatusOr<ExrImage> ReadExr(const std::string& path);
+
+// Reads every tile of `path` (one channel, a row of tiles at a time: memory
+// of a row of tiles, whatever the image size): an error names the file when
+// a tile is missing or does not decode (a truncated or damaged file).
+Status VerifyExrTiles(const std::string& path);
 
 // The background behind pixel (x, y) (whole pixel coordinates from the
 // top-left), linear RGB, for composing a premultiplied image over it.

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <thread>
@@ -44,8 +45,6 @@ std::string ProgressLine(const ProgressSnapshot& s, double elapsed) {
   return buf;
 }
 
-namespace {
-
 // The EXR header's vox attributes: what was rendered, how, and from what.
 ExrAttributes FrameAttributes(const Renderer& renderer, const FrameOptions& options) {
   ExrAttributes attrs = options.attrs;
@@ -60,6 +59,39 @@ ExrAttributes FrameAttributes(const Renderer& renderer, const FrameOptions& opti
   attrs["software"] = "vox-render";
   return attrs;
 }
+
+std::string FrameDoneReason(const Renderer& renderer, const FrameOptions& options,
+                            const std::string& exr, const std::vector<std::string>& others) {
+  std::error_code ec;
+  if (!std::filesystem::exists(exr, ec)) return "no " + exr;
+  StatusOr<ExrInfo> info = ReadExrInfo(exr);
+  if (!info.ok()) return info.status().message();
+  for (const auto& [key, value] : FrameAttributes(renderer, options)) {
+    auto it = info->attrs.find(key);
+    if (it == info->attrs.end()) return exr + " has no " + key;
+    if (it->second != value) return exr + " has another " + key;
+  }
+  std::vector<std::string> channels;
+  for (int c = 0; c < kNumChannels; ++c)
+    if (renderer.layers().Has(c)) channels.push_back(ChannelName(c));
+  std::vector<std::string> have = info->channels;
+  std::sort(channels.begin(), channels.end());
+  std::sort(have.begin(), have.end());
+  if (have != channels || info->float_color != renderer.layers().float_color)
+    return exr + " has other channels";
+  if (Status s = VerifyExrTiles(exr); !s.ok()) return s.message();
+  const auto exr_time = std::filesystem::last_write_time(exr, ec);
+  if (ec) return exr + ": " + ec.message();
+  for (const std::string& p : others) {
+    const auto size = std::filesystem::file_size(p, ec);
+    if (ec || size == 0) return "no " + p;
+    if (std::filesystem::last_write_time(p, ec) < exr_time || ec)
+      return p + " is older than " + exr;
+  }
+  return "";
+}
+
+namespace {
 
 // The tiled EXR the frame's tiles go to (none without options.exr_path).
 StatusOr<std::unique_ptr<TiledExrWriter>> OpenFrameWriter(const Renderer& renderer,

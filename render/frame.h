@@ -17,6 +17,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "core/util/progress.h"
 #include "core/util/status.h"
@@ -87,6 +88,21 @@ struct FrameStats {
 // Renders the renderer's camera image (of its volume) as `options` say.
 // options.tile_size must be in kMinTileSize..kMaxTileSize.
 Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameStats* stats);
+
+// The EXR header's string attributes RenderFrame writes for `renderer` and
+// `options`: options.attrs, what was rendered (vox:camera, vox:scene,
+// vox:split, vox:passes, vox:part, vox:store) and software.
+ExrAttributes FrameAttributes(const Renderer& renderer, const FrameOptions& options);
+
+// Why the outputs already at `exr` (and `others`: the preview, the stats,
+// the saved camera) are not this frame, rendered as `renderer` and `options`
+// would render it, complete; "" when they are: the EXR has every string
+// attribute of FrameAttributes with the same value, the renderer's
+// channels, and every tile present and readable (VerifyExrTiles); each
+// other output exists, is not empty and is no older than the EXR (a frame's
+// outputs are published together, the EXR written first).
+std::string FrameDoneReason(const Renderer& renderer, const FrameOptions& options,
+                            const std::string& exr, const std::vector<std::string>& others);
 
 // The --stats document: rays by kind, DDA moves, transitions, bricks paged
 // in, cache hits and misses, timings. `extra_timings` adds named seconds

@@ -409,6 +409,24 @@ Status RenderJobFrame(const JobRun& run, const FrameOutputs& files, const Camera
   // The frame, into the EXR's temporary (and the kept image).
   FrameOptions frame = JobFrameOptions(options, run.stores, *renderer, budget, run.threads);
   frame.exr_path = files.exr;
+  // Which frame of the sequence: with the camera and the store's id, what
+  // --skip-done checks.
+  frame.attrs["vox:frame"] =
+      std::to_string(files.number) + "/" + std::to_string(run.sequence.count);
+  if (options.skip_done && !files.exr.empty()) {
+    std::vector<std::string> others;
+    for (const std::string* p : {&files.preview, &files.stats, &files.save_camera})
+      if (!p->empty()) others.push_back(*p);
+    const std::string why = FrameDoneReason(*renderer, frame, files.exr, others);
+    if (why.empty()) {
+      if (say)
+        fprintf(options.log,
+                "vox-render: %s is done (this frame of this job, every tile read): skipped\n",
+                files.exr.c_str());
+      return OkStatus();
+    }
+    if (say) fprintf(options.log, "vox-render: rendering %s: %s\n", files.exr.c_str(), why.c_str());
+  }
   if (run.keep) KeepImage(camera, options.layers, run.out, &frame);
   frame.interrupted = options.interrupted;
   // The EXR, the preview and the stats are published together, once all

@@ -99,6 +99,10 @@ struct RenderJobOptions {
   int turntable = 0;
   // --frames A-B: the frames of the sequence this run renders; unset: all.
   std::optional<FrameRange> frames;
+  // --skip-done: a frame whose outputs are already there, complete and
+  // verified as this frame of this job (FrameDoneReason, render/frame.h),
+  // is not rendered again; others are, replacing what is there.
+  bool skip_done = false;
   // Called with each frame's output paths when the frame comes, before
   // its work (vox-render's signal thread removes their temporaries).
   std::function<void(const std::vector<std::string>&)> on_outputs;

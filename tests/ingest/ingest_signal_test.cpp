@@ -5,6 +5,7 @@
 // directory) by the tool's VOX_INGEST_TEST_STALL hook. Also: a dead
 // --add-lod's pyramid temporary is stale, and an output holding its input is
 // refused.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -51,8 +52,10 @@ class IngestSignalTest : public ::testing::Test {
   }
   // Starts vox-ingest stalled mid-ingest; returns its pid once its temporary
   // store directory exists.
-  pid_t StartStalled(const std::string& out) {
+  // `err`: a file for its stderr (empty: the test's).
+  pid_t StartStalled(const std::string& out, const std::string& err = "", bool force = false) {
     std::vector<std::string> args = {VOX_INGEST_BINARY, vdb_, out, "--quiet", "--threads", "2"};
+    if (force) args.push_back("--force");
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -63,7 +66,14 @@ class IngestSignalTest : public ::testing::Test {
     for (auto& e : env_s) envp.push_back(e.data());
     envp.push_back(nullptr);
     pid_t pid = -1;
-    if (posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), envp.data()) != 0) return -1;
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    if (!err.empty())
+      posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC,
+                                       0644);
+    const int spawned = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), envp.data());
+    posix_spawn_file_actions_destroy(&actions);
+    if (spawned != 0) return -1;
     const std::string name = fs::path(out).filename().string();
     for (int i = 0; i < 3000 && Temporaries(dir_.path(), name).empty(); ++i)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -74,19 +84,44 @@ class IngestSignalTest : public ::testing::Test {
   std::string vdb_;
 };
 
+std::string Slurp(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+// The message says what was kept: nothing new, and a store --force was to
+// replace as it was (byte for byte).
 TEST_F(IngestSignalTest, TermAndIntRemoveTheTemporaryStore) {
+  const std::string err = dir_.File("err.txt"), old = dir_.File("old");
+  ASSERT_EQ(
+      std::system((std::string(VOX_INGEST_BINARY) + " " + vdb_ + " " + old + " --quiet").c_str()),
+      0);
+  const std::string old_index = Slurp(old + "/index.vxi");
+  ASSERT_FALSE(old_index.empty());
   for (int sig : {SIGTERM, SIGINT}) {
-    const std::string out = dir_.File("store");
-    pid_t pid = StartStalled(out);
-    ASSERT_GT(pid, 0);
-    ASSERT_EQ(Temporaries(dir_.path(), "store").size(), 1u) << "the ingest never started";
-    ASSERT_EQ(kill(pid, sig), 0);
-    int status = 0;
-    ASSERT_EQ(waitpid(pid, &status, 0), pid);
-    ASSERT_TRUE(WIFEXITED(status)) << "killed by signal " << WTERMSIG(status);
-    EXPECT_EQ(WEXITSTATUS(status), 128 + sig);
-    EXPECT_TRUE(Temporaries(dir_.path(), "store").empty());
-    EXPECT_FALSE(fs::exists(out));
+    for (bool replace : {false, true}) {
+      const std::string out = replace ? old : dir_.File("store");
+      const std::string name = fs::path(out).filename().string();
+      pid_t pid = StartStalled(out, err, replace);
+      ASSERT_GT(pid, 0);
+      ASSERT_EQ(Temporaries(dir_.path(), name).size(), 1u) << "the ingest never started";
+      ASSERT_EQ(kill(pid, sig), 0);
+      int status = 0;
+      ASSERT_EQ(waitpid(pid, &status, 0), pid);
+      ASSERT_TRUE(WIFEXITED(status)) << "killed by signal " << WTERMSIG(status);
+      EXPECT_EQ(WEXITSTATUS(status), 128 + sig);
+      EXPECT_TRUE(Temporaries(dir_.path(), name).empty());
+      const std::string what = sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)";
+      if (replace) {
+        EXPECT_EQ(Slurp(out + "/index.vxi"), old_index);
+        EXPECT_EQ(Slurp(err), "vox-ingest: test stall\n\nvox-ingest: " + what +
+                                  "; no store written: '" + out + "' is as it was before\n");
+      } else {
+        EXPECT_FALSE(fs::exists(out));
+        EXPECT_EQ(Slurp(err), "vox-ingest: test stall\n\nvox-ingest: " + what +
+                                  "; no store written at '" + out + "', nothing left behind\n");
+      }
+    }
   }
 }
 
@@ -164,8 +199,8 @@ TEST_F(IngestSignalTest, AnOutputHoldingTheInputIsRefused) {
   const std::string held = dir_.File("holder");
   fs::create_directories(held);
   fs::copy_file(vdb_, held + "/in.vdb");
-  const std::string cmd = std::string(VOX_INGEST_BINARY) + " " + held + "/in.vdb " + held +
-                          " --force --quiet 2>&1";
+  const std::string cmd =
+      std::string(VOX_INGEST_BINARY) + " " + held + "/in.vdb " + held + " --force --quiet 2>&1";
   FILE* p = popen(cmd.c_str(), "r");
   ASSERT_NE(p, nullptr);
   std::string output;

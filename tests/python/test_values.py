@@ -123,3 +123,20 @@ def test_ingest_array_reads_back_as_the_array(workdir):
     vox.ingest_array(a, path, voxel_size=0.5, origin=(-4, 2, 0), threshold=0.6, quiet=True)
     back = vox.read(path, ((-4, 2, 0), (20, 22, 16)))
     assert np.array_equal(back, np.where(a > 0.6, a, 0))
+
+
+def test_read_chunks_streams_a_region_above_max_bytes(store):
+    """A region refused whole (above max_bytes) streams in boxes, which put
+    together are vox.read of the region."""
+    box = ((-33, -20, -7), (31, 25, 9))
+    whole = vox.read(store, box, attr="normal")
+    with pytest.raises(RuntimeError, match="max_bytes"):
+        vox.read(store, box, attr="normal", max_bytes=100000)
+    got = np.full(whole.shape, np.nan, np.float32)
+    sizes = []
+    for lo, a in vox.read_chunks(store, box, chunk=(16, 20, 6), attr="normal", max_bytes=100000):
+        o = [lo[i] - box[0][i] for i in range(3)]
+        got[o[0]:o[0] + a.shape[0], o[1]:o[1] + a.shape[1], o[2]:o[2] + a.shape[2]] = a
+        sizes.append(a.nbytes)
+    assert np.array_equal(got, whole)
+    assert len(sizes) == 4 * 3 * 3 and max(sizes) == 16 * 20 * 6 * 3 * 4

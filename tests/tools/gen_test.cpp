@@ -403,6 +403,45 @@ TEST(GenStore, CancelledGenerationLeavesNoStore) {
   EXPECT_TRUE(t.Entries().empty());
 }
 
+// Interrupted once every brick is written, while the index and the pyramid
+// are (the cancel flag polled by the pyramid's finish): the whole store is
+// abandoned, the message says so (not only "no pyramid"), and the store
+// --force was to replace is as it was.
+TEST(GenStore, CancelledWhileFinishingKeepsTheEarlierStoreAndSaysSo) {
+  TempDir t;
+  const std::string s = t / "s";
+  ASSERT_TRUE(gen::Generate(Options("sphere", 32, s)).ok());
+  const std::string index = Slurp(s + "/index.vxi");
+  std::atomic<bool> cancel{false};
+  gen::GenerateOptions o = Options("fog", 128, s);
+  o.force = true;
+  o.cancel = &cancel;
+  uint64_t last_done = 0, total = 0;
+  auto st = gen::Generate(o, [&](const gen::GenerateProgressReport& r) {
+    EXPECT_GE(r.done, last_done);
+    last_done = r.done;
+    total = r.total;
+    if (r.done == r.total) cancel.store(true);
+  });
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(total, uint64_t(64));  // 2^(3 * brick level): bricks of 32^3
+  EXPECT_EQ(last_done, total);
+  EXPECT_EQ(st.status().message(), "interrupted; no store written: '" + s + "' is as it was before");
+  EXPECT_EQ(Slurp(s + "/index.vxi"), index);
+  EXPECT_EQ(t.Entries(), std::set<std::string>{"s"});
+  // Without an earlier store: nothing at all.
+  cancel.store(false);
+  o.output = t / "new";
+  o.force = false;
+  st = gen::Generate(o, [&](const gen::GenerateProgressReport& r) {
+    if (r.done == r.total) cancel.store(true);
+  });
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.status().message(),
+            "interrupted; no store written at '" + o.output + "', nothing left behind");
+  EXPECT_EQ(t.Entries(), std::set<std::string>{"s"});
+}
+
 // ------------------------------------------------------------ the program
 
 struct Result {

@@ -354,6 +354,12 @@ TEST_F(ValuesTest, NpyAndRawGiveTheStoreOfTheSameVdb) {
   auto r = testing::RunCommand(ingest + dir_.File("data.npy") + " " + dir_.File("npy.store"));
   ASSERT_EQ(r.code, 0) << r.output;
   ExpectSameStore(o.output, dir_.File("npy.store"));
+  {  // The store names the array as its source, not the temporary .vdb.
+    auto npy_store = Store::Open(dir_.File("npy.store"), OpenOptions{});
+    ASSERT_TRUE(npy_store.ok());
+    EXPECT_EQ((*npy_store)->meta().source_file,
+              dir_.File("data.npy") + " (an array, through a temporary .vdb, removed)");
+  }
   r = testing::RunCommand(ingest + "--shape 20,16,12 --dtype float32 " + dir_.File("data.raw") + " " +
                           dir_.File("raw.store"));
   ASSERT_EQ(r.code, 0) << r.output;

@@ -127,6 +127,8 @@ constexpr OptionSpec kIngestOptions[] = {
     {"--threshold", kValue, "F", kInputGroup,
      "fog volumes: occupied when active and density > F (default 0)"},
     {"--color", kValue, "GRID", kInputGroup, "a vec3s/vec3d grid sampled as each voxel's RGB colour"},
+    {"--source", kValue, "TEXT", kInputGroup,
+     "what the store records as its source (vox-info's source; default: the input file)"},
     {"--max-voxels", kValue, "N", kInputGroup,
      "the most voxels active tiles may expand to (default 1e10); a grid whose occupied tiles "
      "cover more is refused"},
@@ -176,6 +178,8 @@ Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::str
     o.levels = v;
   } else if (flag == "--color") {
     o.color_grid = v;
+  } else if (flag == "--source") {
+    o.source = v;
   } else if (flag == "--normal-bits") {
     if (!ParseInt(v, 8, 16, &o.normal_bits))
       return InvalidArgumentError("--normal-bits " + v +
@@ -237,6 +241,10 @@ constexpr OptionSpec kRenderOptions[] = {
     {"--frames", kValue, "A-B", kFramesGroup,
      "render frames A to B of the sequence (1-based, inclusive; or N: frame N alone), e.g. one "
      "chunk per Slurm array task"},
+    {"--skip-done", kSwitch, "", kFramesGroup,
+     "skip a frame whose outputs exist and are verified as this frame of this job (the EXR's "
+     "vox: header and every tile readable; the other outputs no older): a requeued task "
+     "renders only what is missing or partial"},
     {"-o", kValue, "out.exr", kOutputGroup,
      "output EXR (default render.exr); R G B A (half float, premultiplied) and Z (float, planar "
      "camera depth); docs/usage.md has the layout. A printf frame pattern (out.%04d.exr; also "
@@ -324,6 +332,8 @@ Status ApplyRenderFlag(RenderJobOptions* o, const std::string& a, const std::str
     o->layers.float_color = true;
   } else if (a == "--allow-huge") {
     o->allow_huge = true;
+  } else if (a == "--skip-done") {
+    o->skip_done = true;
   } else if (a == "--compression") {
     VOX_ASSIGN_OR_RETURN(o->compression, ParseExrCompression(v));
   } else if (a == "--io-threads") {

@@ -100,9 +100,10 @@ int ReportChild(const std::string& input, const std::string& output, pid_t child
   const int sig = WIFSIGNALED(status) ? WTERMSIG(status) : SIGKILL;
   RemoveOwnTemporaries(output, child);
   if (sig == SIGKILL || sig == SIGINT || sig == SIGTERM || sig == SIGHUP) {
-    std::fprintf(stderr, "vox-ingest: the ingest was killed by signal %d (%s)%s; its unfinished "
-                 "store is removed\n", sig, strsignal(sig),
-                 sig == SIGKILL ? ", perhaps for lack of memory" : "");
+    std::fprintf(stderr,
+                 "vox-ingest: the ingest was killed by signal %d (%s)%s; its unfinished "
+                 "store is removed\n",
+                 sig, strsignal(sig), sig == SIGKILL ? ", perhaps for lack of memory" : "");
     return 128 + sig;
   }
   std::fprintf(stderr,
@@ -192,11 +193,18 @@ void StartSignalThread(const std::string& output) {
   sigaddset(&set, SIGINT);
   sigaddset(&set, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);  // inherited by every thread created later
-  std::thread([set, output] {
+  // What an interrupted ingest keeps: the store is built in a temporary
+  // directory and replaces what is at the output (--force, --add-lod) only
+  // when complete, so the output is as it was before the run.
+  std::error_code ec;
+  const std::string kept = std::filesystem::exists(output, ec)
+                               ? "no store written: '" + output + "' is as it was before"
+                               : "no store written at '" + output + "', nothing left behind";
+  std::thread([set, output, kept] {
     int sig = 0;
     if (sigwait(&set, &sig) != 0) return;
-    std::fprintf(stderr, "\nvox-ingest: %s: removing the unfinished store and exiting\n",
-                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)");
+    std::fprintf(stderr, "\nvox-ingest: %s; %s\n",
+                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", kept.c_str());
     RemoveOwnTemporaries(output, getpid());
     std::_Exit(128 + sig);
   }).detach();

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <mutex>
 #include <new>
 #include <thread>
@@ -64,8 +65,12 @@ class BrickEnumerator {
       stack_.pop_back();
       const uint64_t s = uint64_t(1) << (levels_ - n.level);
       glm::dvec3 lo = glm::dvec3(n.c * s) - half_;
-      if (!shape_.MayOccupy(lo, lo + double(s - 1), band_)) continue;
+      if (!shape_.MayOccupy(lo, lo + double(s - 1), band_)) {
+        covered_ += uint64_t(1) << (3 * (brick_level_ - n.level));
+        continue;
+      }
       if (n.level == brick_level_) {
+        ++covered_;
         *brick = n.c;
         return true;
       }
@@ -76,6 +81,11 @@ class BrickEnumerator {
     return false;
   }
 
+  // The grid's volume decided so far (enumerated or skipped), in bricks, of
+  // Total(): the generation's progress.
+  uint64_t Covered() const { return covered_; }
+  uint64_t Total() const { return uint64_t(1) << (3 * brick_level_); }
+
  private:
   struct Node {
     glm::u64vec3 c;
@@ -85,6 +95,7 @@ class BrickEnumerator {
   const int levels_, brick_level_;
   const double band_, half_;
   std::vector<Node> stack_;
+  uint64_t covered_ = 0;
 };
 
 // Fills one brick's occupied voxels in Morton order: descends through the
@@ -92,8 +103,7 @@ class BrickEnumerator {
 class BrickFiller {
  public:
   BrickFiller(const Shape& shape, int levels, int depth, double band)
-      : shape_(shape), color_(shape.HasColor()), depth_(depth), band_(band),
-        half_(double(uint64_t(1) << (levels - 1))) {}
+      : shape_(shape), depth_(depth), band_(band), half_(double(uint64_t(1) << (levels - 1))) {}
 
   std::vector<BrickVoxel> Fill(const glm::u64vec3& brick) const {
     std::vector<BrickVoxel> out;
@@ -119,15 +129,11 @@ class BrickFiller {
           l.z |= ((digit >> 2) & 1) << j;
         }
         glm::u64vec3 v = o + l;
-        glm::dvec3 p = base + glm::dvec3(v);
-        double d = shape_.Distance(p);
-        if (d > -band_ && d <= 0) {
-          BrickVoxel bv;
+        BrickVoxel bv;
+        if (shape_.Voxel(base + glm::dvec3(v), band_, &bv.attr)) {
           bv.x = uint32_t(v.x);
           bv.y = uint32_t(v.y);
           bv.z = uint32_t(v.z);
-          bv.attr.normal = glm::vec3(shape_.Normal(p));
-          if (color_) bv.attr.color = glm::vec3(shape_.Color(p));
           out->push_back(bv);
         }
       }
@@ -139,7 +145,6 @@ class BrickFiller {
   }
 
   const Shape& shape_;
-  const bool color_;
   const int depth_;
   const double band_, half_;
 };
@@ -161,8 +166,7 @@ class StoreOccupancy {
       const glm::dvec3 lo = glm::dvec3((g >> uint64_t(k)) * s) - half_;
       if (!shape_.MayOccupy(lo, lo + double(s - 1), band_)) return false;
     }
-    const double d = shape_.Distance(glm::dvec3(g) - half_);
-    return d > -band_ && d <= 0;
+    return shape_.Voxel(glm::dvec3(g) - half_, band_, nullptr);
   }
 
  private:
@@ -228,13 +232,13 @@ std::string CanonicalOptions(const GenerateOptions& o) {
 
 namespace {
 
-// The store's meta for the shape: a level set of 2^n voxels per axis
-// centred on index 0, before its counts are known.
+// The store's meta for the shape: a level set (or a fog volume for a field)
+// of 2^n voxels per axis centred on index 0, before its counts are known.
 StoreMeta ShapeMeta(const GenerateOptions& o, const Shape& shape, int n, const Levels& lv) {
   StoreMeta meta;
   meta.source_file = "vox-gen:" + o.shape;
   meta.grid_name = o.shape;
-  meta.grid_class = GridClass::kLevelSet;
+  meta.grid_class = shape.IsField() ? GridClass::kFogVolume : GridClass::kLevelSet;
   meta.levels = n;
   meta.brick_level = lv.brick_level;
   meta.origin = glm::i64vec3(-int64_t(o.size / 2));
@@ -242,9 +246,11 @@ StoreMeta ShapeMeta(const GenerateOptions& o, const Shape& shape, int n, const L
   meta.index_to_world = glm::dmat4(vs);
   meta.index_to_world[3][3] = 1.0;
   meta.voxel_size = vs;
-  meta.has_normal = true;
+  meta.has_normal = !shape.IsField();
+  meta.has_density = shape.IsField();
   meta.has_color = shape.HasColor();
   meta.isovalue = 0.0;
+  meta.threshold = 0.0;  // fields: occupied where the density exceeds 0
   meta.build_options = CanonicalOptions(o);
   return meta;
 }
@@ -285,6 +291,14 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
       return OkStatus();
     };
   }
+  // What an interrupted run keeps: nothing new. The writer builds in a
+  // temporary directory (removed when it is destroyed) and replaces what
+  // is at the target only when the store is complete.
+  std::error_code ec;
+  const bool existed = std::filesystem::exists(o.output, ec);
+  const Status interrupted =
+      IoError(existed ? "interrupted; no store written: '" + o.output + "' is as it was before"
+                      : "interrupted; no store written at '" + o.output + "', nothing left behind");
   VOX_ASSIGN_OR_RETURN(std::unique_ptr<StoreWriter> writer,
                        StoreWriter::Create(o.output, meta, wo));
   if (o.lod) {
@@ -305,6 +319,7 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
   };
   struct Item {
     glm::u64vec3 brick{0};
+    uint64_t covered = 0;  // the enumerator's Covered() after this brick
     std::vector<BrickVoxel> voxels;
     std::shared_ptr<LodReducedBrick> lod;  // its share of the pyramid
   };
@@ -317,10 +332,10 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
             tbb::filter_mode::serial_in_order,
             [&](tbb::flow_control& fc) -> Item {
               Item it;
-              if (o.cancel != nullptr && o.cancel->load())
-                fail(IoError("interrupted; no store written at '" + o.output + "'"));
+              if (o.cancel != nullptr && o.cancel->load()) fail(interrupted);
               if (failed.load() || !bricks.Next(&it.brick)) fc.stop();
               else ++stats.candidate_bricks;
+              it.covered = bricks.Covered();
               return it;
             }) &
             tbb::make_filter<Item, Item>(tbb::filter_mode::parallel,
@@ -343,19 +358,33 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
             // One brick at a time, in enumeration order: the brick file's
             // layout does not depend on thread timing.
             tbb::make_filter<Item, void>(tbb::filter_mode::serial_in_order, [&](Item it) {
-              if (failed.load() || it.voxels.empty()) return;
-              const size_t count = it.voxels.size();
-              Status s = writer->AddBrick(it.brick, std::move(it.voxels));
-              if (s.ok() && lod) s = lod->Take(it.lod);
-              if (!s.ok()) return fail(s);
-              ++stats.bricks;
-              stats.voxels += count;
-              if (progress) progress(stats.bricks, stats.voxels);
+              if (failed.load()) return;
+              if (!it.voxels.empty()) {
+                const size_t count = it.voxels.size();
+                Status s = writer->AddBrick(it.brick, std::move(it.voxels));
+                if (s.ok() && lod) s = lod->Take(it.lod);
+                if (!s.ok()) return fail(s);
+                ++stats.bricks;
+                stats.voxels += count;
+              }
+              if (progress && it.covered < bricks.Total())  // the last report follows the loop
+                progress({it.covered, bricks.Total(), stats.bricks, stats.voxels});
             }));
   });
-  if (!first_error.ok()) return first_error;  // the writer's destructor removes its temp dir
+  if (progress && first_error.ok()) {
+    progress({bricks.Total(), bricks.Total(), stats.bricks, stats.voxels});
+  }
+  // The writer's destructor removes its temporary directory. Interrupted,
+  // whichever step noticed first (the pyramid's reduction polls the flag
+  // too), the whole store is abandoned.
+  if (!first_error.ok())
+    return o.cancel != nullptr && o.cancel->load() ? interrupted : first_error;
   const double t2 = Now();
-  VOX_RETURN_IF_ERROR(writer->Finish());
+  if (Status s = writer->Finish(); !s.ok()) {
+    // Interrupted while the index or the pyramid was written: the store as
+    // a whole is abandoned, not only the pyramid.
+    return o.cancel != nullptr && o.cancel->load() ? interrupted : s;
+  }
   const double t3 = Now();
   meta.voxel_count = stats.voxels;
   meta.brick_count = stats.bricks;

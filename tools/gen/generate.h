@@ -1,6 +1,7 @@
 // vox::gen::Generate: writes a procedural shape (tools/gen/shapes.h) as a
-// level-set vox store, brick by brick, in memory independent of the grid's
-// size and of the store's voxel count.
+// level-set vox store, or a scalar field as a fog-volume store, brick by
+// brick, in memory independent of the grid's size and of the store's voxel
+// count.
 //
 // Bricks are enumerated depth-first in Morton order from the root, descending
 // only into octants the shape may occupy (Shape::MayOccupy), so the work and
@@ -13,8 +14,9 @@
 //
 // Reproducible: the same options give a byte-identical store (the store id
 // is a hash of the options, bricks are appended in a fixed order). A failed
-// or interrupted run leaves no store at the target (StoreWriter builds in a
-// temporary directory).
+// or interrupted run leaves no store at the target, and what was there before
+// (with force) as it was: StoreWriter builds in a temporary directory and
+// replaces the target only when done. An interrupted run's status says which.
 //
 // Option errors name vox-gen's flags (--size, --levels, --band ...).
 // Thread safety: Generate() may be called from any thread; it runs in its own
@@ -78,8 +80,18 @@ struct GenerateStats {
   double seconds_lod = 0;      // building them (part of seconds_finish)
 };
 
-// Called from one thread at a time, after each brick in order.
-using GenerateProgress = std::function<void(uint64_t bricks, uint64_t voxels)>;
+// A progress report: the grid's volume decided so far (`done` of `total`,
+// in bricks: enumerated, or skipped as empty), and the bricks and voxels
+// written. The fraction done / total is the fraction of the grid's Morton
+// order behind the generator.
+struct GenerateProgressReport {
+  uint64_t done = 0, total = 0;
+  uint64_t bricks = 0, voxels = 0;
+};
+// Called from one thread at a time, after each candidate brick in order, and
+// once with done == total when every brick is written (then the index and
+// the pyramid are finished).
+using GenerateProgress = std::function<void(const GenerateProgressReport&)>;
 
 StatusOr<GenerateStats> Generate(const GenerateOptions& options,
                                  const GenerateProgress& progress = nullptr);

@@ -1,15 +1,15 @@
-// vox-gen: writes a procedural level-set shape as a vox store, brick by brick,
+// vox-gen: writes a procedural level-set shape or fog field as a vox store, brick by brick,
 // in memory independent of the store's size (tools/gen/generate.h).
 //   vox-gen SHAPE store/ --size N [options]    (kOptions below; vox-gen --help)
 // Exit codes: 0 done, 1 the generation failed or was interrupted, 2 bad command line.
 #include <signal.h>
 
 #include <atomic>
-#include <chrono>
 #include <cstdio>
 #include <string>
 #include <vector>
 
+#include "core/util/progress.h"
 #include "tools/common/cli.h"
 #include "tools/common/flags.h"
 #include "tools/common/tool_main.h"
@@ -42,8 +42,8 @@ constexpr vox::OptionSpec kOptions[] = {
 
 const vox::CommandLineSpec kCommandLine{
     "vox-gen", "vox-gen SHAPE store/ --size N [options]",
-    "Writes a procedural level-set shape as the vox store store/, brick by brick, in memory "
-    "independent of the store's size.",
+    "Writes a procedural level-set shape or fog field as the vox store store/, brick by brick, "
+    "in memory independent of the store's size.",
     kOptions,
     "SHAPE is one of:\n"
     "  sphere  a level-set sphere shell (like vdb_tool -sphere)\n"
@@ -52,10 +52,15 @@ const vox::CommandLineSpec kCommandLine{
     "          on disk against the sphere's 1: big stores, fast)\n"
     "  pair    two spheres of 250 voxels radius half the grid apart, the rest empty (a\n"
     "          sparse volume: --size 2048 and up)\n"
+    "  fog     a fog volume: the unit ball of density 1 - (r/R)^2 (dense: half the grid)\n"
+    "  noise   a fog volume: clouds of multi-octave noise over the whole grid (a fifth of it)\n"
     "The first three are the unit sphere, 15/16 of the grid across, centred on index 0 (world\n"
     "about [-1,1]^3); all have voxel size 32/(15 N); occupied voxels are those whose centre's signed distance\n"
-    "d (voxels) has -W < d <= 0, with normals. Exit codes: 0 done, 1 the generation failed or\n"
-    "was interrupted, 2 bad command line.\n"};
+    "d (voxels) has -W < d <= 0, with normals; the fields' are those whose density is above 0,\n"
+    "with their density. Progress: the percentage of the grid done and the time left.\n"
+    "Interrupted (SIGINT, SIGTERM, SIGHUP), it writes no store and leaves what was at store/\n"
+    "as it was, and says so. Exit codes: 0 done, 1 the generation failed or was interrupted,\n"
+    "2 bad command line.\n"};
 
 struct GenCommand {
   vox::gen::GenerateOptions options;
@@ -106,10 +111,6 @@ int UsageError(const std::string& message) {
 std::atomic<bool> g_cancel{false};
 extern "C" void OnSignal(int) { g_cancel.store(true); }
 
-double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
 }  // namespace
 
 static int RunTool(int argc, char** argv) {
@@ -138,17 +139,36 @@ static int RunTool(int argc, char** argv) {
   sigaction(SIGHUP, &sa, nullptr);
   o.cancel = &g_cancel;
 
-  double last = Now();
-  auto progress = [&](uint64_t bricks, uint64_t voxels) {
-    double now = Now();
-    if (now - last < 2.0) return;
-    last = now;
-    std::fprintf(stderr, "vox-gen: %llu bricks, %llu voxels\n", (unsigned long long)bricks,
-                 (unsigned long long)voxels);
+  // A bar on a terminal, a line per 10% otherwise: the grid's volume
+  // decided so far, and the time left at the rate so far.
+  vox::Progress display(vox::ChooseProgressMode(stderr, quiet), stderr);
+  vox::gen::GenerateProgressReport last;
+  const auto text = [&last](double elapsed) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "vox-gen: %3d%% of the grid, %s bricks, %s voxels",
+                  int(last.done * 100 / last.total),
+                  vox::Progress::Count(double(last.bricks)).c_str(),
+                  vox::Progress::Count(double(last.voxels)).c_str());
+    std::string t = buf;
+    if (last.done > 0 && last.done < last.total && elapsed >= 1.0)
+      t += ", " +
+           vox::Progress::Duration(elapsed * double(last.total - last.done) / double(last.done)) +
+           " left";
+    return t;
+  };
+  auto progress = [&](const vox::gen::GenerateProgressReport& r) {
+    last = r;
+    if (r.done < r.total) return display.Update(r.done, r.total, text);
+    display.Finish(r.done, r.total, text);
+    display.Message(o.lod ? "vox-gen: writing the index and the level-of-detail pyramid"
+                          : "vox-gen: writing the index");
   };
   auto stats = quiet ? vox::gen::Generate(o) : vox::gen::Generate(o, progress);
   if (!stats.ok()) {
-    std::fprintf(stderr, "vox-gen: %s\n", stats.status().ToString().c_str());
+    // An interrupted run's message says what was kept, as it is.
+    const vox::Status& status = stats.status();
+    std::fprintf(stderr, "vox-gen: %s\n",
+                 g_cancel.load() ? status.message().c_str() : status.ToString().c_str());
     return 1;
   }
   if (!quiet) {

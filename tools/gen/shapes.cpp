@@ -190,10 +190,101 @@ class Bumpy : public Shape {
   std::vector<Wave> waves_;
 };
 
+// A scalar field: a fog volume whose voxels are occupied where Density > 0.
+class Field : public Shape {
+ public:
+  double Distance(const glm::dvec3& p) const override { return -Density(p); }
+  glm::dvec3 Normal(const glm::dvec3&) const override { return glm::dvec3(0); }
+  bool IsField() const override { return true; }
+};
+
+// 1 - |p|^2 / r^2 inside the ball of radius r voxels.
+class FogBall : public Field {
+ public:
+  explicit FogBall(double r) : r_(r) {}
+  double Density(const glm::dvec3& p) const override {
+    return 1.0 - (p.x * p.x + p.y * p.y + p.z * p.z) / (r_ * r_);
+  }
+  // Exact: the box's point nearest the centre (as Sphere::MayOccupy).
+  bool MayOccupy(const glm::dvec3& lo, const glm::dvec3& hi, double) const override {
+    const glm::dvec3 near = glm::clamp(glm::dvec3(0), lo, hi);
+    return Density(near) > 0;
+  }
+
+ private:
+  double r_;
+};
+
+// (n(p) - kThreshold) / (1 - kThreshold) where n = 0.5 + sum of plane waves
+// exceeds kThreshold (shapes.h). n is L-Lipschitz with L = sum a_i |k_i|.
+class Noise : public Field {
+ public:
+  static constexpr int kOctaves = 6, kWavesPerOctave = 3;
+  static constexpr double kLongestWavelength = 0.5, kThreshold = 0.6;  // world units; n
+
+  explicit Noise(double voxel_size) {
+    uint64_t seed = 0x766f782d666f6731ull;  // "vox-fog1"
+    double octave_sum = 0;
+    for (int o = 0; o < kOctaves; ++o) octave_sum += 1.0 / double(1 << o);
+    const double a0 = 0.5 / (kWavesPerOctave * octave_sum);  // the amplitudes add up to 0.5
+    for (int o = 0; o < kOctaves; ++o) {
+      for (int w = 0; w < kWavesPerOctave; ++w) {
+        const double z = 2 * Uniform(&seed) - 1, t = 2 * std::numbers::pi * Uniform(&seed);
+        const double s = std::sqrt(std::max(0.0, 1 - z * z));
+        const glm::dvec3 dir(s * std::cos(t), s * std::sin(t), z);
+        const double kw = 2 * std::numbers::pi / (kLongestWavelength / double(1 << o));  // world
+        Wave v;
+        v.k = dir * (kw * voxel_size);  // per voxel
+        v.a = a0 / double(1 << o);
+        v.phase = 2 * std::numbers::pi * Uniform(&seed);
+        waves_.push_back(v);
+        lipschitz_ += v.a * kw * voxel_size;
+      }
+    }
+  }
+  double Density(const glm::dvec3& p) const override {
+    return (Value(p) - kThreshold) / (1 - kThreshold);
+  }
+  bool MayOccupy(const glm::dvec3& lo, const glm::dvec3& hi, double) const override {
+    const double h = glm::length(hi - lo) * 0.5;
+    return Value((lo + hi) * 0.5) + lipschitz_ * h + 1e-9 > kThreshold;
+  }
+
+ private:
+  struct Wave {
+    glm::dvec3 k;
+    double a = 0, phase = 0;
+  };
+  double Value(const glm::dvec3& p) const {
+    double n = 0.5;
+    for (const Wave& w : waves_) n += w.a * std::sin(glm::dot(w.k, p) + w.phase);
+    return n;
+  }
+  std::vector<Wave> waves_;
+  double lipschitz_ = 0;
+};
+
 }  // namespace
 
+bool Shape::Voxel(const glm::dvec3& p, double band, VoxelAttributes* attr) const {
+  if (IsField()) {
+    const double density = Density(p);
+    if (!(density > 0)) return false;
+    if (attr != nullptr) attr->density = float(density);
+    return true;
+  }
+  const double d = Distance(p);
+  if (!(d > -band && d <= 0)) return false;
+  if (attr != nullptr) {
+    attr->normal = glm::vec3(Normal(p));
+    if (HasColor()) attr->color = glm::vec3(Color(p));
+  }
+  return true;
+}
+
 const std::vector<std::string>& ShapeNames() {
-  static const std::vector<std::string> names = {"sphere", "bumpy", "rough", "pair"};
+  static const std::vector<std::string> names = {"sphere", "bumpy", "rough", "pair", "fog",
+                                                 "noise"};
   return names;
 }
 
@@ -210,6 +301,8 @@ StatusOr<std::unique_ptr<Shape>> MakeShape(const std::string& name, uint64_t siz
   if (name == "rough") return std::unique_ptr<Shape>(new Rough(RadiusVoxels(size)));
   if (name == "bumpy")
     return std::unique_ptr<Shape>(new Bumpy(RadiusVoxels(size), VoxelSize(size)));
+  if (name == "fog") return std::unique_ptr<Shape>(new FogBall(RadiusVoxels(size)));
+  if (name == "noise") return std::unique_ptr<Shape>(new Noise(VoxelSize(size)));
   std::string known;
   for (const std::string& n : ShapeNames()) known += (known.empty() ? "" : ", ") + n;
   return InvalidArgumentError("unknown shape '" + name + "' (known: " + known + ")");
