@@ -50,35 +50,39 @@ bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volu
 
 namespace {
 
-// Fog crosses a brick whose voxels are all occupied and of one density (the
-// inside of a fog volume) as one cell: the integral over the brick is the
-// same, and the walk skips the brick's other voxels (Visit::kSkipBrick, a
-// second-step grid at a time) without reading them.
-class UniformBricks {
+// Fog crosses an aligned block of voxels that are all occupied and of one
+// density (the inside of a fog volume; Volume::PinnedDensity finds them in
+// the brick) as one cell: the integral over the block is the same, and the
+// walk skips the block's other voxels (Visit::kSkipBrick, a second-step grid
+// at a time) without reading them.
+class UniformBlocks {
  public:
-  // Hit h of level `level` lies in the brick last entered whole.
+  // Hit h of level `level` lies in the block last entered.
   bool Covers(const Hit& h, int level) const {
-    return h.brick_data == data_ && h.brick == brick_ && level == level_ && h.brick_data != nullptr;
+    return h.brick_data == data_ && data_ != nullptr && level == level_ &&
+           glm::i64vec3(h.voxel.x >> levels_, h.voxel.y >> levels_, h.voxel.z >> levels_) == box_;
   }
-  // Where the ray leaves hit h's brick of 2^levels cells a side (level
+  // Where the ray leaves hit h's block of 2^levels cells a side (level
   // `level`'s cells, 2^level voxels a side; gr in voxels), at most t_end;
-  // later hits in the brick are covered.
-  double Enter(const Ray& gr, const Hit& h, int level, int levels, double t_end) {
+  // later hits in the block are covered. Returns the walk's answer there:
+  // skip the second-step grid (n2 levels) when it lies inside the block,
+  // else go on to the next hit.
+  double Enter(const Ray& gr, const Hit& h, int level, int levels, int n2, double t_end) {
     data_ = h.brick_data;
-    brick_ = h.brick;
     level_ = level;
+    levels_ = levels;
+    box_ = glm::i64vec3(h.voxel.x >> levels, h.voxel.y >> levels, h.voxel.z >> levels);
+    skip_ = n2 <= levels ? Visit::kSkipBrick : Visit::kNext;
     const double s = std::ldexp(1.0, -(level + levels));
-    const glm::i64vec3 box(h.voxel.x >> levels, h.voxel.y >> levels, h.voxel.z >> levels);
-    return std::min(t_end, VoxelExitT(Ray{gr.origin * s, gr.dir * s}, box));
+    return std::min(t_end, VoxelExitT(Ray{gr.origin * s, gr.dir * s}, box_));
   }
-  // The walk's answer in a covered brick: skip the second-step grid (n2
-  // levels) when it lies inside the brick, else go on to the next hit.
-  static Visit Skip(int n2, int levels) { return n2 <= levels ? Visit::kSkipBrick : Visit::kNext; }
+  Visit skip() const { return skip_; }
 
  private:
   const void* data_ = nullptr;
-  uint32_t brick_ = kNoBrick;
-  int level_ = -1;
+  int level_ = -1, levels_ = 0;
+  glm::i64vec3 box_{0};
+  Visit skip_ = Visit::kNext;
 };
 
 }  // namespace
@@ -88,26 +92,22 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
   const double sigma_t = scene_.volume.absorption + scene_.volume.scattering;
   const bool has_density = volume_->meta().has_density;
   double tau = 0.0;
-  UniformBricks uniform;
-  Visit uniform_skip = Visit::kNext;  // in the brick `uniform` covers
+  UniformBlocks uniform;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     // Level of detail: each coarse cell's mean density over its segment.
     Status s = lod_->Traverse(
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
           if (seg.t0 >= t_max) return Visit::kStop;
-          if (uniform.Covers(seg.hit, seg.level)) return uniform_skip;
+          if (uniform.Covers(seg.hit, seg.level)) return uniform.skip();
           double t1 = seg.t1, rho = 1.0;
           int levels = -1;
           if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume, &levels))
             return Visit::kStop;
-          if (levels >= 0) {
-            t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.t_end);
-            uniform_skip = UniformBricks::Skip(seg.n2, levels);
-          }
+          if (levels >= 0) t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.n2, seg.t_end);
           tau += sigma_t * rho * std::max(0.0, std::min(t1, t_max) - seg.t0);
           if (!(tau <= kMaxShadowOpticalDepth)) return Visit::kStop;
-          return levels >= 0 ? uniform_skip : Visit::kNext;
+          return levels >= 0 ? uniform.skip() : Visit::kNext;
         },
         &cx.c->trace);
     if (!s.ok()) cx.Fail(s);
@@ -117,18 +117,15 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
       gr,
       [&](const Hit& h) {
         if (h.t >= t_max) return Visit::kStop;
-        if (uniform.Covers(h, 0)) return uniform_skip;
+        if (uniform.Covers(h, 0)) return uniform.skip();
         double rho = 1.0;
         int levels = -1;
         if (has_density && !Density(h, cx, &rho, nullptr, &levels)) return Visit::kStop;
         double t1 = VoxelExitT(gr, h.voxel);
-        if (levels >= 0) {
-          t1 = uniform.Enter(gr, h, 0, levels, kInf);
-          uniform_skip = UniformBricks::Skip(cx.tracer->n2(), levels);
-        }
+        if (levels >= 0) t1 = uniform.Enter(gr, h, 0, levels, cx.tracer->n2(), kInf);
         tau += sigma_t * rho * std::max(0.0, std::min(t1, t_max) - h.t);
         if (!(tau <= kMaxShadowOpticalDepth)) return Visit::kStop;
-        return levels >= 0 ? uniform_skip : Visit::kNext;
+        return levels >= 0 ? uniform.skip() : Visit::kNext;
       },
       &cx.c->trace);
   if (!s.ok()) cx.Fail(s);
@@ -356,41 +353,34 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
     trans *= seg_trans;
     return !cx.failed() && tau <= kMaxOpticalDepth;
   };
-  UniformBricks uniform;
-  Visit uniform_skip = Visit::kNext;  // in the brick `uniform` covers
+  UniformBlocks uniform;
   Status s;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     s = lod_->Traverse(
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
-          if (uniform.Covers(seg.hit, seg.level)) return uniform_skip;
+          if (uniform.Covers(seg.hit, seg.level)) return uniform.skip();
           double t1 = seg.t1, rho = 1.0;
           int levels = -1;
           if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume, &levels))
             return Visit::kStop;
-          if (levels >= 0) {
-            t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.t_end);
-            uniform_skip = UniformBricks::Skip(seg.n2, levels);
-          }
+          if (levels >= 0) t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.n2, seg.t_end);
           if (!cell(seg.t0, t1, rho)) return Visit::kStop;
-          return levels >= 0 ? uniform_skip : Visit::kNext;
+          return levels >= 0 ? uniform.skip() : Visit::kNext;
         },
         &cx.c->trace);
   } else {
     s = cx.tracer->Traverse(
         gr,
         [&](const Hit& h) {
-          if (uniform.Covers(h, 0)) return uniform_skip;
+          if (uniform.Covers(h, 0)) return uniform.skip();
           double rho = 1.0;
           int levels = -1;
           if (has_density && !Density(h, cx, &rho, nullptr, &levels)) return Visit::kStop;
           double t1 = VoxelExitT(gr, h.voxel);
-          if (levels >= 0) {
-            t1 = uniform.Enter(gr, h, 0, levels, kInf);
-            uniform_skip = UniformBricks::Skip(cx.tracer->n2(), levels);
-          }
+          if (levels >= 0) t1 = uniform.Enter(gr, h, 0, levels, cx.tracer->n2(), kInf);
           if (!cell(h.t, t1, rho)) return Visit::kStop;
-          return levels >= 0 ? uniform_skip : Visit::kNext;
+          return levels >= 0 ? uniform.skip() : Visit::kNext;
         },
         &cx.c->trace);
   }

@@ -56,9 +56,10 @@ class Volume {
   }
   // HitAttributes(hit).density read straight from the hit's pinned brick,
   // for fog's inner loop; false when this volume cannot (then ask
-  // HitAttributes, which also gives the error). *uniform_levels: when every
-  // voxel of the hit's brick is occupied and of this density, the brick's
-  // levels (it spans 2^levels voxels a side, aligned), else -1.
+  // HitAttributes, which also gives the error). *uniform_levels: the levels
+  // of the largest aligned block of 2^levels voxels a side around the hit,
+  // within its brick, whose voxels are all occupied and of this density;
+  // -1 when there is none (of at least 2^3 voxels).
   virtual bool PinnedDensity(const Hit& /*hit*/, float* /*density*/, int* /*uniform_levels*/) {
     return false;
   }

@@ -221,15 +221,6 @@ VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t fl
   return a;
 }
 
-float UniformDensity(const uint8_t* planes, uint32_t count, uint8_t flags) {
-  if (!(flags & kAttrDensity) || count == 0) return -1.0f;
-  const uint8_t* p = planes + ((flags & kAttrNormal) ? size_t(4) * count : 0);
-  for (int b = 0; b < 4; ++b, p += count)
-    if (std::memcmp(p, p + 1, count - 1) != 0) return -1.0f;  // (each byte equals the next)
-  const float d = ReadDensity(planes, count, flags, 0);
-  return d >= 0 && std::isfinite(d) ? d : -1.0f;
-}
-
 void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
                      int normal_bits) {
   const uint32_t count = uint32_t(attrs.size());
@@ -320,6 +311,62 @@ struct MaskChecker {
 
 }  // namespace
 
+namespace {
+
+// Sets b's uniform_density, or its uniform_levels: bottom-up, each full
+// cell's one density (or -1); top-down, each cell's largest block of one
+// density around it. `level_start[l]`: the first cell of level l (level
+// order), level_start[depth] the cell count.
+void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) {
+  const uint32_t n = uint32_t(b->cells.size());
+  thread_local std::vector<float> one;  // per cell: its density when of one, else -1
+  thread_local std::vector<int8_t> levels;  // per cell: its block's levels, or -1
+  one.assign(n, -1.0f);
+  const uint8_t* planes = b->attr_planes.data();
+  bool any = false;
+  for (int l = depth - 1; l >= 0; --l)
+    for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {
+      const CompactCell c = b->cells[i];
+      if (ChildMask(c) != 0xffu) continue;
+      const uint32_t first = c.bits >> 8;
+      float d;
+      if (l == depth - 1) {
+        d = ReadDensity(planes, b->voxel_count, b->flags, first);
+        for (uint32_t k = 1; k < 8 && d >= 0; ++k)
+          if (std::bit_cast<uint32_t>(ReadDensity(planes, b->voxel_count, b->flags, first + k)) !=
+              std::bit_cast<uint32_t>(d))
+            d = -1.0f;
+        if (!(d >= 0 && std::isfinite(d))) d = -1.0f;
+      } else {
+        d = one[first];
+        for (uint32_t k = 1; k < 8 && d >= 0; ++k)
+          if (one[first + k] != d) d = -1.0f;
+      }
+      one[i] = d;
+      any = any || d >= 0;
+    }
+  if (!any) return;
+  if (one[0] >= 0) {  // the root: the whole brick
+    b->uniform_density = one[0];
+    return;
+  }
+  levels.assign(n, -1);
+  b->uniform_levels.assign(b->voxel_count, DecodedBrick::kNotUniform);
+  for (int l = 0; l < depth; ++l)
+    for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {
+      int8_t mine = levels[i] >= 0 ? levels[i] : one[i] >= 0 ? int8_t(depth - l) : int8_t(-1);
+      const CompactCell c = b->cells[i];
+      const uint32_t first = c.bits >> 8, kids = Popcount8(ChildMask(c));
+      if (l < depth - 1) {
+        for (uint32_t k = 0; k < kids; ++k) levels[first + k] = mine;
+      } else if (mine >= 0) {
+        for (uint32_t k = 0; k < kids; ++k) b->uniform_levels[first + k] = uint8_t(mine);
+      }
+    }
+}
+
+}  // namespace
+
 StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_t n,
                                                        const BrickEntry& entry, int depth,
                                                        uint8_t flags) {
@@ -386,8 +433,7 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
   UndeltaPlanes(planes, b->attr_planes.data(), voxel_count, flags);
   b->voxel_count = voxel_count;
   b->flags = flags;
-  if (depth * 3 < 32 && voxel_count == uint32_t(1) << (3 * depth))
-    b->uniform_density = UniformDensity(b->attr_planes.data(), voxel_count, flags);
+  if (flags & kAttrDensity) FindUniformBlocks(b.get(), depth, start);
   return b;
 }
 

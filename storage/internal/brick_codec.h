@@ -47,8 +47,6 @@ inline float DecodeCoverage(uint16_t q) { return float(q) / 65535.0f; }
 // A voxel's attributes from planar attribute bytes (`count` voxels).
 VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
                                uint32_t index);
-// The density all `count` voxels share, or -1 when they differ (or carry none).
-float UniformDensity(const uint8_t* planes, uint32_t count, uint8_t flags);
 // The same voxel's density alone (0 without kAttrDensity): fog reads one per
 // cell it crosses, so this skips the other attributes.
 inline float ReadDensity(const uint8_t* planes, uint32_t count, uint8_t flags, uint32_t index) {
@@ -81,19 +79,29 @@ struct DecodedBrick {
   // inside of a fog volume): that density, else -1. A ray crosses such a
   // brick as one cell.
   float uniform_density = -1.0f;
+  // Otherwise, for bricks with densities: per voxel (payload order), the
+  // levels of the largest aligned block around it (2^levels voxels a side,
+  // within the brick) whose voxels are all occupied and of one density, or
+  // kNotUniform; empty when the brick has no such block of 2^3 voxels.
+  std::vector<uint8_t, BrickAllocator<uint8_t>> uniform_levels;
+  static constexpr uint8_t kNotUniform = 0xff;
   // What it costs in memory: this struct, its two blocks (a pool block's
   // whole size, or the heap block's capacity), and the shared_ptr control
   // block make_shared puts beside it. (The cache adds its own per-entry
   // overhead; see ShardedPageCache.)
   size_t charge() const {
     return sizeof(DecodedBrick) + BrickBlockBytes(cells.data(), cells.capacity() * sizeof(CompactCell)) +
-           BrickBlockBytes(attr_planes.data(), attr_planes.capacity()) + kOverheadBytes;
+           BrickBlockBytes(attr_planes.data(), attr_planes.capacity()) +
+           (uniform_levels.empty() ? 0 : BrickBlockBytes(uniform_levels.data(), uniform_levels.capacity())) +
+           kOverheadBytes;
   }
-  // The most charge() can be for a brick of `cells` cells and `attr_bytes`
-  // attribute bytes (both arrays in pool blocks).
-  static size_t MaxCharge(uint64_t cells, uint64_t attr_bytes) {
+  // The most charge() can be for a brick of `cells` cells, `attr_bytes`
+  // attribute bytes and `voxels` voxels with densities (all arrays in pool
+  // blocks).
+  static size_t MaxCharge(uint64_t cells, uint64_t attr_bytes, uint64_t density_voxels) {
     return sizeof(DecodedBrick) + BufferPool::BlockSize(cells * sizeof(CompactCell)) +
-           BufferPool::BlockSize(attr_bytes) + kOverheadBytes;
+           BufferPool::BlockSize(attr_bytes) +
+           (density_voxels > 0 ? BufferPool::BlockSize(density_voxels) : 0) + kOverheadBytes;
   }
   static constexpr size_t kOverheadBytes = 16 + 3 * 16 + 64 + 8 + 32;
 };

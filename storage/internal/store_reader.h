@@ -94,7 +94,8 @@ class StoreImpl : public Store {
       *uniform_levels = depth_;
     } else {
       *density = ReadDensity(b->attr_planes.data(), b->voxel_count, b->flags, hit.payload);
-      *uniform_levels = -1;
+      const uint8_t l = b->uniform_levels.empty() ? DecodedBrick::kNotUniform : b->uniform_levels[hit.payload];
+      *uniform_levels = l == DecodedBrick::kNotUniform ? -1 : int(l);
     }
     return true;
   }
@@ -226,7 +227,8 @@ class StoreImpl : public Store {
   // The most the cache charges for the brick of entry `e` once decoded
   // (DecodedBrick::MaxCharge: its arrays in whole pool blocks).
   uint64_t DecodedCharge(const BrickEntry& e) const {
-    return DecodedBrick::MaxCharge(e.num_cells, uint64_t(e.voxel_count) * AttrBytesPerVoxel(flags_));
+    return DecodedBrick::MaxCharge(e.num_cells, uint64_t(e.voxel_count) * AttrBytesPerVoxel(flags_),
+                                   (flags_ & kAttrDensity) ? e.voxel_count : 0);
   }
   // A brick is decoded only if it fits what the budget gives one brick: the
   // brick cache's capacity, or kMinBrickAllowance if that is smaller (a tiny

@@ -59,8 +59,8 @@ class FogTest : public ::testing::Test {
     meta.brick_level = 3;
     meta.has_normal = false;
     // "store": the box of even density. "mottled": the same box whose voxels
-    // alternate between two densities a part in 10^6 apart, so that no brick
-    // is of one density.
+    // alternate between two densities a part in 10^6 apart, so that no block
+    // of voxels is of one density.
     for (const char* name : {"store", "mottled"}) {
       const bool mottled = std::string(name) == "mottled";
       std::vector<MemoryVoxel> voxels;
@@ -238,10 +238,11 @@ TEST_F(FogTest, ThickFogStaysWithinOnePercent) {
   EXPECT_LT(e.rmse_over_mean, 0.01) << "max " << e.max_abs << " mean " << e.mean;
 }
 
-// A brick whose voxels are all of one density is crossed as one cell, by
-// primary and transmittance rays, exact or with the pyramid: the image is the
-// one of walking its voxels (the mottled box's, whose bricks all differ
-// within), for a fraction of the density reads.
+// A block of voxels all of one density (a whole brick, or an aligned block
+// inside one at the box's edges) is crossed as one cell, by primary and
+// transmittance rays, exact or with the pyramid: the image is the one of
+// walking its voxels (the mottled box's, where no two neighbours share a
+// density), for a fraction of the density reads.
 TEST_F(FogTest, EvenBricksAreCrossedWhole) {
   for (double lod : {0.0, 1.0}) {
     RenderCounters even_c, mottled_c;
