@@ -131,12 +131,13 @@ TEST(Parallel, ParallelForCoversTheRangeInGrainsOnAtMostThreads) {
 
 TEST(Parallel, ParallelForRethrowsAndStops) {
   std::atomic<int> calls{0};
-  EXPECT_THROW(ParallelFor(0, 100000, 1,
-                           [&](size_t b, size_t) {
-                             ++calls;
-                             if (b == 3) throw std::out_of_range("three");
-                           },
-                           2),
+  EXPECT_THROW(ParallelFor(
+                   0, 100000, 1,
+                   [&](size_t b, size_t) {
+                     ++calls;
+                     if (b == 3) throw std::out_of_range("three");
+                   },
+                   2),
                std::out_of_range);
   EXPECT_LT(calls.load(), 100000);  // what was not started is not run
 }
