@@ -4,7 +4,7 @@
 // the pieces it drives each have a file:
 //   internal/vdb_layout.h   the .vdb layout check, before OpenVDB reads the file;
 //   internal/grid_ingest.h  brick extraction of the chosen grid (topology,
-//                           occupied bbox, brick map, the TBB brick pipeline);
+//                           occupied bbox, brick map, the brick pipeline);
 //   internal/vdb_topology.h the grid's topology as compact records, streamed
 //                           from the file (no OpenVDB tree);
 //   internal/voxel_builder.h  one voxel: coordinates, normal or density, colour;
@@ -28,12 +28,12 @@
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/points/PointDataGrid.h>
-#include <tbb/task_arena.h>
 
 #include "ingest/internal/color.h"
 #include "ingest/internal/grid_ingest.h"
 #include "ingest/internal/vdb_layout.h"
 #include "core/util/memory_budget.h"
+#include "core/util/parallel.h"
 #include "core/util/path_identity.h"
 
 namespace vox {
@@ -284,12 +284,13 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const IngestLimits& lim
   stats.seconds_open = t0.Seconds();
 
   // Ingest on the threads asked for.
-  const int threads = o.threads > 0 ? o.threads : tbb::this_task_arena::max_concurrency();
+  const int threads = o.threads > 0 ? o.threads : DefaultThreads();
   stats.threads = threads;
-  tbb::task_arena arena(threads);
   Status s;
   const bool double_values = meta_grid->isType<openvdb::DoubleGrid>();
-  arena.execute([&] { s = ingest_internal::IngestGrid(layout, *grid_layout, double_values, cx); });
+  WithThreadLimit(threads, [&] {
+    s = ingest_internal::IngestGrid(layout, *grid_layout, double_values, cx);
+  });
   if (!s.ok()) return s;
   stats.seconds_total = t_start.Seconds();
   if (progress) progress->Done();

@@ -17,8 +17,8 @@
 // OpenVDB exception crosses Ingest(); every failure is a Status naming the
 // file (and grid). A failed ingest leaves no store at the target.
 //
-// Thread safety: Ingest() may be called from any thread; it runs its own TBB
-// arena of `threads` workers. A ProgressSink is called from one thread at a
+// Thread safety: Ingest() may be called from any thread; it runs on
+// `threads` threads of its own (core/util/parallel.h). A ProgressSink is called from one thread at a
 // time.
 #ifndef VOX_INGEST_INGEST_H_
 #define VOX_INGEST_INGEST_H_

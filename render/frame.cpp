@@ -1,9 +1,5 @@
 #include "render/frame.h"
 
-#include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -13,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "core/util/parallel.h"
 #include "core/util/stopwatch.h"
 
 namespace vox {
@@ -154,8 +151,7 @@ class FrameRun {
   // Renders tile i into w's buffer and hands it to the writer and on_tile.
   Status RenderOne(Worker& w, int64_t i);
   // The worker's counters go to the frame's under mu_, which the calling
-  // thread takes after the loop: the hand-over is ordered for
-  // ThreadSanitizer too (an uninstrumented TBB's join is not).
+  // thread takes after the loop.
   void HandOver(Worker& w) {
     std::lock_guard<std::mutex> lock(mu_);
     stats_->counters.Add(w.counters);
@@ -291,18 +287,21 @@ Status RenderFrame(const Renderer& renderer, const FrameOptions& options, FrameS
   stats->tiles_total = end - begin;
   stats->cache_start = renderer.volume()->cache_stats();
 
-  tbb::enumerable_thread_specific<Worker> workers([&] {
-    Worker w;
-    w.buf.Allocate(options.tile_size, renderer.layers());
-    w.state = renderer.NewThreadState();
-    return w;
-  });
   FrameRun run(renderer, options, layout, begin, end, writer.get(), stats);
   run.StartScout();
   Stopwatch frame_clock;
-  tbb::task_arena arena(threads);
-  arena.execute(
-      [&] { tbb::parallel_for(0, threads, [&](int) { run.Work(workers.local()); }); });
+  // One worker per thread, each with its own buffer and thread state.
+  try {
+    RunWorkers(threads, [&](int) {
+      Worker w;
+      w.buf.Allocate(options.tile_size, renderer.layers());
+      w.state = renderer.NewThreadState();
+      run.Work(w);
+    });
+  } catch (...) {  // out of memory for a worker's buffer: the scout stops first
+    run.StopScout();
+    throw;
+  }
   run.StopScout();
   stats->render_seconds = frame_clock.Lap();
   const Status error = run.Error();

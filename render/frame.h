@@ -1,6 +1,6 @@
 // vox::RenderFrame: renders all tiles of an image (or of one part, for
-// `--tiles I/N`) in parallel with TBB, writing each tile to the tiled EXR as
-// it finishes, and reports progress and statistics.
+// `--tiles I/N`) on worker threads (RunWorkers, core/util/parallel.h),
+// writing each tile to the tiled EXR as it finishes, and reports progress and statistics.
 //
 // Threads pull tiles from one atomic cursor over the Morton tile order, so
 // the tiles in flight are neighbours and share their bricks in the cache.

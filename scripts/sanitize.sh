@@ -13,6 +13,11 @@
 #                              scripts/fuzz.sh.
 #   scripts/sanitize.sh tsan   TSan build (gcc) in build-tsan/ of the tests labelled `tsan`
 #                              (the threaded ones): builds their executables and runs them.
+#                              vox's threads run on std::thread there, not TBB
+#                              (VOX_PLAIN_THREADS, core/util/parallel.h), and the tests
+#                              tsan_planted_race_{workers,pipeline} fail the stage unless
+#                              TSan reports the race planted in those executors. The
+#                              OpenVDB ingest tests stay out (docs/robustness.md).
 # Tests that measure memory (RSS, cgroups) or tight time limits check
 # VOX_SANITIZED and skip those checks: shadow memory and quarantine change
 # what they measure.

@@ -7,8 +7,7 @@
 #include <algorithm>
 #include <mutex>
 
-#include <tbb/parallel_pipeline.h>
-#include <tbb/task_arena.h>
+#include "core/util/parallel.h"
 
 namespace vox::ingest_internal {
 
@@ -251,66 +250,52 @@ Status GridIngest<ValueT>::WriteBricks(StoreWriter* writer) {
   size_t next = 0, written = 0, li = 0, ti = 0;
   uint64_t voxels_done = 0;
   const size_t tokens = BricksInFlight();
-  tbb::parallel_pipeline(
-      tokens,
-      tbb::make_filter<void, Item>(
-          tbb::filter_mode::serial_in_order,
-          [&](tbb::flow_control& fc) -> Item {
-            if (next >= total || failed.load()) {
-              fc.stop();
-              return Item{};
-            }
-            return Item{next++, 0,
-                        std::make_shared<BrickWork>(NextBrick(&li, &ti)), nullptr};
-          }) &
-          tbb::make_filter<Item, Item>(
-              tbb::filter_mode::parallel,
-              [&](Item it) -> Item {
-                if (failed.load()) return it;
-                const BrickWork& bw = *it.work;
-                try {
-                  StatusOr<std::vector<BrickVoxel>> extracted = ExtractBrick(bw, &it.lod);
-                  if (!extracted.ok()) {
-                    fail(extracted.status());
-                    return it;
-                  }
-                  std::vector<BrickVoxel> voxels = std::move(extracted).value();
-                  it.voxels = voxels.size();
-                  if (!voxels.empty()) {
-                    Status s = writer->AddBrick(
-                        glm::u64vec3(KeyCoord(bw.key, 0), KeyCoord(bw.key, 1),
-                                     KeyCoord(bw.key, 2)),
-                        std::move(voxels));
-                    if (!s.ok()) fail(s);
-                  }
-                } catch (const openvdb::Exception& e) {
-                  fail(CorruptionError(cx_.options.input + ": grid " +
-                                       Quote(cx_.meta.grid_name) +
-                                       ": cannot read voxel data: " + e.what()));
-                } catch (const std::bad_alloc&) {
-                  fail(ResourceExhaustedError("out of memory while building brick " +
-                                              std::to_string(it.index) + " of " +
-                                              cx_.options.input));
-                } catch (const std::exception& e) {
-                  fail(InternalError(cx_.options.input + ": " + e.what()));
-                }
-                it.work.reset();
-                return it;
-              }) &
-          tbb::make_filter<Item, void>(
-              tbb::filter_mode::serial_in_order, [&](Item it) {
-                if (failed.load()) return;
-                if (it.lod) {  // in brick order
-                  Status s = lod_->Take(it.lod);
-                  it.lod.reset();
-                  if (!s.ok()) return fail(s);
-                }
-                voxels_done += it.voxels;
-                if (it.voxels) ++written;
-                if (cx_.progress) cx_.progress->Progress(it.index + 1, total, voxels_done);
-                if (cx_.progress && cx_.progress->Cancelled())
-                  fail(UnavailableError(cx_.options.input + ": ingest cancelled"));
-              }));
+  RunPipeline<Item>(
+      DefaultThreads(), tokens,
+      [&](Item& it) {
+        if (next >= total || failed.load()) return false;
+        it.index = next++;
+        it.work = std::make_shared<BrickWork>(NextBrick(&li, &ti));
+        return true;
+      },
+      [&](Item& it) {
+        if (failed.load()) return;
+        const BrickWork& bw = *it.work;
+        try {
+          StatusOr<std::vector<BrickVoxel>> extracted = ExtractBrick(bw, &it.lod);
+          if (!extracted.ok()) return fail(extracted.status());
+          std::vector<BrickVoxel> voxels = std::move(extracted).value();
+          it.voxels = voxels.size();
+          if (!voxels.empty()) {
+            Status s = writer->AddBrick(
+                glm::u64vec3(KeyCoord(bw.key, 0), KeyCoord(bw.key, 1), KeyCoord(bw.key, 2)),
+                std::move(voxels));
+            if (!s.ok()) fail(s);
+          }
+        } catch (const openvdb::Exception& e) {
+          fail(CorruptionError(cx_.options.input + ": grid " + Quote(cx_.meta.grid_name) +
+                               ": cannot read voxel data: " + e.what()));
+        } catch (const std::bad_alloc&) {
+          fail(ResourceExhaustedError("out of memory while building brick " +
+                                      std::to_string(it.index) + " of " + cx_.options.input));
+        } catch (const std::exception& e) {
+          fail(InternalError(cx_.options.input + ": " + e.what()));
+        }
+        it.work.reset();
+      },
+      [&](Item& it) {
+        if (failed.load()) return;
+        if (it.lod) {  // in brick order
+          Status s = lod_->Take(it.lod);
+          it.lod.reset();
+          if (!s.ok()) return fail(s);
+        }
+        voxels_done += it.voxels;
+        if (it.voxels) ++written;
+        if (cx_.progress) cx_.progress->Progress(it.index + 1, total, voxels_done);
+        if (cx_.progress && cx_.progress->Cancelled())
+          fail(UnavailableError(cx_.options.input + ": ingest cancelled"));
+      });
   if (!first_error.ok()) return first_error;
   cx_.stats->occupied_voxels = voxels_done;
   cx_.stats->bricks = written;
@@ -323,7 +308,7 @@ Status GridIngest<ValueT>::WriteBricks(StoreWriter* writer) {
 // neighbours, and the writer's encode and compress buffers.
 template <class ValueT>
 size_t GridIngest<ValueT>::BricksInFlight() const {
-  const int threads = tbb::this_task_arena::max_concurrency();
+  const int threads = DefaultThreads();
   size_t tokens = size_t(std::max(2, 2 * threads));
   if (cx_.memory_budget == 0) return tokens;
   const uint64_t side = uint64_t(1) << B_;

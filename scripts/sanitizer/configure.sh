@@ -3,7 +3,8 @@
 # scripts/fuzz.sh so both build the same objects in the same directory.
 #   scripts/sanitizer/configure.sh asan DIR   clang, ASan + UBSan + libFuzzer's
 #                                             coverage (fuzzer-no-link), fuzz targets on
-#   scripts/sanitizer/configure.sh tsan DIR   gcc, TSan
+#   scripts/sanitizer/configure.sh tsan DIR   gcc, TSan, vox's threads on std::thread
+#                                             (VOX_PLAIN_THREADS: TSan cannot see into TBB)
 # Both leave out the benchmarks and the Python module (an instrumented module
 # cannot load into the uninstrumented python3; python_module_test then
 # reports itself skipped).
@@ -16,7 +17,7 @@ command -v ccache >/dev/null && args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 case "$mode" in
   asan) args+=(-DCMAKE_CXX_COMPILER=clang++ -DVOX_SANITIZE=address,undefined,fuzzer-no-link
                -DVOX_FUZZ=ON) ;;
-  tsan) args+=(-DVOX_SANITIZE=thread) ;;
+  tsan) args+=(-DVOX_SANITIZE=thread -DVOX_PLAIN_THREADS=ON) ;;
   *) echo "usage: scripts/sanitizer/configure.sh asan|tsan DIR" >&2; exit 2 ;;
 esac
 cmake -S . -B "$dir" "${args[@]}" >/dev/null

@@ -165,8 +165,10 @@ def test_probe_generated_shape_equals_vox_probe():
     assert np.array_equal(t[hit], ct[ch])
 
 
-# (tool, command-line arguments, call, exception): every one of these the
-# tool refuses; the module raises with the line the tool printed.
+# (tool, command-line arguments, call, exception, exit code): every one of
+# these the tool refuses with its documented exit code (2: a bad command
+# line, 1: the run failed; vox-probe gives 2 for any store or shape it cannot
+# open); the module raises with the line the tool printed.
 def bad_inputs(store, files, workdir):
     bad_cam = workdir / "bad_cam.json"
     bad_cam.write_text(json.dumps(dict(files["camera"], width=-4)))
@@ -177,47 +179,42 @@ def bad_inputs(store, files, workdir):
     cam = files["camera_path"]
     R, P = "render", "probe"
     return [
-        (R, [store, "--threads", "-1"], lambda: vox.render(store, threads=-1), ValueError),
-        (R, [store, "--tiles", "3/2"], lambda: vox.render(store, tiles="3/2"), ValueError),
-        (R, [store, "--layers", "normal,depth"], lambda: vox.render(store, layers="normal,depth"), ValueError),
-        (R, [store, "--size", "64"], lambda: vox.render(store, size="64"), ValueError),
-        (R, [store, "--cache-mb", "0"], lambda: vox.render(store, cache_mb=0), ValueError),
-        (R, [store, "--memory-mb", "lots"], lambda: vox.render(store, memory_mb="lots"), ValueError),
-        (R, [store, "--no-prefetch"], lambda: vox.render(store, no_prefetch=True), ValueError),
+        (R, [store, "--threads", "-1"], lambda: vox.render(store, threads=-1), ValueError, 2),
+        (R, [store, "--tiles", "3/2"], lambda: vox.render(store, tiles="3/2"), ValueError, 2),
+        (R, [store, "--layers", "normal,depth"], lambda: vox.render(store, layers="normal,depth"), ValueError, 2),
+        (R, [store, "--size", "64"], lambda: vox.render(store, size="64"), ValueError, 2),
+        (R, [store, "--cache-mb", "0"], lambda: vox.render(store, cache_mb=0), ValueError, 2),
+        (R, [store, "--memory-mb", "lots"], lambda: vox.render(store, memory_mb="lots"), ValueError, 2),
+        (R, [store, "--no-prefetch"], lambda: vox.render(store, no_prefetch=True), ValueError, 2),
         (R, [store, "--cam", cam, "--split", "9+9", "-o", workdir / "x.exr"],
-         lambda: vox.render(store, cam, split="9+9"), ValueError),
+         lambda: vox.render(store, cam, split="9+9"), ValueError, 1),
         (R, [store, "--cam", cam, "--tile-size", "3", "-o", workdir / "x.exr"],
-         lambda: vox.render(store, cam, tile_size=3), ValueError),
-        (R, [store, "--cam", bad_cam, "-o", workdir / "x.exr"], lambda: vox.render(store, bad_cam), ValueError),
-        (R, [store, "--cam", far_path, "-o", workdir / "x.exr"], lambda: vox.render(store, far_path), ValueError),
+         lambda: vox.render(store, cam, tile_size=3), ValueError, 2),
+        (R, [store, "--cam", bad_cam, "-o", workdir / "x.exr"], lambda: vox.render(store, bad_cam), ValueError, 1),
+        (R, [store, "--cam", far_path, "-o", workdir / "x.exr"], lambda: vox.render(store, far_path), ValueError, 1),
         (R, [store, "--cam", cam, "--memory-mb", "1", "-o", workdir / "x.exr"],
-         lambda: vox.render(store, cam, memory_mb=1), RuntimeError),
-        (R, [missing, "--cam", cam, "-o", workdir / "x.exr"], lambda: vox.render(missing, cam), OSError),
-        (P, [store, "--fixed", "32"], lambda: vox.probe(store, np.zeros((1, 6)), fixed=32), ValueError),
+         lambda: vox.render(store, cam, memory_mb=1), RuntimeError, 1),
+        (R, [missing, "--cam", cam, "-o", workdir / "x.exr"], lambda: vox.render(missing, cam), OSError, 1),
+        (P, [store, "--fixed", "32"], lambda: vox.probe(store, np.zeros((1, 6)), fixed=32), ValueError, 2),
         (P, [store, "--tracer", "exact"], lambda: vox.probe(store, np.zeros((1, 6)), tracer="exact"),
-         ValueError),
-        (P, [store, "--split", "x"], lambda: vox.probe(store, np.zeros((1, 6)), split="x"), ValueError),
-        (P, [store, "--cache-mb", "-1"], lambda: vox.probe(store, np.zeros((1, 6)), cache_mb=-1), ValueError),
-        (P, [missing], lambda: vox.probe(missing, np.zeros((1, 6))), OSError),
-        (P, ["--generate", "cube:7"], lambda: vox.probe(None, np.zeros((1, 6)), generate="cube:7"), ValueError),
+         ValueError, 2),
+        (P, [store, "--split", "x"], lambda: vox.probe(store, np.zeros((1, 6)), split="x"), ValueError, 2),
+        (P, [store, "--cache-mb", "-1"], lambda: vox.probe(store, np.zeros((1, 6)), cache_mb=-1), ValueError, 2),
+        (P, [missing], lambda: vox.probe(missing, np.zeros((1, 6))), OSError, 2),
+        (P, ["--generate", "cube:7"], lambda: vox.probe(None, np.zeros((1, 6)), generate="cube:7"), ValueError, 2),
         (P, [store, "--single-step", "--split", "3"],
-         lambda: vox.probe(store, np.zeros((1, 6)), single_step=True, split="3"), ValueError),
+         lambda: vox.probe(store, np.zeros((1, 6)), single_step=True, split="3"), ValueError, 2),
     ]
 
 
-def documented_code(code):
-    """Whether `code` is one the tools document for a refusal: 1 (the run
-    failed) or 2 (a bad command line); never a sanitizer's (86) or a
-    signal's (128 + N)."""
-    return code in (1, 2)
-
-
 def test_bad_inputs_raise_the_cli_message(store, files, workdir):
-    for name, args, call, exc in bad_inputs(store, files, workdir):
+    for name, args, call, exc, want in bad_inputs(store, files, workdir):
         if name == "render":
             args = args + ["--quiet"]  # no memory report before the error
         code, _, err = run([tool(name)] + args, stdin="")
-        assert documented_code(code), (name, args, code, err)
+        # The exact code: a sanitizer's report (86) or a signal (128 + N) on
+        # the error path must not pass for the refusal.
+        assert code == want, (name, args, code, err)
         expected = cli_message(err, "vox-" + name)
         with pytest.raises(exc) as info:
             call()
@@ -310,17 +307,18 @@ def test_ingest_equals_vox_ingest(vdb, workdir):
         ours.pop(key), theirs.pop(key)
     assert ours == theirs
     assert stats["occupied_voxels"] == ours["voxels"]
-    # Refusals, as the tool prints them.
-    for args, kwargs, exc in [(["--zstd-level", "30"], {"zstd_level": 30}, ValueError),
-                              (["--normal-bits", "20"], {"normal_bits": 20}, ValueError),
-                              (["--levels", "7+"], {"levels": "7+"}, ValueError),
-                              (["--threads", "-2"], {"threads": -2}, ValueError),
-                              (["--isovalue", "abc"], {"isovalue": "abc"}, ValueError),
-                              (["--grid", "nope"], {"grid": "nope"}, None),
-                              ([], {}, "missing")]:
+    # Refusals, as the tool prints them, with the tool's exit code (2: a bad
+    # command line, 1: the run failed).
+    for args, kwargs, exc, want in [(["--zstd-level", "30"], {"zstd_level": 30}, ValueError, 2),
+                                    (["--normal-bits", "20"], {"normal_bits": 20}, ValueError, 2),
+                                    (["--levels", "7+"], {"levels": "7+"}, ValueError, 2),
+                                    (["--threads", "-2"], {"threads": -2}, ValueError, 2),
+                                    (["--isovalue", "abc"], {"isovalue": "abc"}, ValueError, 2),
+                                    (["--grid", "nope"], {"grid": "nope"}, None, 1),
+                                    ([], {}, "missing", 1)]:
         src = vdb if exc != "missing" else str(workdir / "none.vdb")
         code, _, err = run([tool("ingest"), src, workdir / "bad.store", "--force"] + args)
-        assert documented_code(code), (args, code, err)
+        assert code == want, (args, code, err)
         expected = cli_message(err, "vox-ingest")
         with pytest.raises((ValueError, OSError)) as info:
             vox.ingest(src, workdir / "bad.store", force=True, **kwargs)

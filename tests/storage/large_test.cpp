@@ -2,12 +2,12 @@
 // cache a tenth of its bricks, against MemoryOctree on the same voxels for
 // several splits; the budget holds throughout. Label "long".
 #include <gtest/gtest.h>
-#include <tbb/parallel_for.h>
 
 #include <atomic>
 #include <random>
 
 #include "core/tracer.h"
+#include "core/util/parallel.h"
 #include "storage/store_info.h"
 #include "tests/storage/test_util.h"
 
@@ -44,7 +44,7 @@ TEST(Large, Sphere1024TracesLikeMemoryUnderATightCache) {
     ASSERT_TRUE(ts.ok() && tm.ok());
     std::atomic<int> mismatches{0}, errors{0}, hits{0};
     std::atomic<uint64_t> max_resident{0};
-    tbb::parallel_for(size_t(0), rays.size(), [&](size_t i) {
+    auto trace = [&](size_t i) {
       auto a = ts->FirstHit(rays[i]);
       auto b = tm->FirstHit(rays[i]);
       if (!a.ok() || !b.ok()) {
@@ -61,6 +61,9 @@ TEST(Large, Sphere1024TracesLikeMemoryUnderATightCache) {
       uint64_t r = (*store)->cache_stats().bytes_resident;
       uint64_t m = max_resident.load();
       while (r > m && !max_resident.compare_exchange_weak(m, r)) {}
+    };
+    ParallelFor(0, rays.size(), 256, [&](size_t lo, size_t hi) {
+      for (size_t i = lo; i < hi; ++i) trace(i);
     });
     EXPECT_EQ(errors.load(), 0) << "split " << n1;
     EXPECT_EQ(mismatches.load(), 0) << "split " << n1;

@@ -9,10 +9,8 @@
 #include <sstream>
 #include <string>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
+#include "core/util/parallel.h"
 #include "render/frame.h"
 #include "render/grid_transform.h"
 #include "render/renderer.h"
@@ -78,20 +76,20 @@ StatusOr<nlohmann::json> PaperCase(Store* vol, int image, const PaperOptions& o)
       WorldRay w = cam.PixelRay(i + 0.5, j + 0.5);
       rays[size_t(j) * image + i] = Ray{xf.WorldToGrid(w.origin), xf.world_to_grid_linear * w.dir};
     }
-  tbb::task_arena arena(o.threads);
   auto trace_pass = [&](const RenderTracer& tr) {
     std::atomic<uint64_t> hits{0};
     auto t0 = std::chrono::steady_clock::now();
-    arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), 1024), [&](const auto& br) {
-        uint64_t h = 0;
-        for (size_t i = br.begin(); i != br.end(); ++i) {
-          auto got = tr.FirstHit(rays[i]);
-          h += got.ok() && got->has_value();
-        }
-        hits += h;
-      });
-    });
+    ParallelFor(
+        0, rays.size(), 1024,
+        [&](size_t b, size_t e) {
+          uint64_t h = 0;
+          for (size_t i = b; i != e; ++i) {
+            auto got = tr.FirstHit(rays[i]);
+            h += got.ok() && got->has_value();
+          }
+          hits += h;
+        },
+        o.threads);
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
   auto frame = [&](const Renderer& r) -> StatusOr<FrameStats> {

@@ -10,9 +10,7 @@
 #include <thread>
 #include <vector>
 
-#include <tbb/parallel_pipeline.h>
-#include <tbb/task_arena.h>
-
+#include "core/util/parallel.h"
 #include "ingest/placement.h"
 #include "storage/lod.h"
 #include "tools/gen/shapes.h"
@@ -324,53 +322,43 @@ StatusOr<GenerateStats> Generate(const GenerateOptions& o, const GenerateProgres
     std::shared_ptr<LodReducedBrick> lod;  // its share of the pyramid
   };
   const double t1 = Now();
-  tbb::task_arena arena(stats.threads);
-  arena.execute([&] {
-    tbb::parallel_pipeline(
-        size_t(2 * stats.threads),
-        tbb::make_filter<void, Item>(
-            tbb::filter_mode::serial_in_order,
-            [&](tbb::flow_control& fc) -> Item {
-              Item it;
-              if (o.cancel != nullptr && o.cancel->load()) fail(interrupted);
-              if (failed.load() || !bricks.Next(&it.brick)) fc.stop();
-              else ++stats.candidate_bricks;
-              it.covered = bricks.Covered();
-              return it;
-            }) &
-            tbb::make_filter<Item, Item>(tbb::filter_mode::parallel,
-                                         [&](Item it) -> Item {
-                                           if (failed.load()) return it;
-                                           try {
-                                             it.voxels = filler.Fill(it.brick);
-                                             if (lod && !it.voxels.empty()) {
-                                               auto r = lod->Reduce(it.brick, it.voxels,
-                                                                    occupancy);
-                                               if (!r.ok()) fail(r.status());
-                                               else it.lod = std::move(r).value();
-                                             }
-                                           } catch (const std::bad_alloc&) {
-                                             fail(ResourceExhaustedError(
-                                                 "out of memory while filling a brick"));
-                                           }
-                                           return it;
-                                         }) &
-            // One brick at a time, in enumeration order: the brick file's
-            // layout does not depend on thread timing.
-            tbb::make_filter<Item, void>(tbb::filter_mode::serial_in_order, [&](Item it) {
-              if (failed.load()) return;
-              if (!it.voxels.empty()) {
-                const size_t count = it.voxels.size();
-                Status s = writer->AddBrick(it.brick, std::move(it.voxels));
-                if (s.ok() && lod) s = lod->Take(it.lod);
-                if (!s.ok()) return fail(s);
-                ++stats.bricks;
-                stats.voxels += count;
-              }
-              if (progress && it.covered < bricks.Total())  // the last report follows the loop
-                progress({it.covered, bricks.Total(), stats.bricks, stats.voxels});
-            }));
-  });
+  RunPipeline<Item>(
+      stats.threads, size_t(2 * stats.threads),
+      [&](Item& it) {
+        if (o.cancel != nullptr && o.cancel->load()) fail(interrupted);
+        if (failed.load() || !bricks.Next(&it.brick)) return false;
+        ++stats.candidate_bricks;
+        it.covered = bricks.Covered();
+        return true;
+      },
+      [&](Item& it) {
+        if (failed.load()) return;
+        try {
+          it.voxels = filler.Fill(it.brick);
+          if (lod && !it.voxels.empty()) {
+            auto r = lod->Reduce(it.brick, it.voxels, occupancy);
+            if (!r.ok()) fail(r.status());
+            else it.lod = std::move(r).value();
+          }
+        } catch (const std::bad_alloc&) {
+          fail(ResourceExhaustedError("out of memory while filling a brick"));
+        }
+      },
+      // One brick at a time, in enumeration order: the brick file's layout
+      // does not depend on thread timing.
+      [&](Item& it) {
+        if (failed.load()) return;
+        if (!it.voxels.empty()) {
+          const size_t count = it.voxels.size();
+          Status s = writer->AddBrick(it.brick, std::move(it.voxels));
+          if (s.ok() && lod) s = lod->Take(it.lod);
+          if (!s.ok()) return fail(s);
+          ++stats.bricks;
+          stats.voxels += count;
+        }
+        if (progress && it.covered < bricks.Total())  // the last report follows the loop
+          progress({it.covered, bricks.Total(), stats.bricks, stats.voxels});
+      });
   if (progress && first_error.ok()) {
     progress({bricks.Total(), bricks.Total(), stats.bricks, stats.voxels});
   }
