@@ -102,15 +102,15 @@ struct BrickPoolStats {
   uint64_t overflows = 0;      // bricks' blocks that did not fit and came from the heap
   uint64_t overflow_bytes = 0;
   uint64_t reclaimed = 0;       // unpinned bricks evicted to make room for a block
-  uint64_t reclaimed_bytes = 0;  // the bytes those evictions released (as their caches charged them)
+  uint64_t reclaimed_bytes = 0;  // the bytes those evictions released, as their caches charged them
   std::string ToJson() const;
 };
 
 // Makes the brick pool `bytes` large; nothing with VOX_BRICK_POOL=0 in the
-// environment (bricks then come from the heap: for measuring the pool). A pool of another size is replaced
-// only when none of its blocks is in use (between frames); otherwise it is
-// kept as it is. Errors: the mapping failed (ResourceExhausted, naming the
-// size).
+// environment (bricks then come from the heap: for measuring the pool). A
+// pool of another size is replaced only when none of its blocks is in use
+// (between frames); otherwise it is kept as it is. Errors: the mapping
+// failed (ResourceExhausted, naming the size).
 Status ReserveBrickPool(uint64_t bytes);
 BrickPoolStats ReadBrickPoolStats();
 

@@ -147,10 +147,11 @@ StatusOr<MemoryBudget> BudgetStores(Store* base, const std::vector<Store*>& leve
   auto b = SplitMemoryBudget(total, in);
   if (!b.ok())
     return b.status().WithContext("store '" + base->description() + "' and its " +
-                                  std::to_string(levels.size()) + "-level pyramid (a brick cache of " +
+                                  std::to_string(levels.size()) +
+                                  "-level pyramid (a brick cache of " +
                                   std::to_string(kMinShare / kMiB) + " MiB or more for each)");
-  if (b->brick_cache < n * kMinShare)  // an explicit --cache-mb below the floor is refused by the split
-    return InternalError("brick cache below the pyramid's floor");
+  // The split refuses an explicit --cache-mb below the floor, so this cannot happen.
+  if (b->brick_cache < n * kMinShare) return InternalError("brick cache below the pyramid's floor");
   // Each store its minimum, the rest in proportion: the shares sum to at most the cache.
   const uint64_t rest = b->brick_cache - n * kMinShare;
   for (size_t i = 0; i < all.size(); ++i)

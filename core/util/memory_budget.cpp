@@ -361,10 +361,11 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
     return ResourceExhaustedError(
         "memory budget of " + FormatMiB(total) + " MiB is too small: the render needs at least " +
         FormatMiBUp(need()) + " MiB (--memory-mb " + std::to_string((need() + kMiB - 1) / kMiB) +
-        ", or a memory limit that large; in MiB: process " + FormatMiB(b.process_base) + ", resident top " +
-        FormatMiB(b.resident_top) + ", tile buffers " + FormatMiB(b.tile_buffers) + ", EXR writer " +
-        FormatMiB(b.exr_writer) + ", page cache " + FormatMiB(b.page_cache) + ", brick cache " +
-        FormatMiB(min_cache) + ", pins " + FormatMiB(min_pins) + ", headroom 1/8)");
+        ", or a memory limit that large; in MiB: process " + FormatMiB(b.process_base) +
+        ", resident top " + FormatMiB(b.resident_top) + ", tile buffers " +
+        FormatMiB(b.tile_buffers) + ", EXR writer " + FormatMiB(b.exr_writer) + ", page cache " +
+        FormatMiB(b.page_cache) + ", brick cache " + FormatMiB(min_cache) + ", pins " +
+        FormatMiB(min_pins) + ", headroom 1/8)");
   };
   if (fixed + min_cache + min_pins > total) return too_small();
   const uint64_t left = total - fixed;

@@ -48,7 +48,8 @@ class BudgetCgroupTest : public ::testing::Test {
     char tmpl[] = "/tmp/vox_budget_cgroup_XXXXXX";
     ASSERT_NE(mkdtemp(tmpl), nullptr);
     dir_ = new std::string(tmpl);
-    const std::string gen = std::string(VOX_GEN_BIN) + " sphere " + Store() + " --size 2048 --quiet";
+    const std::string gen =
+        std::string(VOX_GEN_BIN) + " sphere " + Store() + " --size 2048 --quiet";
     ASSERT_EQ(std::system(gen.c_str()), 0) << gen;
     // The unit sphere from 20 units away: about 430,000 of the 8192^2 pixels.
     WriteAll(*dir_ + "/far.json",
@@ -71,13 +72,15 @@ class BudgetCgroupTest : public ::testing::Test {
     std::string log;
     double seconds = 0;
   };
-  static Run Render(const std::string& name, uint64_t limit_bytes, const std::vector<std::string>& flags) {
+  static Run Render(const std::string& name, uint64_t limit_bytes,
+                    const std::vector<std::string>& flags) {
     CgroupRunOptions o;
     o.limit_bytes = limit_bytes;
     o.drop_page_cache = true;
     o.stderr_path = Path(name + ".log");
-    std::vector<std::string> argv = {VOX_RENDER_BIN, Store(), "-o", Path(name + ".exr"),
-                                     "--stats", Path(name + ".json"), "--quiet"};
+    std::vector<std::string> argv = {
+        VOX_RENDER_BIN,       Store(),  "-o", Path(name + ".exr"), "--stats",
+        Path(name + ".json"), "--quiet"};
     argv.insert(argv.end(), flags.begin(), flags.end());
     const auto t0 = std::chrono::steady_clock::now();
     auto r = RunInMemoryCgroup(argv, o);
@@ -90,7 +93,8 @@ class BudgetCgroupTest : public ::testing::Test {
   }
 
   // Refused in 64 MiB at the start, then rendered in the budget the refusal named.
-  void RefusesThenRendersAtTheStatedNeed(const std::string& name, const std::vector<std::string>& flags) {
+  void RefusesThenRendersAtTheStatedNeed(const std::string& name,
+                                         const std::vector<std::string>& flags) {
     const uint64_t tight = 64 * kMiB;
     Run refused = Render(name + "_64", tight, flags);
     SCOPED_TRACE(refused.log);
@@ -108,9 +112,9 @@ class BudgetCgroupTest : public ::testing::Test {
 
     const uint64_t limit = uint64_t(std::ceil(need)) * kMiB;
     Run ok = Render(name + "_need", limit, flags);
-    std::printf("%s: 64 MiB refused in %.1f s, needs %.1f MiB; in %llu MiB: %s, %.1f s\n", name.c_str(),
-                refused.seconds, need, (unsigned long long)(limit / kMiB), ok.result.Describe().c_str(),
-                ok.seconds);
+    std::printf("%s: 64 MiB refused in %.1f s, needs %.1f MiB; in %llu MiB: %s, %.1f s\n",
+                name.c_str(), refused.seconds, need, (unsigned long long)(limit / kMiB),
+                ok.result.Describe().c_str(), ok.seconds);
     EXPECT_FALSE(ok.result.oom_killed) << ok.result.Describe() << "\n" << ok.log;
     ASSERT_EQ(ok.result.exit_code, 0) << ok.result.Describe() << "\n" << ok.log;
     EXPECT_LE(ok.result.peak_bytes, limit);
@@ -139,7 +143,8 @@ TEST_F(BudgetCgroupTest, LargeExactImageRefusesAtStartAndRendersInTheBudgetItNam
   VOX_REQUIRE_MEMORY_CGROUP();
   // 16 threads: each thread's tiles, pins and reads in flight count.
   RefusesThenRendersAtTheStatedNeed(
-      "exact_t16", {"--cam", Path("far.json"), "--scene", Path("scene.json"), "--lod", "0", "--threads", "16"});
+      "exact_t16",
+      {"--cam", Path("far.json"), "--scene", Path("scene.json"), "--lod", "0", "--threads", "16"});
 }
 
 // The cheap corner of the 256 MiB matrix (tools/bench/vbench.py budget runs all of it): the
@@ -152,10 +157,12 @@ TEST_F(BudgetCgroupTest, FramesWithShadowsAndReflectionsAt16ThreadsRenderIn256Mi
   const uint64_t limit = 256 * kMiB;
   for (const bool exact : {true, false}) {
     const std::string name = exact ? "m_exact" : "m_default";
-    std::vector<std::string> flags = {"--cam", Path("full.json"), "--scene", Path("scene.json"), "--threads", "16"};
+    std::vector<std::string> flags = {
+        "--cam", Path("full.json"), "--scene", Path("scene.json"), "--threads", "16"};
     if (exact) flags.insert(flags.end(), {"--lod", "0"});
     Run r = Render(name, limit, flags);
-    std::printf("%s in 256 MiB: %s, %.1f s\n", name.c_str(), r.result.Describe().c_str(), r.seconds);
+    std::printf("%s in 256 MiB: %s, %.1f s\n", name.c_str(), r.result.Describe().c_str(),
+                r.seconds);
     EXPECT_FALSE(r.result.oom_killed) << r.result.Describe();
     ASSERT_EQ(r.result.exit_code, 0) << r.result.Describe() << "\n" << r.log;
     const auto j = nlohmann::json::parse(ReadAll(Path(name + ".json")));

@@ -159,7 +159,8 @@ TEST(BrickPool, AFullPoolEvictsUnpinnedBricksBeforeGoingToTheHeap) {
   const BrickPoolStats before = ReadBrickPoolStats();
   {
     Blob big(2 * FullPool::kBlob);
-    EXPECT_EQ(BrickBlockBytes(big.bytes.data(), big.bytes.size()), 2 * FullPool::kBlob);  // from the pool
+    // From the pool: a block of the pool's size class.
+    EXPECT_EQ(BrickBlockBytes(big.bytes.data(), big.bytes.size()), 2 * FullPool::kBlob);
     const BrickPoolStats after = ReadBrickPoolStats();
     EXPECT_EQ(after.overflows, before.overflows);
     EXPECT_EQ(after.reclaimed, before.reclaimed + 4);
