@@ -6,6 +6,7 @@
 #include <bit>
 #include <cstdlib>
 #include <new>
+#include <shared_mutex>
 #include <sstream>
 
 namespace vox {
@@ -119,7 +120,43 @@ namespace {
 // deleted, so a reader racing with a replacement reads a live object.
 std::atomic<BufferPool*> g_pool{nullptr};
 std::mutex g_reserve_mu;
-std::atomic<uint64_t> g_overflows{0}, g_overflow_bytes{0};
+std::atomic<uint64_t> g_overflows{0}, g_overflow_bytes{0}, g_reclaimed{0}, g_reclaimed_bytes{0};
+
+// The registered reclaimers. Allocators call them under the shared lock;
+// unregistering takes it exclusively, so it waits for calls in progress.
+struct Reclaimers {
+  std::shared_mutex mu;
+  uint64_t next_id = 1;
+  std::vector<std::pair<uint64_t, BrickReclaimer>> list;
+  std::atomic<size_t> turn{0};  // where the next round starts, so no cache is always first
+};
+
+Reclaimers& TheReclaimers() {
+  static auto* r = new Reclaimers();  // outlives every store
+  return *r;
+}
+
+// Evicts unpinned bricks until `pool` has a block for `n` bytes; that block,
+// or null when every reclaimer is out of unpinned bricks.
+void* ReclaimAndAllocate(BufferPool* pool, size_t n) {
+  Reclaimers& r = TheReclaimers();
+  std::shared_lock<std::shared_mutex> lock(r.mu);
+  const size_t count = r.list.size();
+  if (count == 0) return nullptr;
+  size_t i = r.turn.fetch_add(1, std::memory_order_relaxed);
+  for (size_t idle = 0; idle < count; ++i) {
+    const uint64_t freed = r.list[i % count].second();
+    if (freed == 0) {
+      ++idle;
+      continue;
+    }
+    idle = 0;
+    g_reclaimed.fetch_add(1, std::memory_order_relaxed);
+    g_reclaimed_bytes.fetch_add(freed, std::memory_order_relaxed);
+    if (void* b = pool->Allocate(n)) return b;
+  }
+  return pool->Allocate(n);  // another thread may have freed a block meanwhile
+}
 
 std::vector<std::unique_ptr<BufferPool>>& Pools() {
   static auto* pools = new std::vector<std::unique_ptr<BufferPool>>();  // outlives every brick
@@ -129,6 +166,12 @@ std::vector<std::unique_ptr<BufferPool>>& Pools() {
 }  // namespace
 
 Status ReserveBrickPool(uint64_t bytes) {
+  // VOX_BRICK_POOL=0: no pool, bricks on the heap (to measure what the pool costs).
+  static const bool off = [] {
+    const char* e = std::getenv("VOX_BRICK_POOL");
+    return e != nullptr && std::string(e) == "0";
+  }();
+  if (off) return OkStatus();
   std::lock_guard<std::mutex> lock(g_reserve_mu);
   BufferPool* cur = g_pool.load();
   if (cur != nullptr && cur->capacity() == bytes / BufferPool::kMinBlock * BufferPool::kMinBlock)
@@ -150,25 +193,43 @@ BrickPoolStats ReadBrickPoolStats() {
   }
   s.overflows = g_overflows.load(std::memory_order_relaxed);
   s.overflow_bytes = g_overflow_bytes.load(std::memory_order_relaxed);
+  s.reclaimed = g_reclaimed.load(std::memory_order_relaxed);
+  s.reclaimed_bytes = g_reclaimed_bytes.load(std::memory_order_relaxed);
   return s;
 }
 
 std::string BrickPoolStats::ToJson() const {
   std::ostringstream o;
   o << "{\"capacity\": " << capacity << ", \"in_use\": " << in_use << ", \"peak_in_use\": " << peak_in_use
-    << ", \"overflows\": " << overflows << ", \"overflow_bytes\": " << overflow_bytes << "}";
+    << ", \"overflows\": " << overflows << ", \"overflow_bytes\": " << overflow_bytes
+    << ", \"reclaimed\": " << reclaimed << ", \"reclaimed_bytes\": " << reclaimed_bytes << "}";
   return o.str();
 }
 
 void* BrickAllocate(size_t n) {
   if (BufferPool* p = g_pool.load(std::memory_order_acquire)) {
     if (void* b = p->Allocate(n)) return b;
+    if (void* b = ReclaimAndAllocate(p, n)) return b;
     g_overflows.fetch_add(1, std::memory_order_relaxed);
     g_overflow_bytes.fetch_add(n, std::memory_order_relaxed);
   }
   void* b = std::malloc(n == 0 ? 1 : n);
   if (b == nullptr) throw std::bad_alloc();
   return b;
+}
+
+uint64_t RegisterBrickReclaimer(BrickReclaimer reclaim) {
+  Reclaimers& r = TheReclaimers();
+  std::unique_lock<std::shared_mutex> lock(r.mu);
+  const uint64_t id = r.next_id++;
+  r.list.emplace_back(id, std::move(reclaim));
+  return id;
+}
+
+void UnregisterBrickReclaimer(uint64_t id) {
+  Reclaimers& r = TheReclaimers();
+  std::unique_lock<std::shared_mutex> lock(r.mu);
+  std::erase_if(r.list, [id](const auto& e) { return e.first == id; });
 }
 
 void BrickFree(void* p) {

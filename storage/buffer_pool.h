@@ -14,10 +14,13 @@
 // The brick pool (ReserveBrickPool) is the one pool of the process that
 // decoded bricks are allocated from (BrickAllocator): its size is the brick
 // cache and the threads' pins of the memory budget (storage/store_budget.h).
-// A brick that finds no free block large enough (the pool full of pinned
-// bricks, or split too finely) is allocated from the heap instead and
-// counted (BrickPoolStats::overflows); before a budget reserves a pool every
-// brick comes from the heap.
+// A brick that finds no free block large enough first makes room: the
+// brick caches registered as reclaimers (RegisterBrickReclaimer; every
+// store's cache is one) evict their least recently used unpinned bricks, one
+// at a time, until the block fits (counted: BrickPoolStats::reclaimed). Only
+// when nothing unpinned is left (the pool full of pinned bricks) is the
+// brick allocated from the heap instead, and counted (overflows); before a
+// budget reserves a pool every brick comes from the heap.
 //
 // Thread safety: every function and member is thread-safe.
 #ifndef VOX_STORAGE_BUFFER_POOL_H_
@@ -26,6 +29,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -97,17 +101,31 @@ struct BrickPoolStats {
   uint64_t peak_in_use = 0;    // the most ever in use at once
   uint64_t overflows = 0;      // bricks' blocks that did not fit and came from the heap
   uint64_t overflow_bytes = 0;
+  uint64_t reclaimed = 0;       // unpinned bricks evicted to make room for a block
+  uint64_t reclaimed_bytes = 0;  // the bytes those evictions released, as their caches charged them
   std::string ToJson() const;
 };
 
-// Makes the brick pool `bytes` large. A pool of another size is replaced
-// only when none of its blocks is in use (between frames); otherwise it is
-// kept as it is. Errors: the mapping failed (ResourceExhausted, naming the
-// size).
+// Makes the brick pool `bytes` large; nothing with VOX_BRICK_POOL=0 in the
+// environment (bricks then come from the heap: for measuring the pool). A
+// pool of another size is replaced only when none of its blocks is in use
+// (between frames); otherwise it is kept as it is. Errors: the mapping
+// failed (ResourceExhausted, naming the size).
 Status ReserveBrickPool(uint64_t bytes);
 BrickPoolStats ReadBrickPoolStats();
 
-// From the brick pool, or the heap when it has no room (or there is no
+// A reclaimer evicts one unpinned brick (the least recently used it holds)
+// and returns the bytes its cache charged for it, or 0 when it holds none
+// unpinned. It is called from BrickAllocate on any thread, with no lock of
+// the pool held, and must not allocate bricks itself.
+using BrickReclaimer = std::function<uint64_t()>;
+// Returns an id for UnregisterBrickReclaimer, which must be called before
+// what the reclaimer refers to is destroyed (it waits for running calls).
+uint64_t RegisterBrickReclaimer(BrickReclaimer reclaim);
+void UnregisterBrickReclaimer(uint64_t id);
+
+// From the brick pool, making room by reclaiming unpinned bricks when it is
+// full; from the heap when that frees no block large enough (or there is no
 // pool). Throws std::bad_alloc as operator new does.
 void* BrickAllocate(size_t n);
 void BrickFree(void* p);

@@ -172,6 +172,25 @@ class PageCache {
     return prefetch_unused_;
   }
 
+  // Evicts the least recently used value that nothing outside the cache
+  // holds (unpinned: dropping it frees it) and returns its charge; 0 when
+  // every cached value is pinned or the cache is empty. Pinned values are
+  // skipped, not moved. For a memory pool that needs room
+  // (storage/buffer_pool.h); counted as an eviction.
+  size_t EvictUnpinned() {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (auto k = lru_.rbegin(); k != lru_.rend(); ++k) {
+      auto it = map_.find(*k);
+      // A value only the cache holds gains a reference only under mu_.
+      if (it->second.value.use_count() != 1) continue;
+      const size_t charge = it->second.charge;
+      RemoveLocked(it);
+      ++counters_.evictions;
+      return charge;
+    }
+    return 0;
+  }
+
   size_t TotalCharge() const {
     std::lock_guard<std::mutex> lock(mu_);
     return usage_;
@@ -304,6 +323,15 @@ class ShardedPageCache {
     return t;
   }
 
+  // PageCache::EvictUnpinned over the shards, each asked in turn from
+  // where the last call stopped; 0 when no shard holds an unpinned value.
+  size_t EvictUnpinned() {
+    const size_t n = shards_.size(), start = evict_turn_.fetch_add(1, std::memory_order_relaxed);
+    for (size_t i = 0; i < n; ++i)
+      if (size_t freed = shards_[(start + i) % n]->EvictUnpinned()) return freed;
+    return 0;
+  }
+
   size_t TotalCharge() const {
     size_t t = 0;
     for (const auto& s : shards_) t += s->TotalCharge();
@@ -345,6 +373,7 @@ class ShardedPageCache {
   }
 
   std::atomic<size_t> capacity_;
+  std::atomic<size_t> evict_turn_{0};
   std::vector<std::unique_ptr<PageCache<V>>> shards_;
 };
 

@@ -139,16 +139,19 @@ StatusOr<MemoryBudget> BudgetStores(Store* base, const std::vector<Store*>& leve
     weight.push_back(used ? double(s->meta().brick_count) * double(sizes.mean_decoded) + 1.0 : 0.0);
     sum += weight.back();
   }
-  auto b = SplitMemoryBudget(total, in);
-  if (!b.ok()) return b.status().WithContext("store '" + base->description() + "' and its pyramid");
+  // Each store at least kMinShare of the cache: the split's floor, so a
+  // budget too small for it is refused naming the whole budget it needs.
   constexpr uint64_t kMinShare = 4 * kMiB;
   const uint64_t n = all.size();
-  if (b->brick_cache < n * kMinShare)
-    return ResourceExhaustedError("store '" + base->description() + "' with its " +
+  in.min_cache_bytes = std::max(in.min_cache_bytes, n * kMinShare);
+  auto b = SplitMemoryBudget(total, in);
+  if (!b.ok())
+    return b.status().WithContext("store '" + base->description() + "' and its " +
                                   std::to_string(levels.size()) +
-                                  "-level pyramid needs a brick cache of at least " +
-                                  std::to_string(n * kMinShare / kMiB) + " MiB; the budget leaves " +
-                                  std::to_string(b->brick_cache / kMiB) + " MiB");
+                                  "-level pyramid (a brick cache of " +
+                                  std::to_string(kMinShare / kMiB) + " MiB or more for each)");
+  // The split refuses an explicit --cache-mb below the floor, so this cannot happen.
+  if (b->brick_cache < n * kMinShare) return InternalError("brick cache below the pyramid's floor");
   // Each store its minimum, the rest in proportion: the shares sum to at most the cache.
   const uint64_t rest = b->brick_cache - n * kMinShare;
   for (size_t i = 0; i < all.size(); ++i)

@@ -315,7 +315,8 @@ StatusOr<uint64_t> ParseMemorySize(std::string_view flag, std::string_view text)
 uint64_t MinBrickCacheBytes(const BudgetInputs& in) {
   // Each thread may be loading one brick while the others' are held: four
   // bricks per thread, and never under 4 MiB.
-  return std::max<uint64_t>(4 * kMiB, uint64_t(4) * uint64_t(std::max(in.threads, 1)) * in.max_brick_bytes);
+  return std::max<uint64_t>({4 * kMiB, in.min_cache_bytes,
+                             uint64_t(4) * uint64_t(std::max(in.threads, 1)) * in.max_brick_bytes});
 }
 
 StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in) {
@@ -359,10 +360,12 @@ StatusOr<MemoryBudget> SplitMemoryBudget(uint64_t total, const BudgetInputs& in)
   auto too_small = [&] {
     return ResourceExhaustedError(
         "memory budget of " + FormatMiB(total) + " MiB is too small: the render needs at least " +
-        FormatMiBUp(need()) + " MiB (in MiB: process " + FormatMiB(b.process_base) + ", resident top " +
-        FormatMiB(b.resident_top) + ", tile buffers " + FormatMiB(b.tile_buffers) + ", EXR writer " +
-        FormatMiB(b.exr_writer) + ", page cache " + FormatMiB(b.page_cache) + ", brick cache " +
-        FormatMiB(min_cache) + ", pins " + FormatMiB(min_pins) + ", headroom 1/8)");
+        FormatMiBUp(need()) + " MiB (--memory-mb " + std::to_string((need() + kMiB - 1) / kMiB) +
+        ", or a memory limit that large; in MiB: process " + FormatMiB(b.process_base) +
+        ", resident top " + FormatMiB(b.resident_top) + ", tile buffers " +
+        FormatMiB(b.tile_buffers) + ", EXR writer " + FormatMiB(b.exr_writer) + ", page cache " +
+        FormatMiB(b.page_cache) + ", brick cache " + FormatMiB(min_cache) + ", pins " +
+        FormatMiB(min_pins) + ", headroom 1/8)");
   };
   if (fixed + min_cache + min_pins > total) return too_small();
   const uint64_t left = total - fixed;

@@ -127,6 +127,9 @@ struct BudgetInputs {
   // Pins wanted per thread table (a power of two, 1..256); the split lowers
   // it until the tables fit their share (1/8 of what the fixed costs leave).
   int pins_per_thread = 256;
+  // A floor for the brick cache above MinBrickCacheBytes's own (a store and
+  // its pyramid's levels, each with a minimal share); 0: none.
+  uint64_t min_cache_bytes = 0;
   // An explicit brick cache size (--cache-mb); 0: the rest. Must fit
   // in what the fixed costs leave.
   uint64_t cache_override = 0;
@@ -158,7 +161,7 @@ struct MemoryBudget {
 };
 
 // The smallest brick cache a split allows: enough for each thread to hold
-// a few bricks while others load.
+// a few bricks while others load, and at least in.min_cache_bytes.
 uint64_t MinBrickCacheBytes(const BudgetInputs& in);
 
 // Splits `total` bytes (e.g. DetectMemoryLimit().bytes, or --memory-mb):

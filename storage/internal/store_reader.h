@@ -26,6 +26,7 @@
 #include "storage/internal/record_windows.h"
 #include "storage/internal/table_pages.h"
 #include "core/util/memory_budget.h"
+#include "storage/buffer_pool.h"
 #include "storage/page_cache.h"
 #include "storage/store.h"
 
@@ -34,8 +35,10 @@ namespace vox::storage_internal {
 class StoreImpl : public Store {
  public:
   StoreImpl(std::string dir, const OpenOptions& options)
-      : dir_(std::move(dir)), options_(options), cache_(options.cache_bytes) {}
+      : dir_(std::move(dir)), options_(options), cache_(options.cache_bytes),
+        reclaimer_(RegisterBrickReclaimer([this] { return uint64_t(cache_.EvictUnpinned()); })) {}
   ~StoreImpl() override {
+    UnregisterBrickReclaimer(reclaimer_);
     {
       std::lock_guard<std::mutex> lock(pf_mu_);
       pf_stop_ = true;
@@ -273,6 +276,8 @@ class StoreImpl : public Store {
   std::unique_ptr<RandomAccessFile> bricks_;
   std::unique_ptr<RecordWindows> windows_;  // reads records; set by Load
   ShardedPageCache<DecodedBrick> cache_;
+  // The brick pool asks the cache for room through it (storage/buffer_pool.h).
+  const uint64_t reclaimer_;
   std::atomic<uint64_t> bytes_decompressed_{0};
   std::atomic<uint64_t> budget_capacity_{0};  // the brick cache's bytes as SetCacheCapacity set them
   std::atomic<uint64_t> given_to_heap_{0};    // of those, given up by AbsorbHeapGrowth

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "storage/buffer_pool.h"
+#include "storage/page_cache.h"
 
 namespace vox {
 namespace {
@@ -124,6 +125,73 @@ TEST(BrickPool, BricksComeFromThePoolOnceReservedAndFromTheHeapWhenItIsFull) {
   BrickFree(b);
   ASSERT_TRUE(ReserveBrickPool(uint64_t(2) << 20).ok());
   EXPECT_EQ(ReadBrickPoolStats().capacity, uint64_t(2) << 20);
+  EXPECT_EQ(ReadBrickPoolStats().in_use, 0u);
+}
+
+// A cached value whose bytes come from the brick pool, as a decoded brick's do.
+struct Blob {
+  explicit Blob(size_t n) : bytes(n) {}
+  std::vector<uint8_t, BrickAllocator<uint8_t>> bytes;
+};
+
+// A cache (far larger than the pool, so it never evicts on its own) whose
+// blobs fill the pool: 8 blocks of 32 KiB, inserted 0..7, 0 the least
+// recently used.
+struct FullPool {
+  static constexpr size_t kBlob = 32 << 10;
+  PageCache<Blob> cache{size_t(1) << 30};
+  uint64_t id = 0;
+  FullPool() {
+    EXPECT_TRUE(ReserveBrickPool(8 * kBlob).ok());
+    EXPECT_EQ(ReadBrickPoolStats().capacity, 8 * kBlob);
+    for (uint64_t k = 0; k < 8; ++k) cache.Insert(k, std::make_shared<const Blob>(kBlob), kBlob);
+    EXPECT_EQ(ReadBrickPoolStats().in_use, 8 * kBlob);
+    id = RegisterBrickReclaimer([this] { return uint64_t(cache.EvictUnpinned()); });
+  }
+  ~FullPool() { UnregisterBrickReclaimer(id); }
+};
+
+TEST(BrickPool, AFullPoolEvictsUnpinnedBricksBeforeGoingToTheHeap) {
+  FullPool f;
+  // Pins on 0 and 2: the evictions must skip them, so the first 64 KiB block
+  // that can merge back is 4+5, after 1, 3, 4 and 5 (in LRU order) are gone.
+  auto pin0 = f.cache.Peek(0), pin2 = f.cache.Peek(2);
+  const BrickPoolStats before = ReadBrickPoolStats();
+  {
+    Blob big(2 * FullPool::kBlob);
+    // From the pool: a block of the pool's size class.
+    EXPECT_EQ(BrickBlockBytes(big.bytes.data(), big.bytes.size()), 2 * FullPool::kBlob);
+    const BrickPoolStats after = ReadBrickPoolStats();
+    EXPECT_EQ(after.overflows, before.overflows);
+    EXPECT_EQ(after.reclaimed, before.reclaimed + 4);
+    EXPECT_EQ(after.reclaimed_bytes, before.reclaimed_bytes + 4 * FullPool::kBlob);
+    for (uint64_t k : {0, 2, 6, 7}) EXPECT_TRUE(f.cache.Contains(k)) << k;
+    for (uint64_t k : {1, 3, 4, 5}) EXPECT_FALSE(f.cache.Contains(k)) << k;
+    EXPECT_EQ(f.cache.counters().evictions, 4u);
+    EXPECT_EQ(pin0->bytes.size(), FullPool::kBlob);  // the pinned blobs are whole
+    EXPECT_EQ(pin2->bytes.size(), FullPool::kBlob);
+  }
+  pin0.reset();
+  pin2.reset();
+  f.cache.SetCapacity(0);
+  EXPECT_EQ(ReadBrickPoolStats().in_use, 0u);
+}
+
+TEST(BrickPool, AllPinnedGoesToTheHeapAndEvictsNothing) {
+  FullPool f;
+  std::vector<std::shared_ptr<const Blob>> pins;
+  for (uint64_t k = 0; k < 8; ++k) pins.push_back(f.cache.Peek(k));
+  const BrickPoolStats before = ReadBrickPoolStats();
+  {
+    Blob more(1000);
+    EXPECT_EQ(BrickBlockBytes(more.bytes.data(), more.bytes.size()), 1000u);  // from the heap
+    const BrickPoolStats after = ReadBrickPoolStats();
+    EXPECT_EQ(after.overflows, before.overflows + 1);
+    EXPECT_EQ(after.reclaimed, before.reclaimed);
+    EXPECT_EQ(f.cache.counters().entries, 8u);
+  }
+  pins.clear();
+  f.cache.SetCapacity(0);
   EXPECT_EQ(ReadBrickPoolStats().in_use, 0u);
 }
 

@@ -387,6 +387,25 @@ TEST(SplitMemoryBudget, TooSmallSaysWhatItNeeds) {
   EXPECT_FALSE(SplitMemoryBudget(need - kMiB, in).ok()) << need_mib;
 }
 
+TEST(SplitMemoryBudget, ACacheFloorRaisesTheNeedAndTheFlagItNamesSuffices) {
+  BudgetInputs in = TypicalInputs();
+  in.min_cache_bytes = 40 * kMiB;  // e.g. a store and its pyramid's 9 levels, 4 MiB each
+  EXPECT_EQ(MinBrickCacheBytes(in), 40 * kMiB);
+  auto b = SplitMemoryBudget(64 * kMiB, in);
+  ASSERT_FALSE(b.ok());
+  EXPECT_EQ(b.status().code(), StatusCode::kResourceExhausted);
+  const std::string msg = b.status().ToString();
+  EXPECT_NE(msg.find("brick cache 40.0,"), std::string::npos) << msg;
+  const size_t at = msg.find("--memory-mb ");
+  ASSERT_NE(at, std::string::npos) << msg;
+  const uint64_t flag = std::stoull(msg.substr(at + 12));
+  auto ok = SplitMemoryBudget(flag * kMiB, in);
+  ASSERT_TRUE(ok.ok()) << msg << "\n" << ok.status().ToString();
+  EXPECT_GE(ok->brick_cache, 40 * kMiB);
+  EXPECT_EQ(Sum(*ok), flag * kMiB);
+  EXPECT_FALSE(SplitMemoryBudget((flag - 1) * kMiB, in).ok()) << msg;
+}
+
 TEST(SplitMemoryBudget, CacheFloor) {
   BudgetInputs in = TypicalInputs();
   in.threads = 64;

@@ -161,11 +161,11 @@ def sample_rss(pid, peaks, done):
 
 
 def run(argv, limit_mib=None, cold=False, stdout=None, stderr=None, timeout=None, cwd=None,
-        groups=(), rss=False):
+        groups=(), rss=False, env=None):
     """Runs one process: in its own cgroup when limit_mib is not None (0: unlimited, measured) and
     in the extra cgroup directories `groups`, after dropping the page cache when cold. Returns
     wall_s, exit, signal, peak/failcnt/oom (with a cgroup), maxrss and inblock bytes (wait4),
-    cpu_s, and with rss the sampled peaks of RssAnon and RssFile."""
+    cpu_s, and with rss the sampled peaks of RssAnon and RssFile. env: the child's environment."""
     if cold and not drop_page_cache():
         fail("a cold run drops the page cache: run as root")
     cg = Cgroup(int(limit_mib * MiB)) if limit_mib is not None else None
@@ -179,7 +179,7 @@ def run(argv, limit_mib=None, cold=False, stdout=None, stderr=None, timeout=None
                 f.write(str(os.getpid()))
     t0 = time.monotonic()
     try:
-        p = subprocess.Popen(argv, stdout=out, stderr=err, preexec_fn=pre, cwd=cwd)
+        p = subprocess.Popen(argv, stdout=out, stderr=err, preexec_fn=pre, cwd=cwd, env=env)
     except OSError as e:
         if cg:
             cg.finish()

@@ -8,6 +8,8 @@
   scale      a frame's cost as the volume grows and the memory limit shrinks
   cold       a cold frame in a memory limit, against the warm one right after
   turntable  the frames of a turntable in one process, in a memory limit
+  budget     the frames that must render in a memory limit (sizes, modes, threads), never killed
+  pool       the brick pool's cost in time, against bricks on the heap
   ingest     vox-ingest's throughput, store size and peak memory
   precision  the accuracy study: every traversal variant against the exact reference
   paper      the paper's split: two steps against one, per grid and image size
@@ -27,6 +29,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import budget  # noqa: E402
 import harness as H  # noqa: E402
 import memory  # noqa: E402
 import peers  # noqa: E402
@@ -36,8 +39,8 @@ import view  # noqa: E402
 
 QUESTIONS = {
     "peers": peers, "scale": scale, "cold": memory.Cold, "turntable": memory.Turntable,
-    "ingest": memory.Ingest, "precision": study.Precision, "paper": study.Paper, "lod": study.Lod,
-    "view": view,
+    "ingest": memory.Ingest, "budget": budget.Matrix, "pool": budget.Pool, "precision": study.Precision,
+    "paper": study.Paper, "lod": study.Lod, "view": view,
 }
 FIGURES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "figures.tsv")
 
