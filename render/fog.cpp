@@ -14,11 +14,13 @@ using render_internal::kMaxLightLatticeLevel;
 using render_internal::kMaxOpticalDepth;
 using render_internal::kMaxShadowOpticalDepth;
 
-double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone) const {
+glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx,
+                                   const Cone* cone) const {
   ++cx.c->rays[kRayVolume];
-  const double sigma_t = scene_.volume.absorption + scene_.volume.scattering;
+  const FogModel& model = fog_model_;  // per channel: opacity(rho) times each extinction
   const bool has_density = volume_->meta().has_density;
-  double tau = 0.0;
+  glm::dvec3 tau(0.0);
+  auto opaque = [&] { return std::min({tau.x, tau.y, tau.z}) > kMaxShadowOpticalDepth; };
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     // Level of detail: each coarse cell's mean density over its segment.
     Status s = lod_->Traverse(
@@ -29,12 +31,12 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
           double rho = 1.0;
           if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume))
             return false;
-          tau += sigma_t * rho * std::max(0.0, t1 - seg.t0);
-          return tau <= kMaxShadowOpticalDepth;
+          tau += model.Extinction(rho) * std::max(0.0, t1 - seg.t0);
+          return !opaque();
         },
         &cx.c->trace);
     if (!s.ok()) cx.Fail(s);
-    return std::exp(-tau);
+    return glm::exp(-tau);
   }
   Status s = cx.tracer->Traverse(
       gr,
@@ -43,16 +45,17 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
         double t1 = std::min(VoxelExitT(gr, h.voxel), t_max);
         double rho = 1.0;
         if (has_density && !Density(h, cx, &rho)) return false;
-        tau += sigma_t * rho * std::max(0.0, t1 - h.t);
-        return tau <= kMaxShadowOpticalDepth;
+        tau += model.Extinction(rho) * std::max(0.0, t1 - h.t);
+        return !opaque();
       },
       &cx.c->trace);
   if (!s.ok()) cx.Fail(s);
-  return std::exp(-tau);
+  return glm::exp(-tau);
 }
 
 // The density of fog voxel `h` (stops the frame with the error on failure).
-bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume) const {
+bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume,
+                       double* temperature) const {
   ++cx.c->attribute_lookups;
   auto a = (volume != nullptr ? volume : volume_)->HitAttributes(h);  // called by visitors: h's brick is pinned
   if (!a.ok()) {
@@ -60,10 +63,12 @@ bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volu
     return false;
   }
   *rho = a->density;
+  if (temperature != nullptr) *temperature = a->temperature;
   return true;
 }
 
-glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone) const {
+glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone,
+                                  const glm::dvec3* view_w) const {
   const glm::dvec3 p_w = xf_.GridToWorld(p_g);
   // With a pyramid, the transmittance ray's cells widen along it (as fast as
   // the primary ray's cone, or volume.shadow_lod's rate if faster), from
@@ -79,8 +84,10 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
   }
   glm::dvec3 light_in(0.0);
   ForEachLight(scene_.lights, p_w, [&](const Light& l, const glm::dvec3& to_light, double dist) {
-    const double tl = l.shadows ? Transmittance(SpawnRay(p_g, to_light), dist, cx, sc) : 1.0;
-    light_in += l.color * l.intensity * tl;
+    const glm::dvec3 tl =
+        l.shadows ? Transmittance(SpawnRay(p_g, to_light), dist, cx, sc) : glm::dvec3(1.0);
+    const double phase = view_w != nullptr ? fog_model_.Phase(-glm::dot(to_light, *view_w)) : 1.0;
+    light_in += l.color * (l.intensity * phase) * tl;
   });
   return light_in;
 }
@@ -165,9 +172,11 @@ class LightAlongRay {
   explicit LightAlongRay(LightAt light_at) : light_at_(std::move(light_at)) {}
 
   // The integral over t in [t0, t1] of st e^(-st (t - t0)) L(t), per
-  // channel, for a cell of extinction st; step(t): the sample spacing from t.
+  // channel, for a cell of extinction st_rgb (per channel; st: its
+  // largest, which sets the sampling); step(t): the sample spacing from t.
   template <class Step>
-  glm::dvec3 Integrate(double t0, double t1, double st, Step&& step) {
+  glm::dvec3 Integrate(double t0, double t1, const glm::dvec3& st_rgb, Step&& step) {
+    const double st = std::max({st_rgb.x, st_rgb.y, st_rgb.z});
     if (t0 > tb_) {  // the fog's entry, or the first cell after a long gap
       ta_ = t0;
       const double h = step(t0);
@@ -180,8 +189,8 @@ class LightAlongRay {
       const double tc = std::max(ta_ + h, t0);
       if (tc < tb_) SetB(tc, h);
     }
-    glm::dvec3 sum(0.0);
-    double t = t0, trans = 1.0;  // trans: the cell's transmittance from t0 to t
+    glm::dvec3 sum(0.0), trans(1.0);  // trans: the cell's transmittance from t0 to t
+    double t = t0;
     while (t < t1) {
       if (t >= tb_) {
         ta_ = tb_;
@@ -192,19 +201,20 @@ class LightAlongRay {
       }
       // (a step lost below t's precision ends the cell with this interval)
       const double e = tb_ > t ? std::min(t1, tb_) : t1, len = e - t;
-      const double piece_trans = std::exp(-st * len);
+      const glm::dvec3 piece_trans = glm::exp(-st_rgb * len);
       for (int k = 0; k < 3; ++k) {
+        const double sk = st_rgb[k];
         double in;
         if (geometric_) {
           const double kappa = rate_[k];  // the light's decay rate along the ray
           const double l = la_[k] * std::exp(-kappa * (t - ta_));
-          const double x = st + kappa;
-          in = l * (std::abs(x * len) < 1e-12 ? st * len : -st * std::expm1(-x * len) / x);
+          const double x = sk + kappa;
+          in = l * (std::abs(x * len) < 1e-12 ? sk * len : -sk * std::expm1(-x * len) / x);
         } else {
           const double w = tb_ > ta_ ? std::clamp((t + 0.5 * len - ta_) / (tb_ - ta_), 0.0, 1.0) : 0.0;
-          in = (1.0 - piece_trans) * (la_[k] + w * (lb_[k] - la_[k]));
+          in = (1.0 - piece_trans[k]) * (la_[k] + w * (lb_[k] - la_[k]));
         }
-        sum[k] += trans * in;
+        sum[k] += trans[k] * in;
       }
       trans *= piece_trans;
       t = e;
@@ -231,12 +241,13 @@ class LightAlongRay {
 
 }  // namespace
 
-glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance, double* first_t,
-                         const Cone* cone) const {
+glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmittance,
+                         double* first_t, const Cone* cone) const {
   const VolumeMedium& v = scene_.volume;
-  const double sigma_t = v.absorption + v.scattering;
+  const FogModel& model = fog_model_;  // render/fog_material.h
   const bool has_density = volume_->meta().has_density;
-  double tau = 0.0, trans = 1.0;
+  const bool wants_temp = model.uses_temperature();
+  glm::dvec3 tau(0.0), trans(1.0);
   glm::dvec3 scattered(0.0);
   // The light reaching the ray is sampled at points along it and
   // interpolated in between (LightAlongRay). The next sample is light_step
@@ -250,48 +261,75 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
   };
   render_internal::FogLightCache local_cache;  // (a thread's own when it has one)
   render_internal::FogLightCache* cache = cx.light_cache != nullptr ? cx.light_cache : &local_cache;
-  LightAlongRay light([&](double t, double h) { return LightInFog(gr, t, h, cx, cone, cache); });
+  // The phase function (fog_material.h): with one light the light is
+  // weighted at each sample by its angle to the ray there (the lattice
+  // keeps the light unweighted); with several lights each is weighted
+  // before they are summed, so every sample traces its own rays.
+  const glm::dvec3 view_w = -glm::normalize(xf_.grid_to_world_linear * gr.dir);  // towards the camera
+  LightAlongRay light([&](double t, double h) {
+    if (model.isotropic()) return LightInFog(gr, t, h, cx, cone, cache);
+    if (scene_.lights.size() > 1) return LightAtPoint(gr.origin + t * gr.dir, cx, cone, &view_w);
+    glm::dvec3 l = LightInFog(gr, t, h, cx, cone, cache);
+    ForEachLight(scene_.lights, xf_.GridToWorld(gr.origin + t * gr.dir),
+                 [&](const Light&, const glm::dvec3& to_light, double) {
+                   l *= model.Phase(-glm::dot(to_light, view_w));
+                 });
+    return l;
+  });
   *first_t = kInf;
-  // One occupied cell [t0, t1] of density rho (Cone: `level` > 0 for coarse cells).
-  auto cell = [&](double t0, double t1, double rho) {
+  // One occupied cell [t0, t1] of density rho and temperature temp (Cone:
+  // `level` > 0 for coarse cells): its medium per channel (FogModel), the
+  // light it scatters and the light it emits, each seen through the cell
+  // up to where it arises.
+  auto cell = [&](double t0, double t1, double rho, double temp) {
     if (*first_t == kInf) *first_t = t0;
     const double len = std::max(0.0, t1 - t0);
-    const double st = sigma_t * rho;
-    if (st <= 0) return true;
-    const double seg_tau = st * len;
-    const double seg_trans = std::exp(-seg_tau);
-    if (passes_.scattering) {
+    const FogSample m = model.At(rho, temp);
+    const glm::dvec3& st = m.extinction;
+    const double st_max = std::max({st.x, st.y, st.z});
+    if (st_max <= 0 && !model.emits()) return true;
+    const glm::dvec3 seg_tau = st * len;
+    const glm::dvec3 seg_trans = glm::exp(-seg_tau);
+    if (passes_.scattering && st_max > 0) {
       const glm::dvec3 in_cell =
-          light.Integrate(t0, t1, st, [&](double t) { return step_from(t, st); });
-      scattered += trans * (v.scattering / sigma_t) * v.color * in_cell;
+          light.Integrate(t0, t1, st, [&](double t) { return step_from(t, st_max); });
+      for (int k = 0; k < 3; ++k)
+        if (st[k] > 0) scattered[k] += trans[k] * m.scattering[k] / st[k] * in_cell[k];
     }
+    if (model.emits())  // the integral of e^(-st s) over the cell
+      for (int k = 0; k < 3; ++k)
+        scattered[k] += trans[k] * m.emission[k] *
+                        (seg_tau[k] > 1e-12 ? -std::expm1(-seg_tau[k]) / st[k] : len);
     tau += seg_tau;
     trans *= seg_trans;
-    return !cx.failed() && tau <= kMaxOpticalDepth;
+    return !cx.failed() && std::min({tau.x, tau.y, tau.z}) <= kMaxOpticalDepth;
   };
   Status s;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     s = lod_->Traverse(
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
-          double rho = 1.0;
-          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume))
+          double rho = 1.0, temp = 0.0;
+          if ((seg.level > 0 || has_density || wants_temp) &&
+              !Density(seg.hit, cx, &rho, seg.volume, wants_temp ? &temp : nullptr))
             return false;
-          return cell(seg.t0, seg.t1, rho);
+          return cell(seg.t0, seg.t1, rho, temp);
         },
         &cx.c->trace);
   } else {
     s = cx.tracer->Traverse(
         gr,
         [&](const Hit& h) {
-          double rho = 1.0;
-          if (has_density && !Density(h, cx, &rho)) return false;
-          return cell(h.t, VoxelExitT(gr, h.voxel), rho);
+          double rho = 1.0, temp = 0.0;
+          if ((has_density || wants_temp) &&
+              !Density(h, cx, &rho, nullptr, wants_temp ? &temp : nullptr))
+            return false;
+          return cell(h.t, VoxelExitT(gr, h.voxel), rho, temp);
         },
         &cx.c->trace);
   }
   if (!s.ok()) cx.Fail(s);
-  *transmittance = std::exp(-tau);
+  *transmittance = glm::exp(-tau);
   return scattered;
 }
 
