@@ -98,9 +98,9 @@ FogModel::FogModel(const FogControls& c) : c_(c) {
   g_ = c.phase_g;
   isotropic_ = g_ == 0.0;
   blackbody_ = c.blackbody_intensity;
-  emits_ = blackbody_ > 0 || (c.emission_intensity > 0 &&
-                              (c.emission_color.x > 0 || c.emission_color.y > 0 ||
-                               c.emission_color.z > 0));
+  emits_ = blackbody_ > 0 ||
+           (c.emission_intensity > 0 &&
+            (c.emission_color.x > 0 || c.emission_color.y > 0 || c.emission_color.z > 0));
   if (blackbody_ > 0) {
     reference_y_ = BlackbodyXyz(c.reference_kelvin).y;
     const int n = int(kTableMax / kTableStep) + 1;
@@ -108,8 +108,10 @@ FogModel::FogModel(const FogControls& c) : c_(c) {
     for (int i = 0; i < n; ++i) {
       const glm::dvec3 xyz = BlackbodyXyz(i * kTableStep);
       glm::dvec3 rgb = glm::max(XyzToLinearSrgb(xyz), glm::dvec3(0.0));
-      if (c.blackbody_normalize) rgb = xyz.y > 0 ? rgb / xyz.y : glm::dvec3(0.0);
-      else rgb /= reference_y_;
+      if (c.blackbody_normalize)
+        rgb = xyz.y > 0 ? rgb / xyz.y : glm::dvec3(0.0);
+      else
+        rgb /= reference_y_;
       table_[size_t(i)] = rgb;
     }
   }
@@ -154,7 +156,8 @@ FogSample FogModel::At(double rho, double temperature) const {
   s.extinction = sigma_t_ * o;
   s.scattering = s.extinction * albedo_ * rc;
   if (c_.emission_intensity > 0)
-    s.emission = c_.emission_intensity * c_.emission_color * (c_.emission_ramp ? rc : glm::dvec3(1.0)) * o;
+    s.emission =
+        c_.emission_intensity * c_.emission_color * (c_.emission_ramp ? rc : glm::dvec3(1.0)) * o;
   if (blackbody_ > 0) s.emission += Blackbody(c_.kelvin_offset + c_.kelvin_scale * temperature);
   return s;
 }

@@ -45,11 +45,11 @@ struct FogRampPoint {
 struct FogControls {
   glm::dvec3 absorption{0.5};  // per world unit, times the density
   glm::dvec3 scattering{0.5};
-  glm::dvec3 color{1.0};  // tint of the scattered light
+  glm::dvec3 color{1.0};           // tint of the scattered light
   std::vector<FogRampPoint> ramp;  // empty: opacity(rho) = rho, colour 1
   glm::dvec3 emission_color{1.0};
   double emission_intensity = 0.0;
-  bool emission_ramp = false;  // the emission's colour times the ramp's
+  bool emission_ramp = false;        // the emission's colour times the ramp's
   double blackbody_intensity = 0.0;  // 0: no blackbody emission
   double kelvin_scale = 1.0, kelvin_offset = 0.0;
   double reference_kelvin = 1500.0;
@@ -115,8 +115,8 @@ class FogModel {
 // `out` (keys absent keep their values); errors name `file` and the field.
 Status ParseFogControls(const nlohmann::json& v, std::string_view file, FogControls* out);
 // The keys ParseFogControls reads.
-inline constexpr std::string_view kFogControlKeys[] = {
-    "absorption", "scattering", "color", "ramp", "emission", "blackbody", "phase_g"};
+inline constexpr std::string_view kFogControlKeys[] = {"absorption", "scattering", "color",  "ramp",
+                                                       "emission",   "blackbody",  "phase_g"};
 // The controls as scene.json's "volume" keys, merged into `v`.
 void FogControlsToJson(const FogControls& c, nlohmann::json* v);
 

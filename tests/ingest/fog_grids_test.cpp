@@ -5,13 +5,13 @@
 // format 1.2, written by the last vox-ingest writing 1.2 (checked in under
 // tests/ingest/data/), opens and renders to the same pixels as the same ball
 // ingested today.
-#include <cmath>
-#include <cstring>
-#include <string>
-
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
 
 #include "ingest/ingest.h"
 #include "render/renderer.h"
@@ -185,8 +185,7 @@ TEST_F(FogGridsTest, Format12StoreOpensAndRendersAsToday) {
   ASSERT_TRUE(hot.ok());
   auto r = Renderer::Create(old_store->get(), cam, *hot, RenderOptions{});
   ASSERT_FALSE(r.ok());
-  EXPECT_NE(r.status().message().find("--temperature"), std::string::npos)
-      << r.status().ToString();
+  EXPECT_NE(r.status().message().find("--temperature"), std::string::npos) << r.status().ToString();
 }
 
 }  // namespace
