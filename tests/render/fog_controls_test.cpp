@@ -85,6 +85,17 @@ TEST(FogMaterial, RampInterpolatesAndBadControlsAreRefused) {
   EXPECT_NEAR(m.Opacity(0.5), 1.5, 1e-12);
   EXPECT_EQ(m.Opacity(0.9), 2.0);
   EXPECT_NEAR(m.At(0.5, 0).scattering.r / m.At(0.5, 0).scattering.g, 1.0 / 3.0, 1e-12);
+  // Emission through the ramp: intensity * colour * ramp colour * opacity.
+  auto glow = ParseScene(
+      R"({"volume":{"ramp":[{"density":0.2,"color":[1,0,0],"opacity":0},
+                            {"density":0.6,"color":[0,1,0],"opacity":2}],
+                    "emission":{"color":[1,1,0.5],"intensity":2,"ramp":true}}})",
+      "s.json");
+  ASSERT_TRUE(glow.ok()) << glow.status().ToString();
+  const glm::dvec3 e = FogModel(glow->volume).At(0.5, 0).emission;
+  EXPECT_NEAR(e.r, 2 * 0.25 * 1.5, 1e-12);
+  EXPECT_NEAR(e.g, 2 * 0.75 * 1.5, 1e-12);
+  EXPECT_EQ(e.b, 0.0);
   struct {
     const char* json;
     const char* field;
