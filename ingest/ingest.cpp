@@ -197,6 +197,7 @@ Status DescribeGrid(const IngestOptions& o, const openvdb::GridBase& grid,
     if (o.isovalue) meta->build_options += " isovalue=" + FormatDouble(*o.isovalue);
     if (o.threshold) meta->build_options += " threshold=" + FormatDouble(*o.threshold);
     if (!o.color_grid.empty()) meta->build_options += " color=" + o.color_grid;
+    if (!o.temperature_grid.empty()) meta->build_options += " temperature=" + o.temperature_grid;
     if (o.normal_bits != 16) meta->build_options += " normal_bits=" + std::to_string(o.normal_bits);
   }
   return OkStatus();
@@ -219,6 +220,28 @@ StatusOr<openvdb::GridBase::Ptr> ChooseColorGrid(const IngestOptions& o,
                             " values; a colour grid holds vec3s or vec3d");
   if (!color->transform().isLinear()) return UnsupportedError(where + " has a non-linear transform");
   return color;
+}
+
+// The temperature grid (--temperature; null without it), refused unless a
+// float or double grid with a linear transform other than the main grid.
+StatusOr<openvdb::GridBase::Ptr> ChooseTemperatureGrid(const IngestOptions& o,
+                                                       const openvdb::GridPtrVec& grids,
+                                                       const std::string& main_name) {
+  if (o.temperature_grid.empty()) return openvdb::GridBase::Ptr();
+  openvdb::GridBase::Ptr t;
+  for (const auto& g : grids)
+    if (g->getName() == o.temperature_grid) t = g;
+  if (!t)
+    return NotFoundError(o.input + ": no temperature grid named " + Quote(o.temperature_grid) +
+                         "; the file has: " + ListGrids(grids));
+  const std::string where = "temperature grid " + Quote(o.temperature_grid) + " in " + o.input;
+  if (o.temperature_grid == main_name)
+    return InvalidArgumentError(where + " is the grid being ingested; name another grid");
+  if (!t->isType<openvdb::FloatGrid>() && !t->isType<openvdb::DoubleGrid>())
+    return UnsupportedError(where + " holds " + GridTypeLabel(*t) +
+                            " values; a temperature grid holds floats or doubles");
+  if (!t->transform().isLinear()) return UnsupportedError(where + " has a non-linear transform");
+  return t;
 }
 
 // Where the grid `name` lies in the file (its offsets), which the streaming
@@ -264,6 +287,8 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const IngestLimits& lim
   Context cx{o, factory, progress, &stats, choice, StoreMeta{}, nullptr};
   VOX_RETURN_IF_ERROR(DescribeGrid(o, *meta_grid, where, &cx.meta));
   VOX_ASSIGN_OR_RETURN(const openvdb::GridBase::Ptr color_meta, ChooseColorGrid(o, *grids));
+  VOX_ASSIGN_OR_RETURN(const openvdb::GridBase::Ptr temperature_meta,
+                       ChooseTemperatureGrid(o, *grids, name));
   VOX_ASSIGN_OR_RETURN(const ingest_internal::VdbLayout::Grid* grid_layout,
                        FindGridLayout(layout, name, where));
   VOX_ASSIGN_OR_RETURN(const uint64_t budget, MemoryBudget(o));
@@ -280,6 +305,16 @@ StatusOr<IngestStats> IngestImpl(const IngestOptions& o, const IngestLimits& lim
                                      ": grid type changed between metadata and read");
     cx.meta.has_color = true;
     cx.color = color.get();
+  }
+  std::unique_ptr<ColorSource> temperature;
+  if (temperature_meta) {
+    temperature = ingest_internal::NewScalarSource(file.readGrid(o.temperature_grid),
+                                                   meta_grid->transform());
+    if (!temperature)
+      return InternalError("temperature grid " + Quote(o.temperature_grid) + " in " + o.input +
+                           ": grid type changed between metadata and read");
+    cx.meta.has_temperature = true;
+    cx.temperature = temperature.get();
   }
   stats.seconds_open = t0.Seconds();
 

@@ -8,7 +8,9 @@
 // threshold. Active tiles count voxel by voxel (they are expanded). Level
 // sets keep a normal per voxel (the distance field's central-difference
 // gradient in index space), fog volumes the density, and `color_grid` (a
-// vec3 grid) an RGB colour sampled at each occupied voxel.
+// vec3 grid) an RGB colour sampled at each occupied voxel, and
+// `temperature_grid` (a second float or double grid, such as a fire's
+// temperature beside its density) a scalar sampled there too.
 //
 // Placement (levels, origin): see ingest/placement.h. An empty grid (nothing
 // occupied) makes a valid empty store.
@@ -45,6 +47,7 @@ struct IngestOptions {
   std::optional<double> isovalue;   // level sets; default 0
   std::optional<double> threshold;  // fog volumes; default 0
   std::string color_grid;   // optional Vec3f/Vec3d grid of the same file
+  std::string temperature_grid;  // optional float/double grid of the same file (format 1.3)
   int zstd_level = 3;
   int normal_bits = 16;     // per octahedral normal component, 8..16 (WriteOptions::normal_bits)
   int threads = 0;          // 0: all cores

@@ -21,9 +21,11 @@ namespace {
 
 // Renderer::Density's way for volumes without PinnedDensity (a memory
 // volume, the top pool).
-[[gnu::noinline]] Status DensityOfAttributes(Volume* v, const Hit& h, double* rho) {
+[[gnu::noinline]] Status DensityOfAttributes(Volume* v, const Hit& h, double* rho,
+                                             double* temperature) {
   VOX_ASSIGN_OR_RETURN(VoxelAttributes a, v->HitAttributes(h));
   *rho = a.density;
+  if (temperature != nullptr) *temperature = a.temperature;
   return OkStatus();
 }
 
@@ -31,18 +33,19 @@ namespace {
 
 // The density of fog voxel `h` (stops the frame with the error on failure).
 bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume,
-                       int* uniform_levels) const {
+                       double* temperature, int* uniform_levels) const {
   ++cx.c->attribute_lookups;
   Volume* v = volume != nullptr ? volume : volume_;
   float d;
   int levels = -1;
-  if (v->PinnedDensity(h, &d, &levels)) {  // (called by visitors: h's brick is pinned)
+  // (called by visitors: h's brick is pinned)
+  if (temperature == nullptr && v->PinnedDensity(h, &d, &levels)) {
     *rho = d;
     if (uniform_levels != nullptr) *uniform_levels = levels;
     return true;
   }
-  if (uniform_levels != nullptr) *uniform_levels = -1;
-  Status s = DensityOfAttributes(v, h, rho);
+  if (uniform_levels != nullptr) *uniform_levels = -1;  // (blocks of one temperature are not looked for)
+  Status s = DensityOfAttributes(v, h, rho, temperature);
   if (s.ok()) return true;
   cx.Fail(s);
   return false;
@@ -87,11 +90,13 @@ class UniformBlocks {
 
 }  // namespace
 
-double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone) const {
+glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx,
+                                   const Cone* cone) const {
   ++cx.c->rays[kRayVolume];
-  const double sigma_t = scene_.volume.absorption + scene_.volume.scattering;
+  const FogModel& model = fog_model_;  // per channel: opacity(rho) times each extinction
   const bool has_density = volume_->meta().has_density;
-  double tau = 0.0;
+  glm::dvec3 tau(0.0);
+  auto opaque = [&] { return std::min({tau.x, tau.y, tau.z}) > kMaxShadowOpticalDepth; };
   UniformBlocks uniform;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     // Level of detail: each coarse cell's mean density over its segment.
@@ -102,16 +107,17 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
           if (uniform.Covers(seg.hit, seg.level)) return uniform.skip();
           double t1 = seg.t1, rho = 1.0;
           int levels = -1;
-          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume, &levels))
+          if ((seg.level > 0 || has_density) &&
+              !Density(seg.hit, cx, &rho, seg.volume, nullptr, &levels))
             return Visit::kStop;
           if (levels >= 0) t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.n2, seg.t_end);
-          tau += sigma_t * rho * std::max(0.0, std::min(t1, t_max) - seg.t0);
-          if (!(tau <= kMaxShadowOpticalDepth)) return Visit::kStop;
+          tau += model.Extinction(rho) * std::max(0.0, std::min(t1, t_max) - seg.t0);
+          if (opaque()) return Visit::kStop;
           return levels >= 0 ? uniform.skip() : Visit::kNext;
         },
         &cx.c->trace);
     if (!s.ok()) cx.Fail(s);
-    return std::exp(-tau);
+    return glm::exp(-tau);
   }
   Status s = cx.tracer->Traverse(
       gr,
@@ -120,19 +126,20 @@ double Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx, co
         if (uniform.Covers(h, 0)) return uniform.skip();
         double rho = 1.0;
         int levels = -1;
-        if (has_density && !Density(h, cx, &rho, nullptr, &levels)) return Visit::kStop;
+        if (has_density && !Density(h, cx, &rho, nullptr, nullptr, &levels)) return Visit::kStop;
         double t1 = VoxelExitT(gr, h.voxel);
         if (levels >= 0) t1 = uniform.Enter(gr, h, 0, levels, cx.tracer->n2(), kInf);
-        tau += sigma_t * rho * std::max(0.0, std::min(t1, t_max) - h.t);
-        if (!(tau <= kMaxShadowOpticalDepth)) return Visit::kStop;
+        tau += model.Extinction(rho) * std::max(0.0, std::min(t1, t_max) - h.t);
+        if (opaque()) return Visit::kStop;
         return levels >= 0 ? uniform.skip() : Visit::kNext;
       },
       &cx.c->trace);
   if (!s.ok()) cx.Fail(s);
-  return std::exp(-tau);
+  return glm::exp(-tau);
 }
 
-glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone) const {
+glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone,
+                                  const glm::dvec3* view_w) const {
   const glm::dvec3 p_w = xf_.GridToWorld(p_g);
   // With a pyramid, the transmittance ray's cells widen along it (as fast as
   // the primary ray's cone, or volume.shadow_lod's rate if faster), from
@@ -148,8 +155,10 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
   }
   glm::dvec3 light_in(0.0);
   ForEachLight(scene_.lights, p_w, [&](const Light& l, const glm::dvec3& to_light, double dist) {
-    const double tl = l.shadows ? Transmittance(SpawnRay(p_g, to_light), dist, cx, sc) : 1.0;
-    light_in += l.color * l.intensity * tl;
+    const glm::dvec3 tl =
+        l.shadows ? Transmittance(SpawnRay(p_g, to_light), dist, cx, sc) : glm::dvec3(1.0);
+    const double phase = view_w != nullptr ? fog_model_.Phase(-glm::dot(to_light, *view_w)) : 1.0;
+    light_in += l.color * (l.intensity * phase) * tl;
   });
   return light_in;
 }
@@ -234,9 +243,11 @@ class LightAlongRay {
   explicit LightAlongRay(LightAt light_at) : light_at_(std::move(light_at)) {}
 
   // The integral over t in [t0, t1] of st e^(-st (t - t0)) L(t), per
-  // channel, for a cell of extinction st; step(t): the sample spacing from t.
+  // channel, for a cell of extinction st_rgb (per channel; st: its
+  // largest, which sets the sampling); step(t): the sample spacing from t.
   template <class Step>
-  glm::dvec3 Integrate(double t0, double t1, double st, Step&& step) {
+  glm::dvec3 Integrate(double t0, double t1, const glm::dvec3& st_rgb, Step&& step) {
+    const double st = std::max({st_rgb.x, st_rgb.y, st_rgb.z});
     if (t0 > tb_) {  // the fog's entry, or the first cell after a long gap
       ta_ = t0;
       const double h = step(t0);
@@ -249,8 +260,9 @@ class LightAlongRay {
       const double tc = std::max(ta_ + h, t0);
       if (tc < tb_) SetB(tc, h);
     }
-    glm::dvec3 sum(0.0);
-    double t = t0, trans = 1.0;  // trans: the cell's transmittance from t0 to t
+    glm::dvec3 sum(0.0), trans(1.0);  // trans: the cell's transmittance from t0 to t
+    double t = t0;
+    const bool grey_cell = st_rgb.x == st_rgb.y && st_rgb.x == st_rgb.z;
     while (t < t1) {
       if (t >= tb_) {
         ta_ = tb_;
@@ -261,27 +273,31 @@ class LightAlongRay {
       }
       // (a step lost below t's precision ends the cell with this interval)
       const double e = tb_ > t ? std::min(t1, tb_) : t1, len = e - t;
-      const double piece_tau = st * len, piece_trans = ExpNeg(piece_tau);
+      const glm::dvec3 piece_tau = st_rgb * len;
+      glm::dvec3 piece_trans;
+      piece_trans.x = ExpNeg(piece_tau.x);
+      piece_trans.y = grey_cell ? piece_trans.x : ExpNeg(piece_tau.y);
+      piece_trans.z = grey_cell ? piece_trans.x : ExpNeg(piece_tau.z);
       if (geometric_) {
         // The light at t, carried from where it was last known at its
         // decay rate (a cell's exit is the next one's entry, up to rounding).
         // A white light in grey fog: one channel computed for three.
-        const int channels = grey_ ? 1 : 3;
+        const int channels = grey_ && grey_cell ? 1 : 3;
         glm::dvec3 in;
         for (int k = 0; k < channels; ++k) {
           const double kappa = rate_[k];  // the light's decay rate along the ray
           if (!(lt_ == t)) l_[k] = lt_ == -kInf ? la_[k] * ExpNeg(kappa * (t - ta_))
                                                 : l_[k] * ExpNeg(kappa * (t - lt_));
-          in[k] = l_[k] * piece_tau * ExpNegShare(piece_tau + kappa * len);
+          in[k] = l_[k] * piece_tau[k] * ExpNegShare(piece_tau[k] + kappa * len);
           l_[k] *= ExpNeg(kappa * len);
         }
-        if (grey_) in[1] = in[2] = in[0], l_[1] = l_[2] = l_[0];
+        if (channels == 1) in[1] = in[2] = in[0], l_[1] = l_[2] = l_[0];
         sum += trans * in;
         lt_ = e;
       } else {
         for (int k = 0; k < 3; ++k) {
           const double w = tb_ > ta_ ? std::clamp((t + 0.5 * len - ta_) / (tb_ - ta_), 0.0, 1.0) : 0.0;
-          sum[k] += trans * (1.0 - piece_trans) * (la_[k] + w * (lb_[k] - la_[k]));
+          sum[k] += trans[k] * (1.0 - piece_trans[k]) * (la_[k] + w * (lb_[k] - la_[k]));
         }
       }
       trans *= piece_trans;
@@ -315,12 +331,13 @@ class LightAlongRay {
 
 }  // namespace
 
-glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance, double* first_t,
-                         const Cone* cone) const {
+glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmittance,
+                         double* first_t, const Cone* cone) const {
   const VolumeMedium& v = scene_.volume;
-  const double sigma_t = v.absorption + v.scattering;
+  const FogModel& model = fog_model_;  // render/fog_material.h
   const bool has_density = volume_->meta().has_density;
-  double tau = 0.0, trans = 1.0;
+  const bool wants_temp = model.uses_temperature();
+  glm::dvec3 tau(0.0), trans(1.0);
   glm::dvec3 scattered(0.0);
   // The light reaching the ray is sampled at points along it and
   // interpolated in between (LightAlongRay). The next sample is light_step
@@ -334,24 +351,47 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
   };
   render_internal::FogLightCache local_cache;  // (a thread's own when it has one)
   render_internal::FogLightCache* cache = cx.light_cache != nullptr ? cx.light_cache : &local_cache;
-  LightAlongRay light([&](double t, double h) { return LightInFog(gr, t, h, cx, cone, cache); });
+  // The phase function (fog_material.h): with one light the light is
+  // weighted at each sample by its angle to the ray there (the lattice
+  // keeps the light unweighted); with several lights each is weighted
+  // before they are summed, so every sample traces its own rays.
+  const glm::dvec3 view_w = -glm::normalize(xf_.grid_to_world_linear * gr.dir);  // towards the camera
+  LightAlongRay light([&](double t, double h) {
+    if (model.isotropic()) return LightInFog(gr, t, h, cx, cone, cache);
+    if (scene_.lights.size() > 1) return LightAtPoint(gr.origin + t * gr.dir, cx, cone, &view_w);
+    glm::dvec3 l = LightInFog(gr, t, h, cx, cone, cache);
+    ForEachLight(scene_.lights, xf_.GridToWorld(gr.origin + t * gr.dir),
+                 [&](const Light&, const glm::dvec3& to_light, double) {
+                   l *= model.Phase(-glm::dot(to_light, view_w));
+                 });
+    return l;
+  });
   *first_t = kInf;
-  // One occupied cell [t0, t1] of density rho (Cone: `level` > 0 for coarse cells).
-  auto cell = [&](double t0, double t1, double rho) {
+  // One occupied cell [t0, t1] of density rho and temperature temp (Cone:
+  // `level` > 0 for coarse cells): its medium per channel (FogModel), the
+  // light it scatters and the light it emits, each seen through the cell
+  // up to where it arises.
+  auto cell = [&](double t0, double t1, double rho, double temp) {
     if (*first_t == kInf) *first_t = t0;
     const double len = std::max(0.0, t1 - t0);
-    const double st = sigma_t * rho;
-    if (st <= 0) return true;
-    const double seg_tau = st * len;
-    const double seg_trans = ExpNeg(seg_tau);
-    if (passes_.scattering) {
+    const FogSample m = model.At(rho, temp);
+    const glm::dvec3& st = m.extinction;
+    const double st_max = std::max({st.x, st.y, st.z});
+    if (st_max <= 0 && !model.emits()) return true;
+    const glm::dvec3 seg_tau = st * len;
+    const glm::dvec3 seg_trans(ExpNeg(seg_tau.x), ExpNeg(seg_tau.y), ExpNeg(seg_tau.z));
+    if (passes_.scattering && st_max > 0) {
       const glm::dvec3 in_cell =
-          light.Integrate(t0, t1, st, [&](double t) { return step_from(t, st); });
-      scattered += trans * (v.scattering / sigma_t) * v.color * in_cell;
+          light.Integrate(t0, t1, st, [&](double t) { return step_from(t, st_max); });
+      for (int k = 0; k < 3; ++k)
+        if (st[k] > 0) scattered[k] += trans[k] * m.scattering[k] / st[k] * in_cell[k];
     }
+    if (model.emits())  // the integral of e^(-st s) over the cell
+      for (int k = 0; k < 3; ++k)
+        scattered[k] += trans[k] * m.emission[k] * len * ExpNegShare(seg_tau[k]);
     tau += seg_tau;
     trans *= seg_trans;
-    return !cx.failed() && tau <= kMaxOpticalDepth;
+    return !cx.failed() && std::min({tau.x, tau.y, tau.z}) <= kMaxOpticalDepth;
   };
   UniformBlocks uniform;
   Status s;
@@ -360,12 +400,13 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
           if (uniform.Covers(seg.hit, seg.level)) return uniform.skip();
-          double t1 = seg.t1, rho = 1.0;
+          double t1 = seg.t1, rho = 1.0, temp = 0.0;
           int levels = -1;
-          if ((seg.level > 0 || has_density) && !Density(seg.hit, cx, &rho, seg.volume, &levels))
+          if ((seg.level > 0 || has_density || wants_temp) &&
+              !Density(seg.hit, cx, &rho, seg.volume, wants_temp ? &temp : nullptr, &levels))
             return Visit::kStop;
           if (levels >= 0) t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.n2, seg.t_end);
-          if (!cell(seg.t0, t1, rho)) return Visit::kStop;
+          if (!cell(seg.t0, t1, rho, temp)) return Visit::kStop;
           return levels >= 0 ? uniform.skip() : Visit::kNext;
         },
         &cx.c->trace);
@@ -374,18 +415,20 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, double* transmittance,
         gr,
         [&](const Hit& h) {
           if (uniform.Covers(h, 0)) return uniform.skip();
-          double rho = 1.0;
+          double rho = 1.0, temp = 0.0;
           int levels = -1;
-          if (has_density && !Density(h, cx, &rho, nullptr, &levels)) return Visit::kStop;
+          if ((has_density || wants_temp) &&
+              !Density(h, cx, &rho, nullptr, wants_temp ? &temp : nullptr, &levels))
+            return Visit::kStop;
           double t1 = VoxelExitT(gr, h.voxel);
           if (levels >= 0) t1 = uniform.Enter(gr, h, 0, levels, cx.tracer->n2(), kInf);
-          if (!cell(h.t, t1, rho)) return Visit::kStop;
+          if (!cell(h.t, t1, rho, temp)) return Visit::kStop;
           return levels >= 0 ? uniform.skip() : Visit::kNext;
         },
         &cx.c->trace);
   }
   if (!s.ok()) cx.Fail(s);
-  *transmittance = std::exp(-tau);
+  *transmittance = glm::exp(-tau);
   return scattered;
 }
 

@@ -129,6 +129,11 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
     s.default_lights = false;
   }
   r->fog_ = meta.grid_class == GridClass::kFogVolume;
+  r->fog_model_ = FogModel(s.volume);
+  if (r->fog_ && r->fog_model_.uses_temperature() && !meta.has_temperature)
+    return InvalidArgumentError(
+        "scene: volume.blackbody needs a temperature per voxel, and the store of grid '" +
+        meta.grid_name + "' has none (ingest with vox-ingest --temperature GRID)");
   bool any_light = false, any_shadow = false;
   for (const Light& l : s.lights) {
     if (l.intensity <= 0) continue;
@@ -145,7 +150,7 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
   p.shadows = !r->fog_ && any_shadow;
   p.reflection = !r->fog_ && s.max_depth > 0 && max_reflect > 0;
   p.refraction = !r->fog_ && SceneRefracts(s);
-  p.scattering = r->fog_ && any_light && s.volume.scattering > 0;
+  p.scattering = r->fog_ && any_light && r->fog_model_.scatters();
   r->needs_normal_ = any_light || p.reflection || p.refraction || options.layers.normal;
   r->smooth_normals_ = s.smooth_normals && !r->fog_ && meta.has_normal;
   r->needs_attributes_ =
@@ -182,11 +187,13 @@ void Renderer::ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* out,
   const bool lod = lod_.has_value();
   if (cone == nullptr) cone = &primary_cone_;
   if (fog_) {
-    double T = 1.0, first_t = kInf;
+    glm::dvec3 T(1.0);
+    double first_t = kInf;
     glm::dvec3 l = Fog(gr, cx, &T, &first_t, lod ? cone : nullptr);
-    // Premultiplied: the background only when the scene puts it in the EXR.
+    // Premultiplied: the background only when the scene puts it in the EXR
+    // (seen through each channel's transmittance; alpha: their mean).
     out->color = scene_.background_in_exr ? l + T * Background(wr.dir) : l;
-    out->alpha = 1.0 - T;
+    out->alpha = 1.0 - (T.x + T.y + T.z) / 3.0;
     out->z = first_t;
     out->hit = first_t < kInf;
     out->normal = glm::dvec3(0.0);

@@ -324,15 +324,21 @@ class Renderer {
 
   // fog.cpp: volumes.
   // `cone`: trace with LOD (nullptr: exactly).
-  glm::dvec3 Fog(const Ray& gr, TraceContext& cx, double* transmittance, double* first_t,
+  // *transmittance: per channel (fog_material.h: RGB extinction).
+  glm::dvec3 Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmittance, double* first_t,
                  const Cone* cone = nullptr) const;
-  // *uniform_levels (when given): see Volume::PinnedDensity (-1: not known).
+  // The density (and, with `temperature`, the temperature) of fog voxel h;
+  // *uniform_levels (when given): see Volume::PinnedDensity (-1: not known,
+  // always so with a temperature).
   bool Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume = nullptr,
-               int* uniform_levels = nullptr) const;
-  double Transmittance(const Ray& gr, double t_max, TraceContext& cx, const Cone* cone = nullptr) const;
+               double* temperature = nullptr, int* uniform_levels = nullptr) const;
+  glm::dvec3 Transmittance(const Ray& gr, double t_max, TraceContext& cx,
+                           const Cone* cone = nullptr) const;
   // The light reaching fog at grid point p_g (cone: with LOD), through
-  // transmittance rays to the shadowing lights.
-  glm::dvec3 LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone) const;
+  // transmittance rays to the shadowing lights; with `view_w` (the world
+  // direction towards the camera) each light weighted by the phase function.
+  glm::dvec3 LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone,
+                          const glm::dvec3* view_w = nullptr) const;
   // The light reaching fog at ray parameter t of primary ray gr, for light
   // samples h apart there: interpolated on `cache`'s lattice
   // (render/internal/fog_light.h) unless volume.light_lattice is off.
@@ -350,6 +356,7 @@ class Renderer {
   GridTransform xf_;
   RenderPasses passes_;
   bool fog_ = false;
+  FogModel fog_model_{FogControls{}};  // fog: what a voxel absorbs, scatters, emits
   bool needs_attributes_ = true;  // surfaces: shading reads normals or colours
   // Surfaces: something reads the shading normal (a light, a reflection or
   // refraction, or the normal layer); without, hits are shaded without it.

@@ -159,16 +159,11 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
   if (auto it = j.find("volume"); it != j.end()) {
     if (!it->is_object()) return jf::FieldError(file, "volume", "must be an object");
     VOX_RETURN_IF_ERROR(
-        jf::CheckKnownKeys(*it, {"absorption", "scattering", "color", "light_step", "light_optical_depth",
-                            "shadow_lod", "light_lattice"},
+        jf::CheckKnownKeys(*it, {"absorption", "scattering", "color", "ramp", "emission",
+                                 "blackbody", "phase_g", "light_step", "light_optical_depth",
+                                 "shadow_lod", "light_lattice"},
                            file, "volume"));
-    VOX_RETURN_IF_ERROR(
-        jf::GetNumber(*it, "absorption", file, "volume", false, &s.volume.absorption));
-    VOX_RETURN_IF_ERROR(NonNegative(file, "volume.absorption", s.volume.absorption));
-    VOX_RETURN_IF_ERROR(
-        jf::GetNumber(*it, "scattering", file, "volume", false, &s.volume.scattering));
-    VOX_RETURN_IF_ERROR(NonNegative(file, "volume.scattering", s.volume.scattering));
-    VOX_RETURN_IF_ERROR(ReadColor(*it, "color", file, "volume", &s.volume.color));
+    VOX_RETURN_IF_ERROR(ParseFogControls(*it, file, &s.volume));
     VOX_RETURN_IF_ERROR(
         jf::GetNumber(*it, "light_step", file, "volume", false, &s.volume.light_step));
     if (!(s.volume.light_step > 0 && s.volume.light_step <= 1e6))
@@ -243,14 +238,12 @@ std::string Scene::ToJson() const {
     regs.push_back(o);
   }
   if (!regions.empty()) j["materials"] = regs;
-  j["volume"] = {{"absorption", volume.absorption},
-                 {"scattering", volume.scattering},
-                 {"color", v(volume.color)},
-                 {"light_step", volume.light_step},
+  j["volume"] = {{"light_step", volume.light_step},
                  {"light_optical_depth", volume.light_optical_depth},
                  {"shadow_lod", volume.shadow_lod},
                  {"light_lattice", volume.light_lattice}};
   j["normals"] = smooth_normals ? "smooth" : "flat";
+  FogControlsToJson(volume, &j["volume"]);
   j["max_depth"] = max_depth;
   j["samples_per_pixel"] = samples_per_pixel;
   return j.dump();

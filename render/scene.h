@@ -25,10 +25,12 @@
 //         first box holding the hit point gives the material; elsewhere
 //         "material" applies,
 //     "volume": {"absorption":sa, "scattering":ss, "color":[r,g,b],
+//                "ramp":[...], "emission":{...}, "blackbody":{...}, "phase_g":g,
 //                "light_step":S, "light_optical_depth":D, "shadow_lod":G,
 //                "light_lattice":L},
-//         absorption and scattering per world unit, times the voxel density
-//         (fog volumes only); the quality of single scattering: the light
+//         absorption and scattering per world unit (a number or [r,g,b]),
+//         times the voxel density (fog volumes only; the shading controls
+//         are described in render/fog_material.h); the quality of single scattering: the light
 //         reaching a primary ray is evaluated every S voxels along it, or
 //         sooner where the extinction over the step would exceed optical
 //         depth D, and interpolated between (S, D > 0); with a pyramid
@@ -59,6 +61,7 @@
 #include <vector>
 
 #include "core/util/status.h"
+#include "render/fog_material.h"
 
 namespace vox {
 
@@ -88,10 +91,9 @@ struct MaterialRegion {
   Material material;
 };
 
-struct VolumeMedium {
-  double absorption = 0.5;
-  double scattering = 0.5;
-  glm::dvec3 color{1.0};  // tint of the scattered light
+// The fog's shading controls (absorption, scattering, colour, ramp,
+// emission, blackbody, phase: render/fog_material.h) and its sampling.
+struct VolumeMedium : FogControls {
   // Voxels between evaluations of the light reaching a primary ray.
   double light_step = 24.0;
   // At most this optical depth between evaluations of the light.

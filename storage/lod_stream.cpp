@@ -177,6 +177,7 @@ class LodStream::Impl {
       s.normal = si::DecodeOctNormal(
           si::EncodeOctNormal(a.normal, normal_bits_));
     if (flags_ & si::kAttrDensity) s.density = a.density;
+    if (flags_ & si::kAttrTemperature) s.temperature = a.temperature;
     if (flags_ & si::kAttrColor)
       for (int k = 0; k < 3; ++k) s.color[k] = glm::unpackHalf1x16(glm::packHalf1x16(a.color[k]));
     return s;

@@ -38,6 +38,7 @@ struct StoreMeta {
   bool has_density = false;  // fog volumes: the density per voxel
   bool has_color = false;    // an RGB colour per voxel (from a vec3 grid)
   bool has_coverage = false; // level-of-detail stores: the fraction of a cell's voxels occupied
+  bool has_temperature = false;  // format 1.3: a temperature per voxel (from a second float grid)
   double isovalue = 0.0;     // level sets: occupied when active and value <= isovalue
   double threshold = 0.0;    // fog volumes: occupied when active and density > threshold
   std::string build_options; // the ingest command's options, for the record
@@ -50,12 +51,13 @@ struct StoreMeta {
 };
 
 // What a brick keeps per occupied voxel. Fields the store does not have are
-// zero (normal), 1 (density), 1,1,1 (colour) or 1 (coverage).
+// zero (normal), 1 (density), 1,1,1 (colour), 1 (coverage) or 0 (temperature).
 struct VoxelAttributes {
   glm::vec3 normal{0.0f};    // unit, in index space (the gradient of the distance field)
   float density = 1.0f;
   glm::vec3 color{1.0f};
   float coverage = 1.0f;     // level-of-detail cells: fraction of their voxels occupied
+  float temperature = 0.0f;  // a second grid's value (Kelvin for blackbody fog)
 };
 
 }  // namespace vox

@@ -115,6 +115,7 @@ std::string FormatStoreInfo(const StoreInfo& i) {
   if (m.has_normal) attrs += " normal";
   if (m.has_density) attrs += " density";
   if (m.has_color) attrs += " colour";
+  if (m.has_temperature) attrs += " temperature";
   if (m.has_coverage) attrs += " coverage";
   add("  attributes:     %s\n", attrs.empty() ? " none" : attrs.c_str());
   if (m.lod_level > 0)

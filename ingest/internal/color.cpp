@@ -74,4 +74,13 @@ std::unique_ptr<ColorSource> NewColorSource(openvdb::GridBase::Ptr grid,
   return nullptr;
 }
 
+std::unique_ptr<ColorSource> NewScalarSource(openvdb::GridBase::Ptr grid,
+                                             const openvdb::math::Transform& main) {
+  if (auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(grid))
+    return std::make_unique<TypedColorSource<openvdb::FloatGrid>>(g, main);
+  if (auto g = openvdb::gridPtrCast<openvdb::DoubleGrid>(grid))
+    return std::make_unique<TypedColorSource<openvdb::DoubleGrid>>(g, main);
+  return nullptr;
+}
+
 }  // namespace vox::ingest_internal

@@ -2,7 +2,8 @@
 // grid of the same file (Vec3f or Vec3d). Where the colour grid shares the
 // main grid's transform the colour is its value at the voxel; otherwise it is
 // sampled trilinearly at the voxel's world position, as
-// openvdb::tools::BoxSampler does. Private to ingest and its tests.
+// openvdb::tools::BoxSampler does. Scalar grids are sampled the same way
+// (NewScalarSource). Private to ingest and its tests.
 //
 // Thread safety: a ColorSource is shared; each thread takes its own
 // ColorReader (NewReader), which reads leaf values through private copies.
@@ -33,6 +34,12 @@ class ColorSource {
 // for a main grid with transform `main`, which must outlive the source.
 std::unique_ptr<ColorSource> NewColorSource(openvdb::GridBase::Ptr grid,
                                             const openvdb::math::Transform& main);
+
+// The same over a scalar `grid` (a FloatGrid or DoubleGrid; null for any
+// other type): its value, or its trilinear sample, in all three components.
+// vox-ingest --temperature reads a second grid of the file this way.
+std::unique_ptr<ColorSource> NewScalarSource(openvdb::GridBase::Ptr grid,
+                                             const openvdb::math::Transform& main);
 
 }  // namespace vox::ingest_internal
 

@@ -97,6 +97,9 @@ StatusOr<std::vector<BrickVoxel>> GridIngest<ValueT>::ExtractBrick(
   for (int a = 0; a < 3; ++a) rmin[a] = origin_[a] + (KeyCoord(bw.key, a) << B_);
   std::unique_ptr<ColorReader> color = cx_.color ? cx_.color->NewReader() : nullptr;
   Builder builder(*topo_, level_set_, color.get(), rmin);
+  std::unique_ptr<ColorReader> temperature =
+      cx_.temperature ? cx_.temperature->NewReader() : nullptr;
+  builder.SetTemperature(temperature.get());
   std::vector<BrickVoxel> out = BrickVoxels(bw, rmin, builder);
   if (lod_ == nullptr || out.empty()) return out;
   // The store's voxels beside the brick, from the leaves the builder has

@@ -32,6 +32,7 @@ struct Context {
   LevelsChoice choice;
   StoreMeta meta;  // source, grid, class, transform, options filled in by the caller
   ColorSource* color = nullptr;
+  ColorSource* temperature = nullptr;  // a scalar grid: its value in each component
   uint64_t memory_budget = 0;  // bytes the ingest may hold (0: no limit known)
   uint64_t max_tile_voxels = UINT64_MAX;  // IngestLimits::max_tile_voxels
 };

@@ -123,6 +123,8 @@ class BasicVoxelBuilder {
   }
 
   Source& source() { return source_; }
+  // A second scalar grid read as each voxel's temperature (null: none).
+  void SetTemperature(ColorReader* temperature) { temperature_ = temperature; }
 
   // Leaf path. The voxels of `leaf` follow; its values are decoded privately
   // (may throw an OpenVDB exception for corrupt data).
@@ -178,6 +180,7 @@ class BasicVoxelBuilder {
       bv.attr.density = float(v);
     }
     if (color_) bv.attr.color = color_->At(ijk);
+    if (temperature_) bv.attr.temperature = temperature_->At(ijk).x;
     return bv;
   }
 
@@ -203,6 +206,7 @@ class BasicVoxelBuilder {
   Source source_;
   bool level_set_;
   ColorReader* color_;
+  ColorReader* temperature_ = nullptr;
   int64_t rmin_[3];
   // The leaf being visited and its face neighbours' values, resolved lazily.
   const ValueT* d_ = nullptr;

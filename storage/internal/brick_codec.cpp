@@ -83,14 +83,15 @@ inline void ScatterPlanes(uint8_t* planes, uint32_t count, uint32_t index, int n
 }
 
 // Attribute components (width in bytes) in plane order, for delta coding:
-// at most kMaxComponents (normal 2, density 1, colour 3, coverage 1).
-constexpr int kMaxComponents = 7;
+// at most kMaxComponents (normal 2, density 1, colour 3, coverage 1, temperature 1).
+constexpr int kMaxComponents = 8;
 int Components(uint8_t flags, int* widths) {
   int k = 0;
   if (flags & kAttrNormal) widths[k++] = 2, widths[k++] = 2;
   if (flags & kAttrDensity) widths[k++] = 4;
   if (flags & kAttrColor) widths[k++] = 2, widths[k++] = 2, widths[k++] = 2;
   if (flags & kAttrCoverage) widths[k++] = 2;
+  if (flags & kAttrTemperature) widths[k++] = 4;
   return k;
 }
 
@@ -216,8 +217,12 @@ VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t fl
     for (int k = 0; k < 3; ++k) a.color[k] = glm::unpackHalf1x16(uint16_t(c >> (16 * k)));
     planes += size_t(6) * count;
   }
-  if (flags & kAttrCoverage)
+  if (flags & kAttrCoverage) {
     a.coverage = DecodeCoverage(uint16_t(GatherPlanes(planes, count, index, 2)));
+    planes += size_t(2) * count;
+  }
+  if (flags & kAttrTemperature)
+    a.temperature = std::bit_cast<float>(uint32_t(GatherPlanes(planes, count, index, 4)));
   return a;
 }
 
@@ -245,9 +250,14 @@ void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std:
     }
     planes += size_t(6) * count;
   }
-  if (flags & kAttrCoverage)
+  if (flags & kAttrCoverage) {
     for (uint32_t i = 0; i < count; ++i)
       ScatterPlanes(planes, count, i, 2, EncodeCoverage(attrs[i].coverage));
+    planes += size_t(2) * count;
+  }
+  if (flags & kAttrTemperature)
+    for (uint32_t i = 0; i < count; ++i)
+      ScatterPlanes(planes, count, i, 4, std::bit_cast<uint32_t>(attrs[i].temperature));
 }
 
 std::string EncodeBrickRaw(std::span<const Cell> cells, std::span<const VoxelAttributes> attrs,

@@ -37,12 +37,14 @@ Status VersionCheck(uint16_t major, uint16_t minor, const std::string& path) {
 
 uint8_t AttrFlags(const StoreMeta& m) {
   return uint8_t((m.has_normal ? kAttrNormal : 0) | (m.has_density ? kAttrDensity : 0) |
-                 (m.has_color ? kAttrColor : 0) | (m.has_coverage ? kAttrCoverage : 0));
+                 (m.has_color ? kAttrColor : 0) | (m.has_coverage ? kAttrCoverage : 0) |
+                 (m.has_temperature ? kAttrTemperature : 0));
 }
 
 size_t AttrBytesPerVoxel(uint8_t flags) {
   return ((flags & kAttrNormal) ? 4 : 0) + ((flags & kAttrDensity) ? 4 : 0) +
-         ((flags & kAttrColor) ? 6 : 0) + ((flags & kAttrCoverage) ? 2 : 0);
+         ((flags & kAttrColor) ? 6 : 0) + ((flags & kAttrCoverage) ? 2 : 0) +
+         ((flags & kAttrTemperature) ? 4 : 0);
 }
 
 std::string EncodeFileHeader(uint64_t magic, uint64_t store_id) {
@@ -226,6 +228,7 @@ StatusOr<StoreMeta> DecodeMeta(const uint8_t* p, size_t n, const std::string& pa
   m.has_density = flags & kAttrDensity;
   m.has_color = flags & kAttrColor;
   m.has_coverage = flags & kAttrCoverage;
+  m.has_temperature = flags & kAttrTemperature;
   if (m.top_cells == 0 || m.top_cells >= kBrickBit)
     return bad("top cell count " + std::to_string(m.top_cells));
   if (m.brick_count >= kBrickBit) return bad("brick count " + std::to_string(m.brick_count));

@@ -24,7 +24,7 @@ namespace vox::storage_internal {
 inline constexpr uint64_t kIndexMagic = 0x5845444e49584f56ull;
 inline constexpr uint64_t kBrickMagic = 0x4b43495242584f56ull;
 inline constexpr uint16_t kFormatMajor = 1;
-inline constexpr uint16_t kFormatMinor = 2;
+inline constexpr uint16_t kFormatMinor = 3;
 inline constexpr char kIndexFileName[] = "index.vxi";
 inline constexpr char kBrickFileName[] = "bricks.vxb";
 inline constexpr char kLodDirName[] = "lod";  // the level-of-detail pyramid (storage/lod.h)
@@ -40,8 +40,10 @@ inline constexpr uint64_t kMaxBrickRawBytes = uint64_t(1) << 30;
 enum Codec : uint8_t { kCodecRaw = 0, kCodecZstd = 1 };
 
 // Attribute flags (brick header byte 9 and meta block).
-inline constexpr uint8_t kAttrNormal = 1, kAttrDensity = 2, kAttrColor = 4, kAttrCoverage = 8;
-inline constexpr uint8_t kAttrAll = kAttrNormal | kAttrDensity | kAttrColor | kAttrCoverage;
+inline constexpr uint8_t kAttrNormal = 1, kAttrDensity = 2, kAttrColor = 4, kAttrCoverage = 8,
+                          kAttrTemperature = 16;  // 1.3
+inline constexpr uint8_t kAttrAll =
+    kAttrNormal | kAttrDensity | kAttrColor | kAttrCoverage | kAttrTemperature;
 uint8_t AttrFlags(const StoreMeta& meta);
 // Bytes per voxel of the attributes `flags` selects.
 size_t AttrBytesPerVoxel(uint8_t flags);

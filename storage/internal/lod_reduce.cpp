@@ -60,6 +60,7 @@ void Cascade::Emit(int l) {
   }
   if (f.has_color) v.attr.color = glm::vec3(a.color / double(a.count));
   if (f.has_density) v.attr.density = float(a.density / cell_voxels);
+  if (f.has_temperature) v.attr.temperature = float(a.temperature / double(a.count));
   out_[size_t(l - first())].push_back(cv);
   Push(l + 1, c.coord, a);
 }

@@ -32,12 +32,14 @@ struct Aggregate {
   glm::dvec3 surface{0.0};  // sum of the surface voxels' normals, area-weighted
   glm::dvec3 color{0.0};    // sum of their colours
   double density = 0.0;     // sum of their densities (1 each without densities)
+  double temperature = 0.0; // sum of their temperatures
   void Add(const Aggregate& o) {
     count += o.count;
     normal += o.normal;
     surface += o.surface;
     color += o.color;
     density += o.density;
+    temperature += o.temperature;
   }
 };
 
@@ -73,6 +75,7 @@ inline Aggregate VoxelSums(const VoxelAttributes& a, const glm::u64vec3& coord,
     }
   }
   g.color = glm::dvec3(a.color);
+  g.temperature = double(a.temperature);
   g.density = f.has_density ? double(a.density) : (f.fog ? 1.0 : 0.0);
   return g;
 }
@@ -84,7 +87,7 @@ inline constexpr int kLodMaxBitmapDepth = 7;
 // How one coarse level stores its voxels.
 struct LevelFormat {
   int l = 0, depth = 0;  // the level, and its coarse bricks' depth
-  bool has_normal = false, has_color = false, has_density = false;
+  bool has_normal = false, has_color = false, has_density = false, has_temperature = false;
   double cell_voxels = 1;  // base voxels in a cell, 8^l
 };
 

@@ -101,6 +101,7 @@ Status PyramidWriter::Init(const StoreMeta& bm, uint64_t base_id, const std::str
     f.has_normal = m.has_normal;
     f.has_color = m.has_color;
     f.has_density = m.has_density;
+    f.has_temperature = m.has_temperature;
     (l <= local_levels ? local_ : upper_).push_back(f);
     all.push_back(f);
   }

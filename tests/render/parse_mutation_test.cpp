@@ -460,9 +460,10 @@ std::string SceneValueProblem(const Scene& s) {
     if (std::string p = MaterialProblem(s.regions[i].material, where); !p.empty()) return p;
   }
   const VolumeMedium& v = s.volume;
-  if (!std::isfinite(v.absorption) || v.absorption < 0 || !std::isfinite(v.scattering) ||
-      v.scattering < 0)
+  if (!Finite(v.absorption) || !NonNegative(v.absorption) || !Finite(v.scattering) ||
+      !NonNegative(v.scattering))
     return "volume coefficients";
+  if (!(v.phase_g > -1 && v.phase_g < 1)) return "volume.phase_g";
   if (!Finite(v.color) || !NonNegative(v.color)) return "volume.color " + Vec3Text(v.color);
   if (s.max_depth < 0 || s.max_depth > 16) return "max_depth " + std::to_string(s.max_depth);
   if (s.samples_per_pixel < 1 || s.samples_per_pixel > 1024)

@@ -129,6 +129,9 @@ constexpr OptionSpec kIngestOptions[] = {
     {"--color", kValue, "GRID", kInputGroup, "a vec3s/vec3d grid sampled as each voxel's RGB colour"},
     {"--source", kValue, "TEXT", kInputGroup,
      "what the store records as its source (vox-info's source; default: the input file)"},
+    {"--temperature", kValue, "GRID", kInputGroup,
+     "a second float/double grid of the file (a fire's temperature, in Kelvin) sampled at each "
+     "voxel, for blackbody fog (scene.json volume.blackbody)"},
     {"--max-voxels", kValue, "N", kInputGroup,
      "the most voxels active tiles may expand to (default 1e10); a grid whose occupied tiles "
      "cover more is refused"},
@@ -180,6 +183,8 @@ Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::str
     o.color_grid = v;
   } else if (flag == "--source") {
     o.source = v;
+  } else if (flag == "--temperature") {
+    o.temperature_grid = v;
   } else if (flag == "--normal-bits") {
     if (!ParseInt(v, 8, 16, &o.normal_bits))
       return InvalidArgumentError("--normal-bits " + v +

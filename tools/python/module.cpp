@@ -301,6 +301,7 @@ py::dict InfoDict(const vox::StoreInfo& i) {
   if (m.has_normal) attrs.append("normal");
   if (m.has_density) attrs.append("density");
   if (m.has_color) attrs.append("colour");
+  if (m.has_temperature) attrs.append("temperature");
   d["attributes"] = attrs;
   d["build_options"] = m.build_options;
   d["bbox_min"] = Vec3(m.bbox_min);
@@ -491,8 +492,8 @@ PYBIND11_MODULE(_vox, m) {
   m.def("ingest", &Ingest, py::arg("vdb_path"), py::arg("store_path"),
         py::arg("progress") = py::none(),
         "Ingests an OpenVDB grid into a vox store, as vox-ingest; options are its flags "
-        "(grid, levels, isovalue, threshold, color, source, zstd_level, normal_bits, threads, "
-        "memory_mb, force, quiet). progress(bricks_done, bricks_total, voxels_done) is called as bricks are "
+        "(grid, levels, isovalue, threshold, color, temperature, source, zstd_level, normal_bits, "
+        "threads, memory_mb, force, quiet). progress(bricks_done, bricks_total, voxels_done) is called as bricks are "
         "written. Returns the ingest's statistics.");
   py::class_<PyStore>(m, "Store", "A vox store: its metadata as vox-info prints it.")
       .def(py::init<const py::object&>(), py::arg("path"))
