@@ -333,6 +333,7 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) 
   thread_local std::vector<int8_t> levels;  // per cell: its block's levels, or -1
   one.assign(n, -1.0f);
   const uint8_t* planes = b->attr_planes.data();
+  const uint8_t* density_planes = planes + ((b->flags & kAttrNormal) ? size_t(4) * b->voxel_count : 0);
   bool any = false;
   for (int l = depth - 1; l >= 0; --l)
     for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {
@@ -341,11 +342,15 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) 
       const uint32_t first = c.bits >> 8;
       float d;
       if (l == depth - 1) {
-        d = ReadDensity(planes, b->voxel_count, b->flags, first);
-        for (uint32_t k = 1; k < 8 && d >= 0; ++k)
-          if (std::bit_cast<uint32_t>(ReadDensity(planes, b->voxel_count, b->flags, first + k)) !=
-              std::bit_cast<uint32_t>(d))
-            d = -1.0f;
+        // Its 8 voxels are payloads first..first+7: one density when each
+        // byte plane holds 8 equal bytes there.
+        bool same = true;
+        for (size_t k = 0; k < 4 && same; ++k) {
+          uint64_t v;
+          std::memcpy(&v, density_planes + k * b->voxel_count + first, 8);
+          same = v == uint64_t(density_planes[k * b->voxel_count + first]) * 0x0101010101010101ull;
+        }
+        d = same ? ReadDensity(planes, b->voxel_count, b->flags, first) : -1.0f;
         if (!(d >= 0 && std::isfinite(d))) d = -1.0f;
       } else {
         d = one[first];
