@@ -49,15 +49,6 @@ Status ReadRgbOrScalar(const json& v, std::string_view key, std::string_view fil
   return OkStatus();
 }
 
-Status ReadColor(const json& obj, std::string_view key, std::string_view file,
-                 const std::string& prefix, glm::dvec3* out) {
-  VOX_RETURN_IF_ERROR(jf::GetVec3(obj, key, file, prefix, false, out));
-  for (int a = 0; a < 3; ++a)
-    if ((*out)[a] < 0)
-      return jf::FieldError(file, jf::Join(prefix, key), "must not have negative components");
-  return OkStatus();
-}
-
 Status NonNegative(const json& obj, std::string_view key, std::string_view file,
                    const std::string& prefix, double* out) {
   VOX_RETURN_IF_ERROR(jf::GetNumber(obj, key, file, prefix, false, out));
@@ -165,7 +156,7 @@ FogSample FogModel::At(double rho, double temperature) const {
 Status ParseFogControls(const json& v, std::string_view file, FogControls* out) {
   VOX_RETURN_IF_ERROR(ReadRgbOrScalar(v, "absorption", file, &out->absorption));
   VOX_RETURN_IF_ERROR(ReadRgbOrScalar(v, "scattering", file, &out->scattering));
-  VOX_RETURN_IF_ERROR(ReadColor(v, "color", file, "volume", &out->color));
+  VOX_RETURN_IF_ERROR(jf::GetColor(v, "color", file, "volume", &out->color));
   if (auto it = v.find("ramp"); it != v.end()) {
     if (!it->is_array() || it->empty())
       return jf::FieldError(file, "volume.ramp", "must be a non-empty array of control points");
@@ -179,7 +170,7 @@ Status ParseFogControls(const json& v, std::string_view file, FogControls* out) 
       FogRampPoint r;
       VOX_RETURN_IF_ERROR(jf::GetNumber(o, "density", file, p, true, &r.density));
       r.opacity = r.density;  // by default the density itself
-      VOX_RETURN_IF_ERROR(ReadColor(o, "color", file, p, &r.color));
+      VOX_RETURN_IF_ERROR(jf::GetColor(o, "color", file, p, &r.color));
       VOX_RETURN_IF_ERROR(NonNegative(o, "opacity", file, p, &r.opacity));
       if (!out->ramp.empty() && !(r.density > out->ramp.back().density))
         return jf::FieldError(file, p + ".density", "must be above the previous point's");
@@ -191,7 +182,7 @@ Status ParseFogControls(const json& v, std::string_view file, FogControls* out) 
     if (!it->is_object()) return jf::FieldError(file, p, "must be an object");
     VOX_RETURN_IF_ERROR(jf::CheckKnownKeys(*it, {"color", "intensity", "ramp"}, file, p));
     out->emission_intensity = 1.0;
-    VOX_RETURN_IF_ERROR(ReadColor(*it, "color", file, p, &out->emission_color));
+    VOX_RETURN_IF_ERROR(jf::GetColor(*it, "color", file, p, &out->emission_color));
     VOX_RETURN_IF_ERROR(NonNegative(*it, "intensity", file, p, &out->emission_intensity));
     VOX_RETURN_IF_ERROR(jf::GetBool(*it, "ramp", file, p, &out->emission_ramp));
     if (out->emission_ramp && out->ramp.empty())

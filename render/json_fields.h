@@ -130,6 +130,16 @@ inline Status GetVec3(const json& obj, std::string_view key, std::string_view fi
   return ReadVec3(*it, file, Join(prefix, key), out);
 }
 
+// An optional colour field: three numbers, none negative.
+inline Status GetColor(const json& obj, std::string_view key, std::string_view file,
+                       const std::string& prefix, glm::dvec3* out) {
+  VOX_RETURN_IF_ERROR(GetVec3(obj, key, file, prefix, false, out));
+  for (int a = 0; a < 3; ++a)
+    if ((*out)[a] < 0)
+      return FieldError(file, Join(prefix, key), "must not have negative components");
+  return OkStatus();
+}
+
 inline Status GetInt(const json& obj, std::string_view key, std::string_view file,
                      const std::string& prefix, bool required, int64_t lo, int64_t hi, int* out) {
   auto it = obj.find(key);

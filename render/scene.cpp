@@ -17,15 +17,6 @@ Status NonNegative(std::string_view file, const std::string& field, double v) {
   return OkStatus();
 }
 
-Status ReadColor(const json& obj, std::string_view key, std::string_view file,
-                 const std::string& prefix, glm::dvec3* out) {
-  VOX_RETURN_IF_ERROR(jf::GetVec3(obj, key, file, prefix, false, out));
-  for (int a = 0; a < 3; ++a)
-    if ((*out)[a] < 0)
-      return jf::FieldError(file, jf::Join(prefix, key), "must not have negative components");
-  return OkStatus();
-}
-
 Status ParseMaterial(const json& m, std::string_view file, const std::string& prefix,
                      bool allow_box, Material* out) {
   if (!m.is_object()) return jf::FieldError(file, prefix, "must be an object");
@@ -38,7 +29,7 @@ Status ParseMaterial(const json& m, std::string_view file, const std::string& pr
         m, {"color", "diffuse", "specular", "shininess", "reflect", "transmit", "ior"}, file,
         prefix));
   }
-  VOX_RETURN_IF_ERROR(ReadColor(m, "color", file, prefix, &out->color));
+  VOX_RETURN_IF_ERROR(jf::GetColor(m, "color", file, prefix, &out->color));
   struct {
     const char* key;
     double* v;
@@ -88,7 +79,7 @@ Status ParseLight(const json& l, std::string_view file, const std::string& prefi
     return jf::FieldError(file, jf::Join(prefix, "type"),
                           "is '" + type + "'; it must be 'directional' or 'point'");
   }
-  VOX_RETURN_IF_ERROR(ReadColor(l, "color", file, prefix, &out->color));
+  VOX_RETURN_IF_ERROR(jf::GetColor(l, "color", file, prefix, &out->color));
   VOX_RETURN_IF_ERROR(jf::GetNumber(l, "intensity", file, prefix, false, &out->intensity));
   VOX_RETURN_IF_ERROR(NonNegative(file, jf::Join(prefix, "intensity"), out->intensity));
   VOX_RETURN_IF_ERROR(jf::GetBool(l, "shadows", file, prefix, &out->shadows));
@@ -124,7 +115,7 @@ StatusOr<Scene> ParseScene(std::string_view json_text, std::string_view file) {
   }
   VOX_RETURN_IF_ERROR(
       jf::GetBool(j, "background_in_exr", file, "", &s.background_in_exr));
-  VOX_RETURN_IF_ERROR(ReadColor(j, "ambient", file, "", &s.ambient));
+  VOX_RETURN_IF_ERROR(jf::GetColor(j, "ambient", file, "", &s.ambient));
   if (auto it = j.find("lights"); it != j.end()) {
     if (!it->is_array()) return jf::FieldError(file, "lights", "must be an array");
     s.default_lights = false;
