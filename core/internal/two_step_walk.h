@@ -23,7 +23,8 @@ namespace vox::internal {
 // Traces `ray` through `tree`, split into n1 first-step levels and n2 =
 // tree.levels - n1 second-step levels (n2 == 0: a single step over the whole
 // grid), calling `visit(const Hit&) -> bool` (or -> Visit) for each occupied
-// voxel the ray meets, in order, until it returns false (Visit::kStop). Adds to `*counters` when given.
+// voxel the ray meets, in order, until it returns false (Visit::kStop).
+// Adds to `*counters` when given.
 // Returns an error for an invalid ray or a brick that cannot be fetched.
 //
 // PerRay is one ray's state, made by the tracer for each call; it must provide

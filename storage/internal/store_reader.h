@@ -97,7 +97,8 @@ class StoreImpl : public Store {
       *uniform_levels = depth_;
     } else {
       *density = ReadDensity(b->attr_planes.data(), b->voxel_count, b->flags, hit.payload);
-      const uint8_t l = b->uniform_levels.empty() ? DecodedBrick::kNotUniform : b->uniform_levels[hit.payload];
+      const uint8_t l =
+          b->uniform_levels.empty() ? DecodedBrick::kNotUniform : b->uniform_levels[hit.payload];
       *uniform_levels = l == DecodedBrick::kNotUniform ? -1 : int(l);
     }
     return true;
