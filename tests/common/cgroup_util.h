@@ -36,6 +36,14 @@
 
 namespace vox::testing {
 
+// A whole text file (a log, a --stats JSON); empty when it cannot be read.
+inline std::string ReadAll(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
 struct CgroupRunOptions {
   uint64_t limit_bytes = 0;      // 0: no limit (the run is only measured)
   bool drop_page_cache = false;  // sync and drop the kernel's clean page cache first (a cold run)

@@ -32,21 +32,14 @@ namespace {
 namespace fs = std::filesystem;
 constexpr uint64_t kMiB = uint64_t(1) << 20;
 
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 void WriteAll(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
 
 class BudgetCgroupTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     if (!MemoryCgroupUnavailable().empty()) return;
-    char tmpl[] = "/tmp/vox_budget_cgroup_XXXXXX";
-    ASSERT_NE(mkdtemp(tmpl), nullptr);
+    std::string tmpl = (fs::temp_directory_path() / "vox_budget_cgroup_XXXXXX").string();
+    ASSERT_NE(mkdtemp(tmpl.data()), nullptr);
     dir_ = new std::string(tmpl);
     const std::string gen =
         std::string(VOX_GEN_BIN) + " sphere " + Store() + " --size 2048 --quiet";

@@ -98,11 +98,6 @@ uint64_t DirBytes(const std::string& dir) {
   return total;
 }
 
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
-
 class CgroupRenderTest : public ::testing::Test {
  protected:
   void SetUp() override {

@@ -67,11 +67,6 @@ uint64_t MemTotalBytes() {
   return 0;
 }
 
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
-
 // The figures docs/scale.md records from a frame's --stats: bricks paged in
 // (every level) and bytes the process read.
 std::string Figures(const std::string& stats_path) {

@@ -24,13 +24,6 @@ namespace {
 namespace fs = std::filesystem;
 constexpr uint64_t kMiB = uint64_t(1) << 20;
 
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 class TurntableMemoryTest : public SphereShellStoreSuite {
  protected:
   // Runs vox-render with `args` in a 64 MiB cgroup (stopped by SIGINT after
