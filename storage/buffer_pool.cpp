@@ -14,17 +14,21 @@ namespace vox {
 StatusOr<std::unique_ptr<BufferPool>> BufferPool::Create(uint64_t bytes) {
   const uint64_t size = bytes / kMinBlock * kMinBlock;
   if (size == 0) return InvalidArgumentError("a buffer pool needs at least " + std::to_string(kMinBlock) + " bytes");
-  void* p = mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+  // The blocks' states follow the blocks in the same mapping: the kernel
+  // zeroes their pages as they are first touched, so a pool of gigabytes
+  // costs nothing at start for the byte per kMinBlock it may need.
+  void* p = mmap(nullptr, size + StateBytes(size), PROT_READ | PROT_WRITE,
+                 MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
   if (p == MAP_FAILED)
     return ResourceExhaustedError("cannot map a brick pool of " + std::to_string(size >> 20) +
                                   " MiB (the address space limit, ulimit -v?)");
   return std::unique_ptr<BufferPool>(new BufferPool(reinterpret_cast<uintptr_t>(p), size));
 }
 
-BufferPool::BufferPool(uintptr_t base, uint64_t size) : base_(base), size_(size) {
+BufferPool::BufferPool(uintptr_t base, uint64_t size)
+    : base_(base), size_(size), state_(reinterpret_cast<uint8_t*>(base + size)) {
   while ((kMinBlock << (max_order_ + 1)) <= size_) ++max_order_;
   heads_.assign(size_t(max_order_) + 1, kNone);
-  state_.assign(size_ >> kMinShift, 0);
   // The mapping as blocks of decreasing powers of two: each lies at a
   // multiple of its size, and the buddy of a block at the tail is past the
   // end, so it never merges out of the pool.
@@ -37,7 +41,12 @@ BufferPool::BufferPool(uintptr_t base, uint64_t size) : base_(base), size_(size)
 }
 
 BufferPool::~BufferPool() {
-  if (!retired_) munmap(reinterpret_cast<void*>(base_), size_);
+  if (!retired_) munmap(reinterpret_cast<void*>(base_), size_ + StateBytes(size_));
+}
+
+uint64_t BufferPool::StateBytes(uint64_t size) {
+  const uint64_t page = 4096;
+  return ((size >> kMinShift) + page - 1) / page * page;
 }
 
 size_t BufferPool::BlockSize(size_t n) { return n <= kMinBlock ? kMinBlock : std::bit_ceil(n); }
@@ -100,7 +109,7 @@ bool BufferPool::Retire() {
   if (retired_) return true;
   if (in_use_ != 0) return false;
   retired_ = true;
-  munmap(reinterpret_cast<void*>(base_), size_);
+  munmap(reinterpret_cast<void*>(base_), size_ + StateBytes(size_));
   return true;
 }
 

@@ -83,6 +83,8 @@ class BufferPool {
   Links* At(uint64_t off) const { return reinterpret_cast<Links*>(base_ + off); }
   void Push(uint64_t off, int order);
   void Unlink(uint64_t off, int order);
+  // The bytes of the per-kMinBlock states mapped after `size` bytes of blocks.
+  static uint64_t StateBytes(uint64_t size);
 
   const uintptr_t base_;
   const uint64_t size_;
@@ -90,7 +92,7 @@ class BufferPool {
   mutable std::mutex mu_;
   bool retired_ = false;
   std::vector<uint64_t> heads_;  // per order: the first free block's offset, or kNone
-  std::vector<uint8_t> state_;   // per kMinBlock: at a block's start, kFree | order, or order
+  uint8_t* const state_;         // per kMinBlock: at a block's start, kFree | order, or order
   uint64_t in_use_ = 0, peak_ = 0;
 };
 
