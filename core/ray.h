@@ -71,9 +71,20 @@ struct Hit {
 // (stop) are not enough. kSkipBrick: go on after the hit's second-step grid
 // (the first-step voxel it lies in) without reporting its other voxels, as
 // after a second step without a hit; in a single-step walk it is kNext.
-enum class Visit { kNext, kStop, kSkipBrick };
+// SkipBlock(k): go on after the aligned block of 2^k voxels a side that holds
+// the hit (voxel >> k), without reporting its other voxels: the walk leaves
+// it by the skip loop's moves, as it leaves an empty octant of that size
+// (in the second step's grid, or the first's for a block that is larger).
+enum class Visit { kNext, kStop, kSkipBrick, kSkipBlock0 = 16 };
 inline Visit AsVisit(bool go_on) { return go_on ? Visit::kNext : Visit::kStop; }
 inline Visit AsVisit(Visit v) { return v; }
+inline Visit SkipBlock(int levels) {
+  return levels <= 0 ? Visit::kNext : Visit(int(Visit::kSkipBlock0) + levels);
+}
+// The k of SkipBlock(k), or 0 for the other answers.
+inline int SkipBlockLevels(Visit v) {
+  return int(v) > int(Visit::kSkipBlock0) ? int(v) - int(Visit::kSkipBlock0) : 0;
+}
 
 struct TraceCounters {
   uint64_t rays = 0;

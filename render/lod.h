@@ -155,7 +155,8 @@ class LodTracer {
   // Visits the occupied cells along the ray in order, level by level,
   // until `visit` (bool(const LodSegment&), or Visit) returns false
   // (Visit::kStop; Visit::kSkipBrick skips the rest of the segment's
-  // second-step grid, seg.n2 levels). `base` traces
+  // second-step grid, seg.n2 levels; SkipBlock(k) the rest of the cell's
+  // block of 2^k cells of its level). `base` traces
   // level 0 (the caller's tracer of the base volume, e.g. with a per-thread
   // brick table); `thread` (optional) the coarse levels. `start` (may be
   // null): a beam StartPlane the ray satisfies in the base volume

@@ -26,8 +26,23 @@
 
 namespace vox::internal {
 
-// kSkip: a visitor's Visit::kSkipBrick, ending a second step's walk.
-enum class Flow { kLeft, kStop, kError, kSkip };
+// kSkip: a visitor's Visit::kSkipBrick, ending a second step's walk (or
+// the rest of a step's grid). SkipFlow(k): a visitor's SkipBlock(k): a step
+// leaves the hit's block of 2^k of its voxels by the skip loop and goes on,
+// or, for a block at least as large as its grid, ends with kSkip (k equal to
+// its levels n) or SkipFlow(k - n), for the step above to leave.
+enum class Flow { kLeft, kStop, kError, kSkip, kSkipBlock0 = 16 };
+inline Flow SkipFlow(int levels) { return Flow(int(Flow::kSkipBlock0) + levels); }
+
+// A visitor's answer as a step's flow; `skip_brick`: kSkipBrick ends the
+// step (else it is kLeft).
+inline Flow FlowOf(Visit v, bool skip_brick) {
+  if (v == Visit::kNext) [[likely]]
+    return Flow::kLeft;
+  if (v == Visit::kStop) return Flow::kStop;
+  if (v == Visit::kSkipBrick) return skip_brick ? Flow::kSkip : Flow::kLeft;
+  return SkipFlow(SkipBlockLevels(v));
+}
 
 // A step's packed-register geometry: x, y, z in fields of n + 1 bits.
 struct StepLayout {
@@ -139,7 +154,9 @@ struct WalkStats {
 // (ChildIndex of the last-level cell: a payload at the tree's last level,
 // else the next step's root for BrickPinner::Resolve at bit 0), with `prev`
 // the register before the last move (== xyz before any move); kLeft goes on
-// (the voxel is skipped), kStop and kError end the walk.
+// (the voxel is skipped), SkipFlow(k) goes on after the voxel's aligned
+// block of 2^k voxels (k < layout.n; a larger block ends the walk, see
+// Flow), kStop, kError and kSkip end the walk.
 template <class Dda, class Occupied>
 Flow WalkStep(const StepLayout& layout, uint64_t xyz, Dda& dda, CompactCell root, int top_bit,
               BrickPinner& pinner, Occupied&& occupied, WalkStats* stats) {
@@ -166,7 +183,19 @@ Flow WalkStep(const StepLayout& layout, uint64_t xyz, Dda& dda, CompactCell root
       const uint32_t child = ChildIndex(cell, digit);
       if (bit == 0) {
         flow = occupied(child, xyz, prev, dda);
-        if (flow != Flow::kLeft) goto done;
+        if (flow == Flow::kLeft) [[likely]]
+          break;
+        if (int(flow) <= int(Flow::kSkipBlock0)) goto done;
+        const int k = int(flow) - int(Flow::kSkipBlock0);
+        if (k >= layout.n) {  // the block holds the rest of this grid along the ray
+          flow = k == layout.n ? Flow::kSkip : SkipFlow(k - layout.n);
+          goto done;
+        }
+        // Leave the voxel's block of 2^k as an empty octant at bit k.
+        flow = Flow::kLeft;
+        depth -= k;
+        bit = k;
+        mask = unit << k;
         break;
       }
       if (!pinner.Resolve(child, bit, top_bit, cell)) {

@@ -69,14 +69,10 @@ Status TraceTwoSteps(const OctreeView& tree, int n1, int n2, const Ray& ray, Per
   auto leaf = [&](const StepLayout& lay, const int64_t base[3], uint32_t child, bool in_brick,
                   uint64_t xyz) {
     Hit h = LeafHit(ray, lay, base, xyz, child, in_brick, pinner);
-    const Visit v = AsVisit(visit(h));
-    return v == Visit::kNext ? Flow::kLeft : v == Visit::kStop ? Flow::kStop : Flow::kSkip;
+    return FlowOf(AsVisit(visit(h)), /*skip_brick=*/n2 > 0);
   };
   auto occupied1 = [&](uint32_t child, uint64_t xyz, uint64_t prev, const Dda& d1) -> Flow {
-    if (n2 == 0) {
-      const Flow f = leaf(l1, base0, child, top1 > 0, xyz);
-      return f == Flow::kSkip ? Flow::kLeft : f;
-    }
+    if (n2 == 0) return leaf(l1, base0, child, top1 > 0, xyz);
     // An occupied first-step voxel: trace the second step in it; a miss
     // there skips it and the first step goes on with its state untouched.
     CompactCell c2;
@@ -91,7 +87,8 @@ Status TraceTwoSteps(const OctreeView& tree, int n1, int n2, const Ray& ray, Per
     };
     Flow f = WalkStep(l2, xyz2, d2, c2, top2, pinner, occupied2, &stats);
     per_ray.AddMoves(d2, &c);
-    return f == Flow::kSkip ? Flow::kLeft : f;  // (skipped: the first step goes on)
+    // (skipped: the first step goes on; SkipFlow: it leaves the larger block)
+    return f == Flow::kSkip ? Flow::kLeft : f;
   };
   Flow f = WalkStep(l1, xyz1, dda, tree.top[0], top1, pinner, occupied1, &stats);
   per_ray.AddMoves(dda, &c);
