@@ -56,37 +56,15 @@ namespace {
 // Fog crosses an aligned block of voxels that are all occupied and of one
 // density (the inside of a fog volume; Volume::PinnedDensity finds them in
 // the brick) as one cell: the integral over the block is the same, and the
-// walk skips the block's other voxels (Visit::kSkipBrick, a second-step grid
-// at a time) without reading them.
-class UniformBlocks {
- public:
-  // Hit h of level `level` lies in the block last entered.
-  bool Covers(const Hit& h, int level) const {
-    return h.brick_data == data_ && data_ != nullptr && level == level_ &&
-           glm::i64vec3(h.voxel.x >> levels_, h.voxel.y >> levels_, h.voxel.z >> levels_) == box_;
-  }
-  // Where the ray leaves hit h's block of 2^levels cells a side (level
-  // `level`'s cells, 2^level voxels a side; gr in voxels), at most t_end;
-  // later hits in the block are covered. Returns the walk's answer there:
-  // skip the second-step grid (n2 levels) when it lies inside the block,
-  // else go on to the next hit.
-  double Enter(const Ray& gr, const Hit& h, int level, int levels, int n2, double t_end) {
-    data_ = h.brick_data;
-    level_ = level;
-    levels_ = levels;
-    box_ = glm::i64vec3(h.voxel.x >> levels, h.voxel.y >> levels, h.voxel.z >> levels);
-    skip_ = n2 <= levels ? Visit::kSkipBrick : Visit::kNext;
-    const double s = std::ldexp(1.0, -(level + levels));
-    return std::min(t_end, VoxelExitT(Ray{gr.origin * s, gr.dir * s}, box_));
-  }
-  Visit skip() const { return skip_; }
-
- private:
-  const void* data_ = nullptr;
-  int level_ = -1, levels_ = 0;
-  glm::i64vec3 box_{0};
-  Visit skip_ = Visit::kNext;
-};
+// walk leaves the block without reporting its other voxels (SkipBlock,
+// core/ray.h). Returns where the ray leaves hit h's block of 2^levels cells
+// a side (level `level`'s cells, 2^level voxels a side; gr in voxels), at
+// most t_end.
+double BlockExitT(const Ray& gr, const Hit& h, int level, int levels, double t_end) {
+  const glm::i64vec3 box(h.voxel.x >> levels, h.voxel.y >> levels, h.voxel.z >> levels);
+  const double s = std::ldexp(1.0, -(level + levels));
+  return std::min(t_end, VoxelExitT(Ray{gr.origin * s, gr.dir * s}, box));
+}
 
 }  // namespace
 
@@ -97,23 +75,21 @@ glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx
   const bool has_density = volume_->meta().has_density;
   glm::dvec3 tau(0.0);
   auto opaque = [&] { return std::min({tau.x, tau.y, tau.z}) > kMaxShadowOpticalDepth; };
-  UniformBlocks uniform;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     // Level of detail: each coarse cell's mean density over its segment.
     Status s = lod_->Traverse(
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
           if (seg.t0 >= t_max) return Visit::kStop;
-          if (uniform.Covers(seg.hit, seg.level)) return uniform.skip();
           double t1 = seg.t1, rho = 1.0;
           int levels = -1;
           if ((seg.level > 0 || has_density) &&
               !Density(seg.hit, cx, &rho, seg.volume, nullptr, &levels))
             return Visit::kStop;
-          if (levels >= 0) t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.n2, seg.t_end);
+          if (levels > 0) t1 = BlockExitT(gr, seg.hit, seg.level, levels, seg.t_end);
           tau += model.Extinction(rho) * std::max(0.0, std::min(t1, t_max) - seg.t0);
           if (opaque()) return Visit::kStop;
-          return levels >= 0 ? uniform.skip() : Visit::kNext;
+          return SkipBlock(levels);
         },
         &cx.c->trace);
     if (!s.ok()) cx.Fail(s);
@@ -123,15 +99,13 @@ glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx
       gr,
       [&](const Hit& h) {
         if (h.t >= t_max) return Visit::kStop;
-        if (uniform.Covers(h, 0)) return uniform.skip();
         double rho = 1.0;
         int levels = -1;
         if (has_density && !Density(h, cx, &rho, nullptr, nullptr, &levels)) return Visit::kStop;
-        double t1 = VoxelExitT(gr, h.voxel);
-        if (levels >= 0) t1 = uniform.Enter(gr, h, 0, levels, cx.tracer->n2(), kInf);
+        const double t1 = levels > 0 ? BlockExitT(gr, h, 0, levels, kInf) : VoxelExitT(gr, h.voxel);
         tau += model.Extinction(rho) * std::max(0.0, std::min(t1, t_max) - h.t);
         if (opaque()) return Visit::kStop;
-        return levels >= 0 ? uniform.skip() : Visit::kNext;
+        return SkipBlock(levels);
       },
       &cx.c->trace);
   if (!s.ok()) cx.Fail(s);
@@ -244,19 +218,23 @@ class LightAlongRay {
 
   // The integral over t in [t0, t1] of st e^(-st (t - t0)) L(t), per
   // channel, for a cell of extinction st_rgb (per channel; st: its
-  // largest, which sets the sampling); step(t): the sample spacing from t.
+  // largest, which sets the sampling) seen through transmittance
+  // entry_trans from the camera; step(t, T): the sample spacing from t,
+  // where the transmittance from the camera is T (its largest channel).
   template <class Step>
-  glm::dvec3 Integrate(double t0, double t1, const glm::dvec3& st_rgb, Step&& step) {
+  glm::dvec3 Integrate(double t0, double t1, const glm::dvec3& st_rgb,
+                       const glm::dvec3& entry_trans, Step&& step) {
     const double st = std::max({st_rgb.x, st_rgb.y, st_rgb.z});
     if (t0 > tb_) {  // the fog's entry, or the first cell after a long gap
       ta_ = t0;
-      const double h = step(t0);
+      seen_a_ = std::max({entry_trans.x, entry_trans.y, entry_trans.z});
+      const double h = step(t0, seen_a_);
       la_ = light_at_(t0, h);
       ext_ = st;
       SetB(t0 + h, h);
     } else if (st > ext_) {
       ext_ = st;
-      const double h = step(ta_);
+      const double h = step(ta_, seen_a_);
       const double tc = std::max(ta_ + h, t0);
       if (tc < tb_) SetB(tc, h);
     }
@@ -268,7 +246,9 @@ class LightAlongRay {
         ta_ = tb_;
         la_ = lb_;
         ext_ = st;
-        const double h = step(ta_);
+        const glm::dvec3 seen = entry_trans * trans;
+        seen_a_ = std::max({seen.x, seen.y, seen.z});
+        const double h = step(ta_, seen_a_);
         SetB(ta_ + h, h);
       }
       // (a step lost below t's precision ends the cell with this interval)
@@ -322,6 +302,7 @@ class LightAlongRay {
 
   LightAt light_at_;
   double ta_ = -kInf, tb_ = -kInf, ext_ = 0.0;  // ext_: the extinction [ta, tb] was chosen for
+  double seen_a_ = 1.0;  // the transmittance from the camera at ta_
   glm::dvec3 la_{0.0}, lb_{0.0}, rate_{0.0};
   // The light at lt_ (-inf: not known since the rates changed).
   glm::dvec3 l_{0.0};
@@ -342,12 +323,16 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
   // The light reaching the ray is sampled at points along it and
   // interpolated in between (LightAlongRay). The next sample is light_step
   // voxels on (times the cone's width with LOD), or less where the fog is
-  // thick: at most light_optical_depth of the extinction of the cell it
-  // starts in.
+  // thick: at most light_optical_depth / sqrt(T) of the extinction of the
+  // cell it starts in, T the transmittance from the camera to the sample
+  // (its largest channel). What a sample interval scatters towards the camera
+  // weighs T, and the interpolation's error grows as the interval's square:
+  // so that intervals err alike, deep in thick fog, where little of what is
+  // scattered reaches the camera, the samples lie further apart.
   const double light_step = v.light_step * volume_->meta().voxel_size;  // t is in world units
-  auto step_from = [&](double t, double extinction) {
+  auto step_from = [&](double t, double extinction, double seen) {
     const double h = cone != nullptr ? light_step * std::max(1.0, cone->Width(t)) : light_step;
-    return extinction > 0 ? std::min(h, v.light_optical_depth / extinction) : h;
+    return extinction > 0 ? std::min(h, v.light_optical_depth / (extinction * std::sqrt(seen))) : h;
   };
   render_internal::FogLightCache local_cache;  // (a thread's own when it has one)
   render_internal::FogLightCache* cache = cx.light_cache != nullptr ? cx.light_cache : &local_cache;
@@ -382,7 +367,7 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     const glm::dvec3 seg_trans(ExpNeg(seg_tau.x), ExpNeg(seg_tau.y), ExpNeg(seg_tau.z));
     if (passes_.scattering && st_max > 0) {
       const glm::dvec3 in_cell =
-          light.Integrate(t0, t1, st, [&](double t) { return step_from(t, st_max); });
+          light.Integrate(t0, t1, st, trans, [&](double t, double seen) { return step_from(t, st_max, seen); });
       for (int k = 0; k < 3; ++k)
         if (st[k] > 0) scattered[k] += trans[k] * m.scattering[k] / st[k] * in_cell[k];
     }
@@ -393,37 +378,34 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     trans *= seg_trans;
     return !cx.failed() && std::min({tau.x, tau.y, tau.z}) <= kMaxOpticalDepth;
   };
-  UniformBlocks uniform;
   Status s;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     s = lod_->Traverse(
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
-          if (uniform.Covers(seg.hit, seg.level)) return uniform.skip();
           double t1 = seg.t1, rho = 1.0, temp = 0.0;
           int levels = -1;
           if ((seg.level > 0 || has_density || wants_temp) &&
               !Density(seg.hit, cx, &rho, seg.volume, wants_temp ? &temp : nullptr, &levels))
             return Visit::kStop;
-          if (levels >= 0) t1 = uniform.Enter(gr, seg.hit, seg.level, levels, seg.n2, seg.t_end);
+          if (levels > 0) t1 = BlockExitT(gr, seg.hit, seg.level, levels, seg.t_end);
           if (!cell(seg.t0, t1, rho, temp)) return Visit::kStop;
-          return levels >= 0 ? uniform.skip() : Visit::kNext;
+          return SkipBlock(levels);
         },
         &cx.c->trace);
   } else {
     s = cx.tracer->Traverse(
         gr,
         [&](const Hit& h) {
-          if (uniform.Covers(h, 0)) return uniform.skip();
           double rho = 1.0, temp = 0.0;
           int levels = -1;
           if ((has_density || wants_temp) &&
               !Density(h, cx, &rho, nullptr, wants_temp ? &temp : nullptr, &levels))
             return Visit::kStop;
-          double t1 = VoxelExitT(gr, h.voxel);
-          if (levels >= 0) t1 = uniform.Enter(gr, h, 0, levels, cx.tracer->n2(), kInf);
+          const double t1 =
+              levels > 0 ? BlockExitT(gr, h, 0, levels, kInf) : VoxelExitT(gr, h.voxel);
           if (!cell(h.t, t1, rho, temp)) return Visit::kStop;
-          return levels >= 0 ? uniform.skip() : Visit::kNext;
+          return SkipBlock(levels);
         },
         &cx.c->trace);
   }

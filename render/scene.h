@@ -33,7 +33,8 @@
 //         are described in render/fog_material.h); the quality of single scattering: the light
 //         reaching a primary ray is evaluated every S voxels along it, or
 //         sooner where the extinction over the step would exceed optical
-//         depth D, and interpolated between (S, D > 0); with a pyramid
+//         depth D / sqrt(T) (T: the transmittance from the camera), and
+//         interpolated between (S, D > 0); with a pyramid
 //         a transmittance ray's cells widen by one voxel every G voxels
 //         along it (G > 0; 0: exact voxels all the way), and where samples
 //         lie far apart the light is kept on a lattice shared by
@@ -96,7 +97,8 @@ struct MaterialRegion {
 struct VolumeMedium : FogControls {
   // Voxels between evaluations of the light reaching a primary ray.
   double light_step = 24.0;
-  // At most this optical depth between evaluations of the light.
+  // At most this optical depth between evaluations of the light, divided
+  // by the square root of the transmittance from the camera.
   double light_optical_depth = 0.15;
   // Voxels along a transmittance ray per voxel of cell width (LOD
   // pyramid); 0: exact voxels.

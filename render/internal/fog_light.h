@@ -10,44 +10,45 @@
 #ifndef VOX_RENDER_INTERNAL_FOG_LIGHT_H_
 #define VOX_RENDER_INTERNAL_FOG_LIGHT_H_
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <glm/vec3.hpp>
-#include <unordered_map>
+#include <vector>
 
 namespace vox::render_internal {
 
 // A lattice of spacing 2^level voxels: point i lies at (i + 1/2) 2^level in
 // grid coordinates (cell centres of the pyramid's level `level`).
 struct LatticePoint {
-  int64_t x, y, z;
-  int level;
+  int32_t x, y, z, level;
   bool operator==(const LatticePoint& o) const {
     return x == o.x && y == o.y && z == o.z && level == o.level;
   }
 };
 
-struct LatticePointHash {
-  size_t operator()(const LatticePoint& p) const {
-    uint64_t h = uint64_t(p.x) * 0x9E3779B97F4A7C15ull;
-    h ^= uint64_t(p.y) * 0xC2B2AE3D27D4EB4Full + (h << 6) + (h >> 2);
-    h ^= uint64_t(p.z) * 0x165667B19E3779F9ull + (h << 6) + (h >> 2);
-    h ^= uint64_t(p.level) * 0x27D4EB2F165667C5ull;
-    return size_t(h ^ (h >> 29));
-  }
-};
+inline size_t LatticePointHash(const LatticePoint& p) {
+  uint64_t h = uint64_t(int64_t(p.x)) * 0x9E3779B97F4A7C15ull;
+  h ^= uint64_t(int64_t(p.y)) * 0xC2B2AE3D27D4EB4Full + (h << 6) + (h >> 2);
+  h ^= uint64_t(int64_t(p.z)) * 0x165667B19E3779F9ull + (h << 6) + (h >> 2);
+  h ^= uint64_t(p.level) * 0x27D4EB2F165667C5ull;
+  return size_t(h ^ (h >> 29));
+}
 
 class FogLightCache {
  public:
   // Points kept at most; the cache starts again when full (its values do not
   // depend on what it held, so nothing but time changes).
   static constexpr size_t kMaxPoints = size_t(1) << 16;
-  // Bytes it holds at most (entries and buckets), for the memory budget.
-  static constexpr size_t kMaxBytes = kMaxPoints * 96;
+  // Bytes it holds at most (its open-addressed slots, at most half of them
+  // used), for the memory budget.
+  static constexpr size_t kMaxBytes = 2 * kMaxPoints * 48;
 
   void Clear() {
-    points_.clear();
+    slots_.assign(slots_.size(), Slot{});
+    used_ = 0;
     block_valid_ = false;
   }
 
@@ -62,20 +63,27 @@ class FogLightCache {
       for (int c = 0; c < 8; ++c) out[c] = block_[c];
       return true;
     }
-    if (points_.size() + 8 > kMaxPoints) points_.clear();
+    if (used_ + 8 > kMaxPoints) Clear();
     const double s = std::ldexp(1.0, level);
+    constexpr int64_t kFar = int64_t(1) << 30;  // (lattice indices of any grid fit)
+    const bool keep = std::abs(i0.x) < kFar && std::abs(i0.y) < kFar && std::abs(i0.z) < kFar;
     for (int c = 0; c < 8; ++c) {
-      const LatticePoint p{i0.x + (c & 1), i0.y + ((c >> 1) & 1), i0.z + ((c >> 2) & 1), level};
-      auto it = points_.find(p);
-      if (it == points_.end()) {
-        glm::dvec3 v;
-        if (!light(glm::dvec3((double(p.x) + 0.5) * s, (double(p.y) + 0.5) * s,
-                              (double(p.z) + 0.5) * s),
-                   &v))
-          return false;
-        it = points_.emplace(p, v).first;
+      const glm::i64vec3 i(i0.x + (c & 1), i0.y + ((c >> 1) & 1), i0.z + ((c >> 2) & 1));
+      const glm::dvec3 q((double(i.x) + 0.5) * s, (double(i.y) + 0.5) * s, (double(i.z) + 0.5) * s);
+      if (!keep) {
+        if (!light(q, &out[c])) return false;
+        continue;
       }
-      out[c] = it->second;
+      if (2 * (used_ + 1) > slots_.size()) Grow();
+      const LatticePoint p{int32_t(i.x), int32_t(i.y), int32_t(i.z), level};
+      Slot* slot = Find(p);
+      if (!slot->used) {
+        if (!light(q, &slot->value)) return false;
+        slot->key = p;
+        slot->used = true;
+        ++used_;
+      }
+      out[c] = slot->value;
     }
     for (int c = 0; c < 8; ++c) block_[c] = out[c];
     block_valid_ = true;
@@ -85,7 +93,27 @@ class FogLightCache {
   }
 
  private:
-  std::unordered_map<LatticePoint, glm::dvec3, LatticePointHash> points_;
+  struct Slot {
+    LatticePoint key{0, 0, 0, 0};
+    glm::dvec3 value{0.0};
+    bool used = false;
+  };
+  // p's slot, or the free slot where it belongs (linear probing; the table
+  // is at most half full).
+  Slot* Find(const LatticePoint& p) {
+    const size_t mask = slots_.size() - 1;
+    for (size_t k = LatticePointHash(p) & mask;; k = (k + 1) & mask)
+      if (!slots_[k].used || slots_[k].key == p) return &slots_[k];
+  }
+  void Grow() {
+    std::vector<Slot> old(std::max<size_t>(64, 2 * slots_.size()));
+    old.swap(slots_);
+    for (const Slot& o : old)
+      if (o.used) *Find(o.key) = o;
+  }
+
+  std::vector<Slot> slots_;  // a power of two of them (or none yet)
+  size_t used_ = 0;
   bool block_valid_ = false;
   int block_level_ = 0;
   glm::i64vec3 block_i0_{0};
