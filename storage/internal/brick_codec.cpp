@@ -150,6 +150,41 @@ void UndeltaComponent(const uint8_t* src, uint8_t* dst, uint32_t count) {
     prev = T(_mm_extract_epi16(carry, 0));
   }
 #endif
+#if defined(__SSE2__)
+  if constexpr (W == 4) {
+    // Densities 16 at a time: four 4-lane sums, the planes joined and split
+    // by unpacks and saturating packs (each byte isolated first, so the
+    // packs never saturate).
+    __m128i carry = _mm_setzero_si128();
+    const __m128i byte = _mm_set1_epi32(0xff);
+    auto plane = [&](const __m128i* v, int shift) {
+      const __m128i a = _mm_packs_epi32(_mm_and_si128(_mm_srli_epi32(v[0], shift), byte),
+                                        _mm_and_si128(_mm_srli_epi32(v[1], shift), byte));
+      const __m128i b = _mm_packs_epi32(_mm_and_si128(_mm_srli_epi32(v[2], shift), byte),
+                                        _mm_and_si128(_mm_srli_epi32(v[3], shift), byte));
+      return _mm_packus_epi16(a, b);
+    };
+    for (; i + 16 <= count; i += 16) {
+      __m128i b[4];
+      for (int k = 0; k < 4; ++k) b[k] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(p[k] + i));
+      const __m128i lo01 = _mm_unpacklo_epi8(b[0], b[1]), hi01 = _mm_unpackhi_epi8(b[0], b[1]);
+      const __m128i lo23 = _mm_unpacklo_epi8(b[2], b[3]), hi23 = _mm_unpackhi_epi8(b[2], b[3]);
+      __m128i v[4] = {_mm_unpacklo_epi16(lo01, lo23), _mm_unpackhi_epi16(lo01, lo23),
+                      _mm_unpacklo_epi16(hi01, hi23), _mm_unpackhi_epi16(hi01, hi23)};
+      for (int k = 0; k < 4; ++k) {
+        __m128i x = v[k];
+        x = _mm_add_epi32(x, _mm_slli_si128(x, 4));
+        x = _mm_add_epi32(x, _mm_slli_si128(x, 8));
+        x = _mm_add_epi32(x, carry);
+        carry = _mm_shuffle_epi32(x, 0xff);  // lane 3 everywhere
+        v[k] = x;
+      }
+      for (int k = 0; k < 4; ++k)
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(q[k] + i), plane(v, 8 * k));
+    }
+    prev = T(_mm_cvtsi128_si32(carry));
+  }
+#endif
   if constexpr (W == 4) {
     // Densities: the planes through restrict pointers held in registers
     // (through the arrays above, every byte store would reload them).
@@ -329,11 +364,30 @@ namespace {
 // order), level_start[depth] the cell count.
 void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) {
   const uint32_t n = uint32_t(b->cells.size());
+  const uint8_t* planes = b->attr_planes.data();
+  const uint8_t* density_planes = planes + ((b->flags & kAttrNormal) ? size_t(4) * b->voxel_count : 0);
+  if (uint64_t(b->voxel_count) == uint64_t(1) << (3 * depth)) {
+    // A full brick (the inside of a fog): of one density when each byte
+    // plane holds one byte throughout.
+    bool same = true;
+    for (size_t k = 0; k < 4 && same; ++k) {
+      const uint8_t* q = density_planes + k * b->voxel_count;
+      const uint64_t want = uint64_t(q[0]) * 0x0101010101010101ull;
+      for (uint32_t i = 0; i < b->voxel_count && same; i += 8) {  // (a multiple of 8 voxels)
+        uint64_t v;
+        std::memcpy(&v, q + i, 8);
+        same = v == want;
+      }
+    }
+    const float d = same ? ReadDensity(planes, b->voxel_count, b->flags, 0) : -1.0f;
+    if (d >= 0 && std::isfinite(d)) {
+      b->uniform_density = d;
+      return;
+    }
+  }
   thread_local std::vector<float> one;  // per cell: its density when of one, else -1
   thread_local std::vector<int8_t> levels;  // per cell: its block's levels, or -1
   one.assign(n, -1.0f);
-  const uint8_t* planes = b->attr_planes.data();
-  const uint8_t* density_planes = planes + ((b->flags & kAttrNormal) ? size_t(4) * b->voxel_count : 0);
   bool any = false;
   for (int l = depth - 1; l >= 0; --l)
     for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {

@@ -3,6 +3,7 @@
 // decoder fed mutated bytes (never a bad pool, never a crash).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -227,6 +228,46 @@ TEST(BrickDecoder, DecodedPlanesAreTheWrittenAttributes) {
       ASSERT_EQ((*d)->attr_planes.size(), expect.size()) << n << " voxels, flags " << int(flags);
       EXPECT_EQ(0, std::memcmp((*d)->attr_planes.data(), expect.data(), expect.size()))
           << n << " voxels, flags " << int(flags);
+    }
+  }
+}
+
+// Blocks of one density (DecodedBrick::uniform_density, uniform_levels),
+// found when a brick is decoded: a full brick of one density is one block,
+// and a voxel that differs in any byte of its density breaks its 2^3 block
+// (and the whole brick's) but not the others.
+TEST(BrickDecoder, FindsBlocksOfOneDensity) {
+  const int depth = 2;  // 4^3 voxels, leaf cells of 2^3
+  std::vector<LeafPoint> pts;
+  for (uint64_t z = 0; z < 4; ++z)
+    for (uint64_t y = 0; y < 4; ++y)
+      for (uint64_t x = 0; x < 4; ++x) pts.push_back(LeafPoint{x, y, z, kEmptyRef});
+  std::sort(pts.begin(), pts.end(), MortonLess);
+  for (size_t i = 0; i < pts.size(); ++i) pts[i].ref = MakeLeafRef(uint32_t(i));
+  const auto cells = BuildCells(pts, depth);
+  for (float other : {0.5f, std::nextafter(0.5f, 1.0f), 2.0f}) {
+    for (uint32_t odd : {0u, 37u, 63u}) {
+      std::vector<VoxelAttributes> attrs(pts.size());
+      for (VoxelAttributes& a : attrs) a.density = 0.5f;
+      attrs[odd].density = other;
+      const std::string raw = EncodeBrickRaw(cells, attrs, depth, kAttrDensity);
+      BrickEntry e;
+      e.num_cells = uint32_t(cells.size());
+      e.voxel_count = uint32_t(pts.size());
+      auto d = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, depth,
+                              kAttrDensity);
+      ASSERT_TRUE(d.ok()) << d.status().ToString();
+      const DecodedBrick& b = **d;
+      if (other == 0.5f) {
+        EXPECT_EQ(b.uniform_density, 0.5f);
+        EXPECT_TRUE(b.uniform_levels.empty());
+        continue;
+      }
+      EXPECT_LT(b.uniform_density, 0.0f) << other << " at " << odd;
+      ASSERT_EQ(b.uniform_levels.size(), pts.size());
+      for (uint32_t i = 0; i < pts.size(); ++i)  // payloads of one leaf cell are 8 in a row
+        EXPECT_EQ(int(b.uniform_levels[i]), i / 8 == odd / 8 ? int(DecodedBrick::kNotUniform) : 1)
+            << other << " at " << odd << ", voxel " << i;
     }
   }
 }
