@@ -12,10 +12,16 @@
 # its image is black). Per frame it prints:
 #   - vox's default frame and vdb_render, alternately, REPEATS times (3),
 #     whole-process medians: CPU seconds (user + sys: fair on a shared
-#     machine) and wall seconds, and their ratio;
-#   - the RMSE of vox's image against vox's converged image (exact voxels,
-#     exact transmittance rays, the light every half voxel, float EXR), as a
-#     percentage of the converged image's mean over all pixels;
+#     machine) and wall seconds, and their ratio: each with its default
+#     medium, then both with vdb_render's (absorption 0.1 and scattering 1.5
+#     per voxel: vox gets them per world unit; vox also at light_optical_depth
+#     0.1), then both with vox's (0.5 and 0.5 per world unit: vdb_render gets
+#     them per voxel, without its shadow "gain", which thins the medium along
+#     shadow rays);
+#   - the RMSE of vox's image against vox's converged image of that medium
+#     (exact voxels, exact transmittance rays, the light every half voxel and
+#     at most 0.01 optical depth apart, float EXR), as a percentage of the
+#     converged image's mean over all pixels;
 #   - the time-against-RMSE curve: vox at other settings of the scene's
 #     "volume" quality fields (render/scene.h), one run each.
 # Needs vdb_tool, vdb_render and BUILD_DIR's vox-ingest, vox-render and
@@ -48,6 +54,24 @@ rmse_pct() {  # RMSE of $2 against reference $1, % of $1's mean (black: $3)
     awk -v m="$mean" '{ printf "%.3f", 100 * $1 / m }'
 }
 
+race() {  # label vox-command vdb_render-command [REF]: alternate runs, print a table row
+  # (with REF, vox's image's RMSE against that converged image; else "-")
+  : >vox_times.txt
+  : >vdb_times.txt
+  i=0
+  while [ "$i" -lt "$repeats" ]; do
+    rm -f "vox_$name.exr"
+    cpu_wall $2 --float -o "vox_$name.exr" >>vox_times.txt
+    cpu_wall $3 >>vdb_times.txt
+    i=$((i + 1))
+  done
+  vc=$(cut -d' ' -f1 vox_times.txt | median) vw=$(cut -d' ' -f2 vox_times.txt | median)
+  dc=$(cut -d' ' -f1 vdb_times.txt | median) dw=$(cut -d' ' -f2 vdb_times.txt | median)
+  r=-
+  [ -n "${4:-}" ] && r=$(rmse_pct "$4" "vox_$name.exr" "black_$name.exr")
+  echo "| $1 | $vc | $vw | $dc | $dw | $(echo "$vc $dc" | awk '{ printf "%.2f", $1 / $2 }') | $r |"
+}
+
 frame() {  # name vdb_tool-args WxH
   name=$1 size=$3
   w=${size%x*} h=${size#*x}
@@ -61,10 +85,10 @@ frame() {  # name vdb_tool-args WxH
   at=$(sed 's/.*"look_at":\[\([^]]*\)\].*/\1/' "cam_$name.json")
   up=$(sed 's/.*"up":\[\([^]]*\)\].*/\1/' "cam_$name.json")
   fov=$(sed 's/.*"fov_deg":\([0-9.]*\).*/\1/' "cam_$name.json")
-  vox="$render $name.vox --cam cam_$name.json --scene scene.json --threads 1 --quiet"
+  vox="$render $name.vox --cam cam_$name.json --threads 1 --quiet"
   # The converged image, and an empty one (the camera turned away) for the mean.
   if [ ! -f "ref_$name.exr" ]; then
-    scene '"light_step":0.5, "shadow_lod":0' >ref_scene.json
+    scene '"light_step":0.5, "light_optical_depth":0.01, "shadow_lod":0' >ref_scene.json
     $render "$name.vox" --cam "cam_$name.json" --scene ref_scene.json --threads 1 --quiet --lod 0 \
       --float -o "ref_$name.exr"
   fi
@@ -74,19 +98,24 @@ frame() {  # name vdb_tool-args WxH
   $render "$name.vox" --cam "black_$name.json" --scene scene.json --quiet --float -o "black_$name.exr"
   vdb="vdb_render $name.vdb vdb_$name.ppm -res ${w}x$h -translate $pos -lookat $at -up $up -fov $fov \
     -light 1,1,1,1,1,1 -cpus 1"
-  : >vox_times.txt
-  : >vdb_times.txt
-  i=0
-  while [ "$i" -lt "$repeats" ]; do
-    rm -f "vox_$name.exr"
-    cpu_wall $vox --float -o "vox_$name.exr" >>vox_times.txt
-    cpu_wall $vdb >>vdb_times.txt
-    i=$((i + 1))
-  done
-  vc=$(cut -d' ' -f1 vox_times.txt | median) vw=$(cut -d' ' -f2 vox_times.txt | median)
-  dc=$(cut -d' ' -f1 vdb_times.txt | median) dw=$(cut -d' ' -f2 vdb_times.txt | median)
-  echo "| $name $size | $vc | $vw | $dc | $dw | $(echo "$vc $dc" | awk '{ printf "%.2f", $1 / $2 }') |" \
-    "$(rmse_pct "ref_$name.exr" "vox_$name.exr" "black_$name.exr") |"
+  race "$name $size" "$vox --scene scene.json" "$vdb" "ref_$name.exr"
+  # The same medium for both: vdb_render's coefficients are per voxel step.
+  vs=$("$build/tools/info/vox-info" "$name.vox" | sed -n 's/^ *voxel size: *//p')
+  thick=$(echo "$vs" | awk '{ printf "%.6g, \"scattering\":%.6g", 0.1 / $1, 1.5 / $1 }')
+  scene "\"absorption\":$thick" >thick_scene.json
+  if [ ! -f "ref_thick_$name.exr" ]; then
+    scene "\"absorption\":$thick, \"light_step\":0.5, \"light_optical_depth\":0.01, \"shadow_lod\":0" \
+      >ref_thick_scene.json
+    $render "$name.vox" --cam "cam_$name.json" --scene ref_thick_scene.json --quiet --lod 0 \
+      --float -o "ref_thick_$name.exr"
+  fi
+  race "$name $size, vdb_render's medium" "$vox --scene thick_scene.json" "$vdb" "ref_thick_$name.exr"
+  scene "\"absorption\":$thick, \"light_optical_depth\":0.1" >thick_scene.json
+  race "$name $size, vdb_render's medium, light_optical_depth 0.1" "$vox --scene thick_scene.json" \
+    "$vdb" "ref_thick_$name.exr"
+  thin=$(echo "$vs" | awk '{ printf "%.6g,%.6g,%.6g", 0.5 * $1, 0.5 * $1, 0.5 * $1 }')
+  race "$name $size, vox's medium" "$vox --scene scene.json" \
+    "$vdb -absorb $thin -scatter $thin -gain 0"
   # The curve: vox's other quality settings.
   for q in '"light_step":64, "light_optical_depth":0.4, "shadow_lod":24' \
     '"light_step":32, "light_optical_depth":0.2, "shadow_lod":16' \
