@@ -178,7 +178,10 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
   // shadow's edge or the rim of thick fog), or a corner has none where
   // others have some, the sample has its own rays.
   glm::dvec3 out;
-  for (int k = 0; k < 3; ++k) {
+  // A white light through grey fog: the three channels are one.
+  bool grey = true;
+  for (int c = 0; c < 8 && grey; ++c) grey = corner[c].x == corner[c].y && corner[c].x == corner[c].z;
+  for (int k = 0; k < (grey ? 1 : 3); ++k) {
     double v[8], lo = kInf, hi = -kInf;
     for (int c = 0; c < 8; ++c) {
       v[c] = corner[c][k];
@@ -195,6 +198,7 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
     const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
     out[k] = std::exp(y0 + f.z * (y1 - y0));
   }
+  if (grey) out.y = out.z = out.x;
   return out;
 }
 
