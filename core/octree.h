@@ -138,6 +138,12 @@ class BrickSource {
     *error = InternalError("this brick source does not lend (brick " + std::to_string(id) + ")");
     return nullptr;
   }
+  // A lending source's count of the lends that may have ended earlier
+  // loans (a brick replaced in its slot), for a walk whose visitor walks
+  // other rays through the same source (fog's transmittance rays inside its
+  // primary walk): when the count moved during a visit, the walk lends its
+  // brick again before it reads on. Null: loans end only as LendBrick says.
+  virtual const uint64_t* lend_epoch() const { return nullptr; }
 };
 
 // What a traversal needs to walk a tree: non-owning.

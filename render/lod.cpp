@@ -54,6 +54,7 @@ class LodThread::Tagged : public BrickSource {
   const BrickView* LendBrick(uint32_t id, Status* error) override {
     return table_->LendBrick(tag_ | id, error);
   }
+  const uint64_t* lend_epoch() const override { return table_->lend_epoch(); }
 
  private:
   LendingBrickTable* table_;

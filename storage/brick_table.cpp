@@ -49,6 +49,7 @@ const BrickView* LendingBrickTable::LendBrick(uint32_t id, Status* error) {
     *error = v.status();
     return nullptr;
   }
+  if (s.view.cells != nullptr) ++epoch_;  // (the slot's brick may have been lent)
   s.id = id;
   s.view = std::move(v).value();
   return &s.view;

@@ -54,6 +54,7 @@ class LendingBrickTable : public BrickSource {
   // miss (replacing the slot's brick); nullptr with *error set when the
   // shared source fails. Valid until the next call on this table.
   const BrickView* LendBrick(uint32_t id, Status* error) override;
+  const uint64_t* lend_epoch() const override { return &epoch_; }
 
  private:
   struct Slot {
@@ -63,6 +64,7 @@ class LendingBrickTable : public BrickSource {
   BrickSource* shared_;
   bool no_wait_ = false;
   std::vector<uint32_t> wanted_;
+  uint64_t epoch_ = 0;  // lends that replaced a slot's brick
   int shift_;  // 32 - slot bits: the slot is the hash's top bits
   std::vector<Slot> slots_;
 };

@@ -85,10 +85,15 @@ inline int TopBit(const OctreeView& tree, int levels_below) {
 // source (BrickSource::lends) keeps the brick pinned for it.
 struct BrickPinner {
   BrickPinner(BrickSource* s, const CompactCell* top_pool)
-      : source(s), lending(s != nullptr && s->lends()), top(top_pool) {}
+      : source(s),
+        lending(s != nullptr && s->lends()),
+        epoch(lending ? s->lend_epoch() : nullptr),
+        top(top_pool) {}
 
   BrickSource* source = nullptr;
   bool lending = false;
+  const uint64_t* epoch = nullptr;  // the source's lend_epoch (lending only)
+  uint64_t lent_at = 0;             // *epoch when the brick was lent
   const CompactCell* top = nullptr;    // the tree's top pool
   uint32_t id = kNoBrick;
   const CompactCell* cells = nullptr;  // the pinned brick's pool
@@ -96,6 +101,17 @@ struct BrickPinner {
   std::shared_ptr<const void> pin;     // when the source does not lend
   Status error{};
   uint64_t fetches = 0;
+
+  // After a visit: when the source's loans may have ended meanwhile (a
+  // visitor walked other rays through it), lends the pinned brick again so
+  // that `cells` and `data` point into a live brick. False on a fetch error.
+  bool Revalidate() {
+    if (epoch == nullptr || *epoch == lent_at || id == kNoBrick) [[likely]]
+      return true;
+    const uint32_t want = id;
+    id = kNoBrick;
+    return Fetch(want);
+  }
 
   // Sets `cell` to child `index` (ChildIndex) of a cell at step bit `bit`,
   // with `top_bit` the step's TopBit. False on a fetch error (kept in `error`).
@@ -126,6 +142,7 @@ struct BrickPinner {
       if (v == nullptr) return false;
       cells = v->cells;
       data = v->data;
+      if (epoch != nullptr) lent_at = *epoch;
     } else {
       auto b = source->FetchBrick(want);
       if (!b.ok()) {

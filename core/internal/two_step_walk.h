@@ -69,7 +69,8 @@ Status TraceTwoSteps(const OctreeView& tree, int n1, int n2, const Ray& ray, Per
   auto leaf = [&](const StepLayout& lay, const int64_t base[3], uint32_t child, bool in_brick,
                   uint64_t xyz) {
     Hit h = LeafHit(ray, lay, base, xyz, child, in_brick, pinner);
-    return FlowOf(AsVisit(visit(h)), /*skip_brick=*/n2 > 0);
+    const Flow f = FlowOf(AsVisit(visit(h)), /*skip_brick=*/n2 > 0);
+    return f == Flow::kStop || pinner.Revalidate() ? f : Flow::kError;
   };
   auto occupied1 = [&](uint32_t child, uint64_t xyz, uint64_t prev, const Dda& d1) -> Flow {
     if (n2 == 0) return leaf(l1, base0, child, top1 > 0, xyz);

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/octree.h"
+#include "core/tracer.h"
 
 namespace vox {
 namespace {
@@ -151,6 +152,81 @@ TEST(LendingBrickTable, SlotBitsFollowTheCacheBudget) {
   const int mid = LendingBrickTable::SlotBits(uint64_t(256) << 20);
   EXPECT_GT(mid, 4);
   EXPECT_LT(mid, 8);
+}
+
+// A MemoryOctree's bricks as copies whose memory is scrubbed (every cell
+// emptied) when their last pin goes, as a cache that evicts and reuses
+// memory would leave it. (The copies are kept, so reading a scrubbed one is
+// a wrong answer, not undefined behaviour.)
+class ScrubbingSource : public BrickSource {
+ public:
+  explicit ScrubbingSource(MemoryOctree* tree) : tree_(tree) {}
+  StatusOr<BrickView> FetchBrick(uint32_t id) override {
+    VOX_ASSIGN_OR_RETURN(BrickView v, tree_->FetchBrick(id));
+    auto copy = std::make_shared<std::vector<CompactCell>>(v.cells, v.cells + v.num_cells);
+    kept_.push_back(copy);
+    v.cells = copy->data();
+    v.pin = std::shared_ptr<const void>(copy.get(), [copy](const void*) {
+      std::memset(static_cast<void*>(copy->data()), 0, copy->size() * sizeof(CompactCell));
+    });
+    return v;
+  }
+
+ private:
+  MemoryOctree* tree_;
+  std::vector<std::shared_ptr<std::vector<CompactCell>>> kept_;
+};
+
+// A visitor that walks other rays through the walk's own lending table (fog
+// does: its transmittance rays start inside its primary walk) ends the
+// loans the outer walk reads from; the outer walk lends its brick again and
+// meets the same voxels as without the inner walks.
+TEST(LendingBrickTable, AWalkInsideAVisitorLeavesTheOuterWalkItsBrick) {
+  std::mt19937_64 rng(11);
+  std::vector<LeafPoint> pts;
+  for (int i = 0; i < 3000; ++i)
+    pts.push_back({rng() % 64, rng() % 64, rng() % 64, kEmptyRef});
+  auto built = MemoryOctree::Build(pts, 6, 3);  // bricks of 8^3
+  ASSERT_TRUE(built.ok()) << built.status().ToString();
+  std::unique_ptr<MemoryOctree> tree = std::move(built).value();
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int checked = 0, revisited = 0;
+  for (int r = 0; r < 200; ++r) {
+    const Ray outer{glm::dvec3(-5, 32 + 20 * u(rng), 32 + 20 * u(rng)),
+                    glm::dvec3(1, 0.3 * u(rng), 0.3 * u(rng))};
+    // The plain walk, through a table of its own.
+    ScrubbingSource plain_source(tree.get());
+    LendingBrickTable plain_table(&plain_source, 0);
+    OctreeView plain_view = tree->view();
+    plain_view.bricks = &plain_table;
+    auto plain = AutoTracer<double>::Create(plain_view, 3);
+    ASSERT_TRUE(plain.ok());
+    std::vector<glm::i64vec3> want, got;
+    ASSERT_TRUE(plain->Traverse(outer, [&](const Hit& h) { want.push_back(h.voxel); return true; }).ok());
+    // The same walk whose visitor walks a ray across the grid at each hit,
+    // through one table of one slot: every inner walk takes the slot.
+    ScrubbingSource source(tree.get());
+    LendingBrickTable table(&source, 0);
+    OctreeView view = tree->view();
+    view.bricks = &table;
+    auto tracer = AutoTracer<double>::Create(view, 3);
+    ASSERT_TRUE(tracer.ok());
+    ASSERT_TRUE(tracer
+                    ->Traverse(outer,
+                               [&](const Hit& h) {
+                                 got.push_back(h.voxel);
+                                 const Ray inner{glm::dvec3(h.voxel) + 0.5, glm::dvec3(0.2, 1, -0.7)};
+                                 int n = 0;
+                                 EXPECT_TRUE(tracer->Traverse(inner, [&](const Hit&) { return ++n < 4; }).ok());
+                                 revisited += n > 0;
+                                 return true;
+                               })
+                    .ok());
+    EXPECT_EQ(got, want) << "ray " << r;
+    checked += int(want.size());
+  }
+  EXPECT_GT(checked, 500);
+  EXPECT_GT(revisited, 500);
 }
 
 }  // namespace
