@@ -26,10 +26,9 @@
 #include "render/exr.h"
 #include "render/frame_sequence.h"
 #include "render/lod.h"
+#include "render/session.h"
 #include "render/tiles.h"
-#include "storage/lod.h"
 #include "storage/store.h"
-#include "storage/store_budget.h"
 
 namespace vox {
 
@@ -128,38 +127,6 @@ struct RenderJobOutput {
   int width = 0, height = 0;
   std::vector<float> rgba, z, normal, voxel, position, distance;
 };
-
-// The stores a render reads: the base and, when level of detail is in
-// effect, its pyramid (storage/lod.h).
-struct RenderStores {
-  std::unique_ptr<Store> base;
-  std::unique_ptr<LodPyramid> pyramid;
-  std::vector<Store*> levels;  // pyramid levels 1 .., owned by `pyramid`
-  double lod = 0.0;            // the factor in effect; 0: the exact frame
-  bool lod_default = false;    // chosen by default, not by --lod
-};
-
-// Opens the store at `dir` and, when level of detail is in effect (`lod` >
-// 0, or unset and the store has a pyramid: kDefaultLodFactor), its pyramid.
-// vox-render and the benchmarks choose the same way.
-StatusOr<RenderStores> OpenRenderStores(const std::string& dir, std::optional<double> lod,
-                                        const OpenOptions& open);
-
-// What stays open from one job to the next (vox-view): the store, its
-// pyramid when it has one (or --lod asked for it), their brick caches and the
-// process budget chosen when it opened, from the opening options'
-// store_dir, memory_bytes, cache_mb, threads, prefetch, io_threads and
-// read_windows. A job given a session renders with these and its own
-// camera, scene, size and --lod; a second identical frame reads no brick.
-struct RenderSession {
-  RenderStores stores;            // lod, lod_default and levels are set per job
-  std::vector<Store*> all_levels; // the pyramid's levels, when it is open
-  ProcessBudget process;
-  uint64_t anon_at_start = 0;  // the process's anonymous memory before the stores opened
-  int io_threads = 0;
-  double open_seconds = 0.0;
-};
-StatusOr<std::unique_ptr<RenderSession>> OpenRenderSession(const RenderJobOptions& options);
 
 // `output` may be null. With `session`, the job opens nothing: it renders
 // over the session's stores and budget (RenderSession).

@@ -167,8 +167,8 @@ def test_probe_generated_shape_equals_vox_probe():
 
 # (tool, command-line arguments, call, exception, exit code): every one of
 # these the tool refuses with its documented exit code (2: a bad command
-# line, 1: the run failed; vox-probe gives 2 for any store or shape it cannot
-# open); the module raises with the line the tool printed.
+# line, a --generate shape included; 1: the run failed, a store that does not
+# open included); the module raises with the line the tool printed.
 def bad_inputs(store, files, workdir):
     bad_cam = workdir / "bad_cam.json"
     bad_cam.write_text(json.dumps(dict(files["camera"], width=-4)))
@@ -200,7 +200,7 @@ def bad_inputs(store, files, workdir):
          ValueError, 2),
         (P, [store, "--split", "x"], lambda: vox.probe(store, np.zeros((1, 6)), split="x"), ValueError, 2),
         (P, [store, "--cache-mb", "-1"], lambda: vox.probe(store, np.zeros((1, 6)), cache_mb=-1), ValueError, 2),
-        (P, [missing], lambda: vox.probe(missing, np.zeros((1, 6))), OSError, 2),
+        (P, [missing], lambda: vox.probe(missing, np.zeros((1, 6))), OSError, 1),
         (P, ["--generate", "cube:7"], lambda: vox.probe(None, np.zeros((1, 6)), generate="cube:7"), ValueError, 2),
         (P, [store, "--single-step", "--split", "3"],
          lambda: vox.probe(store, np.zeros((1, 6)), single_step=True, split="3"), ValueError, 2),

@@ -130,7 +130,7 @@ TEST_F(ProbeLod, BadInputNamesTheFlag) {
     EXPECT_NE(r.err.find("--lod"), std::string::npos) << r.err;
   }
   Result r = RunProbe(dir_, (dir_ / "n").string() + " --lod 1 --cone-rad 0.1", rays_);
-  EXPECT_EQ(r.exit_code, 2) << r.err;  // --lod without a pyramid: a bad flag for this store
+  EXPECT_EQ(r.exit_code, 1) << r.err;  // --lod without a pyramid: the store cannot serve it
   EXPECT_NE(r.err.find("--lod"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("--add-lod"), std::string::npos) << r.err;
   r = RunProbe(dir_, (dir_ / "s").string() + " --lod 1", rays_);

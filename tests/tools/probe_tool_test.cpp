@@ -98,7 +98,7 @@ TEST(ProbeTool, BadFlagsAndMissingStore) {
   EXPECT_EQ(RunProbe("--generate blob:64", "").exit_code, 2);
   EXPECT_EQ(RunProbe("--generate sphere:64 --split 3+4", "").exit_code, 2);
   Result r = RunProbe("/nonexistent/store", "");
-  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.exit_code, 1);  // a failure, as vox-render's and vox-info's
   EXPECT_NE(r.err.find("/nonexistent/store"), std::string::npos) << r.err;
 }
 

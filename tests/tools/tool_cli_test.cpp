@@ -1,7 +1,8 @@
 // The command line of each vox tool, end to end: --flag=value
 // works, --version prints the version line, --help groups the options by
-// topic, and a bad command line prints one line and a pointer to the help,
-// exit 2.
+// topic, a bad command line prints one line and a pointer to the help,
+// exit 2, and an input that is not there (a store, a file) is a failure of
+// the run: exit 1, one message naming it, whichever tool reads it.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -102,6 +103,51 @@ TEST(ToolCommandLine, BadCommandLinesPrintOneLineAndExit2) {
     ExpectUsageError(t, "x " + t.switch_flag + "=1",
                      t.switch_flag + " is a switch and takes no value");
   }
+}
+
+// The same error class, the same exit code in every tool: an input that does
+// not exist, or a directory that is not a store, fails the run (exit 1) with
+// a message naming it, and no output appears.
+TEST(ToolCommandLine, MissingInputsExit1NamingThem) {
+  const std::filesystem::path dir =
+      std::filesystem::path(::testing::TempDir()) / ("tool_missing_" + std::to_string(getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "empty_dir");
+  const std::string out = (dir / "out").string();
+  for (const std::string& missing :
+       std::vector<std::string>{(dir / "no_such").string(), (dir / "empty_dir").string()}) {
+    const std::vector<std::pair<const Tool*, std::string>> runs = {
+        {&Tools()[1], missing + " -o " + out + ".exr --size 8x8"},
+        {&Tools()[2], missing},
+        {&Tools()[2], missing + " --at 0 0 0"},
+        {&Tools()[2], missing + " --slice x 0 -o " + out + ".exr"},
+        {&Tools()[4], missing},
+        {&Tools()[0], "--add-lod " + missing},
+    };
+    for (const auto& [tool, args] : runs) {
+      const ToolRun r = RunTool(*tool, args);
+      EXPECT_EQ(r.code, 1) << tool->name << " " << args << "\n" << r.err;
+      EXPECT_NE(r.err.find("'" + missing + "'"), std::string::npos) << tool->name << " " << args
+                                                                   << "\n" << r.err;
+      EXPECT_EQ(r.out, "") << tool->name << " " << args;
+    }
+  }
+  // Files: vox-ingest's inputs (a .vdb, a .npy, a raw array) and vox-merge's parts.
+  for (const char* name : {"no_such.vdb", "no_such.npy", "no_such.raw"}) {
+    const std::string missing = (dir / name).string();
+    const std::string raw =
+        std::string(name) == "no_such.raw" ? " --shape 2,2,2 --dtype uint8" : "";
+    const ToolRun r = RunTool(Tools()[0], missing + " " + out + raw);
+    EXPECT_EQ(r.code, 1) << name << "\n" << r.err;
+    EXPECT_NE(r.err.find(missing), std::string::npos) << r.err;
+  }
+  const std::string part = (dir / "no_such_part.exr").string();
+  const ToolRun merge = RunTool(Tools()[5], part + " -o " + out + ".exr");
+  EXPECT_EQ(merge.code, 1) << merge.err;
+  EXPECT_NE(merge.err.find(part), std::string::npos) << merge.err;
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    EXPECT_EQ(e.path().filename(), "empty_dir") << "an output appeared: " << e.path();
+  std::filesystem::remove_all(dir);
 }
 
 // An empty value is refused naming its flag, in both spellings: "--stats="

@@ -264,7 +264,7 @@ TEST_F(ValuesTest, ProbeAtAndSliceFromTheCommandLine) {
       EXPECT_EQ(px[size_t(row * w + col)], acc.getValue(Coord(5, col - 3, row - 3))) << col << " " << row;
   // Bad input: a clear message, no file.
   r = testing::RunCommand(std::string(VOX_PROBE_BIN) + " " + store + " --slice x 5 -o " + exr + ".2 --attr normal");
-  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.code, 1);  // the store cannot serve it
   EXPECT_NE(r.output.find("attribute 'normal': this store keeps occupancy, density"), std::string::npos) << r.output;
 }
 
@@ -370,7 +370,7 @@ TEST_F(ValuesTest, NpyAndRawGiveTheStoreOfTheSameVdb) {
   // Bad input: the file and the problem named, no store.
   r = testing::RunCommand(std::string(VOX_INGEST_BIN) + " --shape 20,16,13 --dtype float32 " + dir_.File("data.raw") +
                           " " + dir_.File("bad.store"));
-  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.code, 1);  // the file does not match its --shape: an input that cannot be read
   EXPECT_NE(r.output.find("data.raw' has 15360 bytes; shape 20 x 16 x 13 of float32 needs 16640"), std::string::npos)
       << r.output;
   EXPECT_FALSE(std::filesystem::exists(dir_.File("bad.store")));

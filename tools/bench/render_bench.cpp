@@ -23,7 +23,7 @@
 #include "core/tracer.h"
 #include "render/camera.h"
 #include "render/frame.h"
-#include "render/job.h"
+#include "render/session.h"
 #include "render/lod.h"
 #include "render/renderer.h"
 #include "render/scene.h"

@@ -45,6 +45,18 @@ struct Prober::Impl {
 Prober::Prober(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Prober::~Prober() = default;
 
+Status CheckProbeOptions(const ProbeOptions& opt) {
+  if (opt.fixed != 0 && opt.fixed != 64 && opt.fixed != 128)
+    return InvalidArgumentError("--fixed takes auto, 64 or 128");
+  if ((opt.cone_rad >= 0 || opt.cone_width > 0) && opt.lod == 0)
+    return InvalidArgumentError("--cone-rad and --cone-width need --lod F");
+  if (opt.lod > 0 && opt.cone_rad < 0)
+    return InvalidArgumentError("--lod needs --cone-rad R (the cone's spread, radians)");
+  if (opt.single_step && !opt.split.empty())
+    return InvalidArgumentError("--single-step and --split exclude each other");
+  return OkStatus();
+}
+
 StatusOr<std::unique_ptr<Prober>> Prober::Open(const ProbeOptions& opt) {
   return OpenOn(nullptr, opt);
 }
@@ -56,15 +68,9 @@ StatusOr<std::unique_ptr<Prober>> Prober::OpenOn(Store* open_store, const ProbeO
   };
   if (open_store == nullptr && opt.generate.empty() == opt.store.empty())
     return InvalidArgumentError("give either --generate SHAPE or a store directory");
-  if (opt.fixed != 0 && opt.fixed != 64 && opt.fixed != 128)
-    return InvalidArgumentError("--fixed takes auto, 64 or 128");
-  if ((opt.cone_rad >= 0 || opt.cone_width > 0) && opt.lod == 0)
-    return InvalidArgumentError("--cone-rad and --cone-width need --lod F");
-  if (opt.lod > 0) {
-    if (opt.store.empty() && open_store == nullptr)
-      return InvalidArgumentError("--lod needs a store with a level-of-detail pyramid");
-    if (opt.cone_rad < 0) return InvalidArgumentError("--lod needs --cone-rad R (the cone's spread, radians)");
-  }
+  VOX_RETURN_IF_ERROR(CheckProbeOptions(opt));
+  if (opt.lod > 0 && opt.store.empty() && open_store == nullptr)
+    return InvalidArgumentError("--lod needs a store with a level-of-detail pyramid");
   auto impl = std::make_unique<Impl>();
   OctreeView view;
   if (!opt.generate.empty()) {
@@ -113,8 +119,6 @@ StatusOr<std::unique_ptr<Prober>> Prober::OpenOn(Store* open_store, const ProbeO
   int n1 = DefaultFirstStepLevels(view.levels);
   if (opt.single_step) {
     n1 = view.levels;
-    if (!opt.split.empty())
-      return InvalidArgumentError("--single-step and --split exclude each other");
   } else if (!opt.split.empty()) {
     auto s = ParseSplit(opt.split, view.levels);
     if (!s.ok()) return fail(s.status(), false);

@@ -21,6 +21,11 @@ class Store;
 
 namespace vox {
 
+// The options' checks that need no volume: flags that exclude or need each
+// other, and values out of range. vox-probe runs them first, as a bad
+// command line (exit 2); Open and OpenOn run them too.
+Status CheckProbeOptions(const ProbeOptions& options);
+
 // vox-probe's volume (a store under the memory budget, or a generated shape)
 // and tracer (split, fixed-point word), ready to trace index-space rays.
 class Prober {

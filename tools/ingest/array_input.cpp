@@ -135,6 +135,7 @@ ArrayInput PrepareArrayInput(int argc, char** argv) {
     auto m = MappedArray::OpenNpy(input);
     if (!m.ok()) {
       in.error = m.status().message();
+      in.exit_code = 1;
       return in;
     }
     array = std::move(m).value();
@@ -147,6 +148,7 @@ ArrayInput PrepareArrayInput(int argc, char** argv) {
     auto m = MappedArray::OpenRaw(input, shape, dtype);
     if (!m.ok()) {
       in.error = m.status().message();
+      in.exit_code = 1;
       return in;
     }
     array = std::move(m).value();
@@ -154,6 +156,7 @@ ArrayInput PrepareArrayInput(int argc, char** argv) {
   Status st = ArrayToVdb(array->view(), place, in.temp_vdb, "'" + input + "'");
   if (!st.ok()) {
     in.error = st.message();
+    in.exit_code = 1;
     in.temp_vdb.clear();
     return in;
   }

@@ -13,7 +13,10 @@ namespace vox {
 
 struct ArrayInput {
   bool wanted = false;       // the command line names an array input
-  std::string error;         // non-empty: a bad command line
+  std::string error;         // non-empty: the command line or the array is refused
+  // The exit code for `error`: 2 a bad command line, 1 an array file that
+  // cannot be read or converted (as any input that fails: docs/usage.md).
+  int exit_code = 2;
   std::vector<std::string> args;  // the command line for the ingest, the .vdb in the array's place
   std::string temp_vdb;      // to remove when the ingest is over
 };

@@ -135,7 +135,7 @@ int main(int argc, char** argv) {
   vox::ArrayInput array = vox::PrepareArrayInput(argc, argv);
   if (!array.error.empty()) {
     std::fprintf(stderr, "vox-ingest: %s\n", array.error.c_str());
-    return 2;
+    return array.exit_code;
   }
   if (!array.wanted) return vox::ToolMain("vox-ingest", argc, argv, RunTool);
   std::vector<char*> args;

@@ -42,8 +42,8 @@ const vox::CommandLineSpec kCommandLine{
     "plus 0.5), through a store or a generated shape, and prints 'hit i j k t' or "
     "'miss' per line, in order.",
     vox::ProbeOptionTable(),
-    "Exit codes: 0 done, 1 some lines refused (each prints 'error'), 2 bad command line or\n"
-    "source.\n"};
+    "Exit codes: 0 done, 1 the store cannot be read (or serve the options) or some lines were\n"
+    "refused (each prints 'error'), 2 bad command line (a --generate shape included).\n"};
 
 int UsageError(const std::string& message) {
   return vox::UsageError(kCommandLine.program, message);
@@ -109,10 +109,14 @@ static int RunTool(int argc, char** argv) {
   if (!stores.empty()) opt.store = stores[0];
   if (opt.generate.empty() == opt.store.empty())
     return UsageError("give either --generate SHAPE or a store directory");
+  if (vox::Status s = vox::CheckProbeOptions(opt); !s.ok()) return UsageError(s.message());
   auto prober = vox::Prober::Open(opt);
-  if (!prober.ok()) {  // a bad shape or store, or options that exclude each other
+  if (!prober.ok()) {
     std::fprintf(stderr, "vox-probe: %s\n", prober.status().message().c_str());
-    return 2;
+    // A store that cannot be opened, or cannot serve the options (--lod
+    // without a pyramid, a --split past its levels), fails as in every tool
+    // (1); a --generate shape that cannot be made is a bad command line (2).
+    return opt.generate.empty() ? 1 : 2;
   }
   return Run(**prober, opt.stats);
 }

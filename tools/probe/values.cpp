@@ -163,7 +163,11 @@ int WriteSlice(StoreValues& v, const ValueArgs& a) {
   ValueAttr attr = DefaultValueAttr(v.meta());
   if (!a.attr.empty()) {
     auto p = ParseValueAttr(a.attr, v.meta());
-    if (!p.ok()) return Usage("--attr " + p.status().message());
+    if (!p.ok()) {  // an attribute the store does not keep: the store cannot serve it
+      std::fprintf(stderr, "vox-probe: --attr %s (store '%s')\n", p.status().message().c_str(),
+                   a.store.c_str());
+      return 1;
+    }
     attr = *p;
   }
   glm::i64vec3 lo, hi;
@@ -219,9 +223,9 @@ int RunValues(int argc, char** argv) {
   const std::string error = Parse(argc, argv, &a);
   if (!error.empty()) return Usage(error);
   auto v = StoreValues::Open(a.store, int(a.level), uint64_t(256) << 20);
-  if (!v.ok()) {
+  if (!v.ok()) {  // a store (or --level) that cannot be read: a failure, as in every tool
     std::fprintf(stderr, "vox-probe: %s\n", v.status().ToString().c_str());
-    return 2;
+    return 1;
   }
   return a.axis >= 0 ? WriteSlice(**v, a) : PrintAt(**v, a);
 }
