@@ -18,6 +18,13 @@ Status Bad(const std::string& path, const std::string& what) {
   return CorruptionError("'" + path + "': metadata has " + what);
 }
 
+// Whether the cube [lo, lo + size) lies inside m's bbox on every axis.
+bool InsideBox(const glm::i64vec3& lo, int64_t size, const StoreMeta& m) {
+  for (int a = 0; a < 3; ++a)
+    if (lo[a] < m.bbox_min[a] || lo[a] + size - 1 > m.bbox_max[a]) return false;
+  return true;
+}
+
 }  // namespace
 
 Status CheckMetaFields(const StoreMeta& m, const std::string& path) {
@@ -58,6 +65,20 @@ Status CheckMetaAgainstTop(const StoreMeta& m, std::span<const CompactCell> top,
     stack.pop_back();
     if (it.cell >= top.size()) return CorruptionError("'" + path + "': top cell out of range");
     const int64_t half = int64_t(1) << (m.levels - it.level - 1);
+    const uint32_t mask = ChildMask(top[it.cell]);
+    if (mask == 0) continue;
+    if (it.level + 1 == top_levels && InsideBox(it.lo, 2 * half, m)) {
+      // Every leaf of a cell inside the bbox meets it: the leaves' hull, a
+      // cell at a time (each axis's lower and upper half, from the mask).
+      constexpr uint32_t kLower[3] = {0x55u, 0x33u, 0x0fu}, kUpper[3] = {0xaau, 0xccu, 0xf0u};
+      cells += Popcount8(mask);
+      for (int a = 0; a < 3; ++a) {
+        hull_lo[a] = std::min(hull_lo[a], it.lo[a] + ((mask & kLower[a]) != 0 ? 0 : half));
+        hull_hi[a] =
+            std::max(hull_hi[a], it.lo[a] + ((mask & kUpper[a]) != 0 ? 2 * half : half) - 1);
+      }
+      continue;
+    }
     for (unsigned d = 0; d < 8; ++d) {
       if (!HasChild(top[it.cell], d)) continue;
       const glm::i64vec3 lo = it.lo + glm::i64vec3(d & 1, (d >> 1) & 1, (d >> 2) & 1) * half;

@@ -112,6 +112,22 @@ TEST_F(MetaCheck, TheBboxMustAgreeWithTheOccupiedBricks) {
   // Grown past the bricks (still inside the grid).
   s = OpenEdited([](StoreMeta* m) { m->bbox_max = m->origin + glm::i64vec3(127); });
   EXPECT_EQ(s.code(), StatusCode::kCorruption) << s.ToString();
+  // Grown to the far brick's parent cell (grid 96..111, 80..95, 80..95), which
+  // the brick (96..103, 88..95, 80..87) fills only in part: the check takes
+  // such a cell's leaves from its child mask.
+  s = OpenEdited([](StoreMeta* m) { m->bbox_max = m->origin + glm::i64vec3(111, 95, 95); });
+  EXPECT_EQ(s.code(), StatusCode::kCorruption) << s.ToString();
+  EXPECT_NE(s.message().find("beyond the occupied cells"), std::string::npos) << s.ToString();
+  // One voxel past the brick on one axis.
+  for (int a = 0; a < 3; ++a) {
+    s = OpenEdited([a](StoreMeta* m) {
+      m->bbox_max = m->origin + glm::i64vec3(103, 95, 87);
+      m->bbox_max[a] += 1;
+    });
+    EXPECT_EQ(s.code(), StatusCode::kCorruption) << a << ": " << s.ToString();
+  }
+  EXPECT_TRUE(
+      OpenEdited([](StoreMeta* m) { m->bbox_max = m->origin + glm::i64vec3(103, 95, 87); }).ok());
   // Huge: past the grid.
   s = OpenEdited([](StoreMeta* m) { m->bbox_max = glm::i64vec3(INT64_MAX / 2); });
   EXPECT_EQ(s.code(), StatusCode::kCorruption) << s.ToString();
