@@ -184,7 +184,7 @@ class ScrubbingSource : public BrickSource {
 TEST(LendingBrickTable, AWalkInsideAVisitorLeavesTheOuterWalkItsBrick) {
   std::mt19937_64 rng(11);
   std::vector<LeafPoint> pts;
-  for (int i = 0; i < 3000; ++i)
+  for (int i = 0; i < 20000; ++i)
     pts.push_back({rng() % 64, rng() % 64, rng() % 64, kEmptyRef});
   auto built = MemoryOctree::Build(pts, 6, 3);  // bricks of 8^3
   ASSERT_TRUE(built.ok()) << built.status().ToString();
