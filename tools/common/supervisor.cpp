@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "storage/store_writer.h"
 #include "tools/common/signals.h"
 
 namespace vox {
@@ -187,7 +188,7 @@ int RunSupervised(char** argv, const std::string& input, const std::string& outp
   return ReportChild(input, output, child, status, n == 1);
 }
 
-void StartSignalThread(const std::string& output) {
+void StartSignalThread(const std::string& output, bool resume) {
   sigset_t set;
   sigemptyset(&set);
   sigaddset(&set, SIGINT);
@@ -197,9 +198,12 @@ void StartSignalThread(const std::string& output) {
   // directory and replaces what is at the output (--force, --add-lod) only
   // when complete, so the output is as it was before the run.
   std::error_code ec;
-  const std::string kept = std::filesystem::exists(output, ec)
+  std::string kept = std::filesystem::exists(output, ec)
                                ? "no store written: '" + output + "' is as it was before"
                                : "no store written at '" + output + "', nothing left behind";
+  if (resume)
+    kept = "no store written at '" + output + "'; the bricks written so far are kept in '" +
+           ResumeDirectory(output) + "': run it again with --resume to continue";
   std::thread([set, output, kept] {
     int sig = 0;
     if (sigwait(&set, &sig) != 0) return;
