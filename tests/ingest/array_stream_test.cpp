@@ -16,6 +16,7 @@
 #include "storage/lod.h"
 #include "storage/store.h"
 #include "tests/ingest/ingest_test_util.h"
+#include "tests/ingest/same_store.h"
 
 namespace vox {
 namespace {
@@ -46,59 +47,6 @@ TestArray MakeArray(const std::string& dtype, std::array<int64_t, 3> shape, bool
   return a;
 }
 
-void ExpectSameMeta(const StoreMeta& a, const StoreMeta& b) {
-  EXPECT_EQ(a.grid_name, b.grid_name);
-  EXPECT_EQ(a.grid_class, b.grid_class);
-  EXPECT_EQ(a.levels, b.levels);
-  EXPECT_EQ(a.brick_level, b.brick_level);
-  EXPECT_EQ(a.origin, b.origin);
-  EXPECT_EQ(a.bbox_min, b.bbox_min);
-  EXPECT_EQ(a.bbox_max, b.bbox_max);
-  EXPECT_EQ(a.index_to_world, b.index_to_world);
-  EXPECT_EQ(a.voxel_size, b.voxel_size);
-  EXPECT_EQ(a.voxel_count, b.voxel_count);
-  EXPECT_EQ(a.brick_count, b.brick_count);
-  EXPECT_EQ(a.top_cells, b.top_cells);
-  EXPECT_EQ(a.has_normal, b.has_normal);
-  EXPECT_EQ(a.has_density, b.has_density);
-  EXPECT_EQ(a.has_color, b.has_color);
-  EXPECT_EQ(a.has_coverage, b.has_coverage);
-  EXPECT_EQ(a.has_temperature, b.has_temperature);
-  EXPECT_EQ(a.isovalue, b.isovalue);
-  EXPECT_EQ(a.threshold, b.threshold);
-  EXPECT_EQ(a.lod_level, b.lod_level);
-  EXPECT_EQ(a.lod_base_levels, b.lod_base_levels);
-}
-
-// The same store: metadata, and every voxel in the same brick and payload
-// with the same attributes. Returns the voxel count.
-size_t ExpectSameStore(const std::string& a_dir, const std::string& b_dir) {
-  auto a = Store::Open(a_dir, OpenOptions{});
-  auto b = Store::Open(b_dir, OpenOptions{});
-  EXPECT_TRUE(a.ok()) << a.status().ToString();
-  EXPECT_TRUE(b.ok()) << b.status().ToString();
-  if (!a.ok() || !b.ok()) return 0;
-  ExpectSameMeta((*a)->meta(), (*b)->meta());
-  auto va = testutil::ReadAll(**a);
-  auto vb = testutil::ReadAll(**b);
-  EXPECT_TRUE(va.ok() && vb.ok());
-  if (!va.ok() || !vb.ok()) return 0;
-  EXPECT_EQ(va->size(), vb->size());
-  if (va->size() != vb->size()) return 0;
-  for (auto ia = va->begin(), ib = vb->begin(); ia != va->end(); ++ia, ++ib) {
-    EXPECT_EQ(ia->first, ib->first);
-    EXPECT_EQ(ia->second.brick, ib->second.brick);
-    EXPECT_EQ(ia->second.payload, ib->second.payload);
-    auto aa = (*a)->Attributes(ia->second.brick, ia->second.payload);
-    auto ab = (*b)->Attributes(ib->second.brick, ib->second.payload);
-    EXPECT_TRUE(aa.ok() && ab.ok());
-    if (!aa.ok() || !ab.ok() || ia->first != ib->first) return 0;
-    EXPECT_EQ(aa->density, ab->density);
-    EXPECT_EQ(aa->coverage, ab->coverage);
-  }
-  return va->size();
-}
-
 class ArrayStreamTest : public ::testing::Test {
  protected:
   // Ingests `a` both ways; expects the same store and pyramid, whose base
@@ -123,12 +71,7 @@ class ArrayStreamTest : public ::testing::Test {
     EXPECT_EQ(s2->occupied_voxels, expected);
     EXPECT_EQ(s1->occupied_voxels, s2->occupied_voxels);
     EXPECT_EQ(s1->bricks, s2->bricks);
-    EXPECT_EQ(ExpectSameStore(via, direct), expected);
-    EXPECT_EQ(HasLod(via), HasLod(direct));
-    for (int l = 1; std::filesystem::exists(via + "/lod/" + std::to_string(l)); ++l) {
-      SCOPED_TRACE("level " + std::to_string(l));
-      ExpectSameStore(via + "/lod/" + std::to_string(l), direct + "/lod/" + std::to_string(l));
-    }
+    EXPECT_EQ(testutil::ExpectSameStoreAndPyramid(via, direct), expected);
   }
   testutil::TempDir dir_;
 };

@@ -198,17 +198,26 @@ void StartSignalThread(const std::string& output, bool resume) {
   // directory and replaces what is at the output (--force, --add-lod) only
   // when complete, so the output is as it was before the run.
   std::error_code ec;
-  std::string kept = std::filesystem::exists(output, ec)
+  const bool existed = std::filesystem::exists(output, ec);
+  const std::string kept = existed
                                ? "no store written: '" + output + "' is as it was before"
                                : "no store written at '" + output + "', nothing left behind";
-  if (resume)
-    kept = "no store written at '" + output + "'; the bricks written so far are kept in '" +
-           ResumeDirectory(output) + "': run it again with --resume to continue";
-  std::thread([set, output, kept] {
+  // A resumable ingest's bricks stay in its directory (once it has one).
+  const std::string resume_dir = resume ? ResumeDirectory(output) : std::string();
+  const std::string kept_resumable =
+      (existed ? "no store written: '" + output + "' is as it was before"
+               : "no store written at '" + output + "'") +
+      "; the bricks written so far are kept in '" + resume_dir +
+      "': run it again with --resume to continue";
+  std::thread([set, output, kept, kept_resumable, resume_dir] {
     int sig = 0;
     if (sigwait(&set, &sig) != 0) return;
+    std::error_code exists_ec;
+    const std::string what =
+        !resume_dir.empty() && std::filesystem::exists(resume_dir, exists_ec) ? kept_resumable
+                                                                              : kept;
     std::fprintf(stderr, "\nvox-ingest: %s; %s\n",
-                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", kept.c_str());
+                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", what.c_str());
     RemoveOwnTemporaries(output, getpid());
     std::_Exit(128 + sig);
   }).detach();
