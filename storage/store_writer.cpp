@@ -447,7 +447,8 @@ class StoreWriterImpl : public StoreWriter {
     if (flock(lock_fd_, LOCK_EX | LOCK_NB) != 0)
       return UnavailableError("'" + temp_ + "' is in use by another resumable ingest of '" +
                               target_ + "'");
-    const std::string key = ResumeKey(), bricks = temp_ + "/" + kBrickFileName,
+    const std::string key = JournalKey(options_.resume_key, meta_, options_.zstd_level,
+                                                        options_.normal_bits), bricks = temp_ + "/" + kBrickFileName,
                       journal = temp_ + "/" + kJournalFileName;
     if (fs::exists(journal, ec)) {
       StatusOr<JournalContents> j = BrickJournal::Read(journal, bricks);
@@ -495,26 +496,6 @@ class StoreWriterImpl : public StoreWriter {
     resume_note_ = "resuming: " + std::to_string(j.records.size()) + " bricks of an earlier run "
                    "verified in '" + temp_ + "'";
     return OkStatus();
-  }
-
-  // What a resumed run must share with the earlier one: the caller's key,
-  // the metadata and the brick encoding.
-  std::string ResumeKey() const {
-    const StoreMeta& m = meta_;
-    std::string k = options_.resume_key + "\n" + m.source_file + "\n" + m.grid_name;
-    char buf[512];
-    std::snprintf(buf, sizeof buf, "\n%d %d %d %lld %lld %lld %.17g %.17g %.17g %d%d%d%d%d %d %d",
-                  int(m.grid_class), m.levels, m.brick_level, (long long)m.origin.x,
-                  (long long)m.origin.y, (long long)m.origin.z, m.isovalue, m.threshold,
-                  m.voxel_size, m.has_normal, m.has_density, m.has_color, m.has_coverage,
-                  m.has_temperature, options_.zstd_level, options_.normal_bits);
-    k += buf;
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) {
-        std::snprintf(buf, sizeof buf, " %.17g", m.index_to_world[i][j]);
-        k += buf;
-      }
-    return k;
   }
 
   const std::string target_, temp_;

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 
 #include "core/util/crc32c.h"
@@ -72,6 +73,24 @@ bool ReadAt(int fd, uint64_t offset, size_t n, char* out) {
 }
 
 }  // namespace
+
+std::string JournalKey(const std::string& caller_key, const StoreMeta& m, int zstd_level,
+                       int normal_bits) {
+  std::string k = caller_key + "\n" + m.source_file + "\n" + m.grid_name;
+  char buf[512];
+  std::snprintf(buf, sizeof buf, "\n%d %d %d %lld %lld %lld %.17g %.17g %.17g %d%d%d%d%d %d %d",
+                int(m.grid_class), m.levels, m.brick_level, (long long)m.origin.x,
+                (long long)m.origin.y, (long long)m.origin.z, m.isovalue, m.threshold,
+                m.voxel_size, m.has_normal, m.has_density, m.has_color, m.has_coverage,
+                m.has_temperature, zstd_level, normal_bits);
+  k += buf;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) {
+      std::snprintf(buf, sizeof buf, " %.17g", m.index_to_world[i][j]);
+      k += buf;
+    }
+  return k;
+}
 
 BrickJournal::~BrickJournal() {
   if (fd_ >= 0) ::close(fd_);

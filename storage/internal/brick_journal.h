@@ -21,6 +21,7 @@
 
 #include "core/util/status.h"
 #include "storage/internal/format.h"
+#include "storage/meta.h"
 
 namespace vox::storage_internal {
 
@@ -38,6 +39,12 @@ struct JournalContents {
   std::vector<JournalRecord> records;  // verified against bricks.vxb, in file order
   uint64_t bricks_end = 0;             // bricks.vxb's bytes up to the last verified record
 };
+
+// The key a journal carries: what a resumed run must share with the earlier
+// one (the caller's key, the store's metadata but its counts, the brick
+// encoding).
+std::string JournalKey(const std::string& caller_key, const StoreMeta& meta, int zstd_level,
+                       int normal_bits);
 
 class BrickJournal {
  public:

@@ -57,3 +57,17 @@ def test_an_interrupted_array_ingest_leaves_nothing_behind(workdir):
     assert ("vox-ingest: interrupted (SIGINT); no store written at '%s', nothing left behind"
             % out) in err
     assert sorted(os.listdir(d)) == ["big.npy"]
+
+
+def test_ingest_array_removes_the_temporary_vdb_a_killed_call_left(workdir):
+    d = workdir / "stale"
+    d.mkdir()
+    gone = subprocess.Popen(["true"])
+    gone.wait()  # a process that is gone: its temporary is stale
+    stale = d / ("a.store.input-%d.vdb" % gone.pid)
+    live = d / ("a.store.input-%d.vdb" % os.getppid())  # a live process's: kept
+    other = d / ("b.store.input-%d.vdb" % gone.pid)     # another store's: kept
+    for f in (stale, live, other):
+        f.write_bytes(b"partial")
+    vox.ingest_array(np.ones((4, 4, 4), np.float32), str(d / "a.store"), quiet=True)
+    assert sorted(os.listdir(d)) == sorted(["a.store", live.name, other.name])
