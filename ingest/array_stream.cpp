@@ -141,7 +141,8 @@ Status ArrayIngest::CheckOptions() const {
   if (o_.threads < 0) return InvalidArgumentError("thread count must be >= 0 (0: all cores)");
   const std::string what = o_.input + ": an array";
   if (o_.isovalue)
-    return InvalidArgumentError(what + " is a fog volume; --isovalue applies to level sets "
+    return InvalidArgumentError(what +
+                                " is a fog volume; --isovalue applies to level sets "
                                 "(use --threshold)");
   if (!o_.grid_name.empty() || !o_.color_grid.empty() || !o_.temperature_grid.empty())
     return InvalidArgumentError(what + " has one grid: no --grid, --color or --temperature");
@@ -203,7 +204,8 @@ Status ArrayIngest::Describe() {
   if (meta_.build_options.empty()) {
     meta_.build_options = "levels=" + o_.levels + " zstd_level=" + std::to_string(o_.zstd_level) +
                           " threshold=" + FormatDouble(place_.threshold);
-    if (o_.normal_bits != 16) meta_.build_options += " normal_bits=" + std::to_string(o_.normal_bits);
+    if (o_.normal_bits != 16)
+      meta_.build_options += " normal_bits=" + std::to_string(o_.normal_bits);
   }
   VOX_ASSIGN_OR_RETURN(LevelsChoice choice, ParseLevels(o_.levels));
   const bool empty = active_ == 0;
@@ -413,8 +415,8 @@ StatusOr<IngestStats> ArrayIngest::Run() {
     Stopwatch t0;
     if (progress_)
       progress_->Message("reading " + o_.input + " for its occupied bbox (" +
-                         std::to_string(a_.shape[0]) + " x " + std::to_string(a_.shape[1]) +
-                         " x " + std::to_string(a_.shape[2]) + " " + a_.dtype + ")");
+                         std::to_string(a_.shape[0]) + " x " + std::to_string(a_.shape[1]) + " x " +
+                         std::to_string(a_.shape[2]) + " " + a_.dtype + ")");
     Scan();
     stats_.active_voxels = active_;
     stats_.seconds_bbox = t0.Seconds();
@@ -449,11 +451,9 @@ StatusOr<IngestStats> ArrayIngest::Run() {
 
 }  // namespace
 
-StatusOr<IngestStats> IngestArrayWithWriter(const ArrayView& array,
-                                            const ArrayPlacement& placement,
+StatusOr<IngestStats> IngestArrayWithWriter(const ArrayView& array, const ArrayPlacement& placement,
                                             const IngestOptions& options,
-                                            const WriterFactory& factory,
-                                            ProgressSink* progress) {
+                                            const WriterFactory& factory, ProgressSink* progress) {
   try {
     return ArrayIngest(array, placement, options, factory, progress).Run();
   } catch (const std::bad_alloc&) {

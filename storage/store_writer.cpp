@@ -447,8 +447,9 @@ class StoreWriterImpl : public StoreWriter {
     if (flock(lock_fd_, LOCK_EX | LOCK_NB) != 0)
       return UnavailableError("'" + temp_ + "' is in use by another resumable ingest of '" +
                               target_ + "'");
-    const std::string key = JournalKey(options_.resume_key, meta_, options_.zstd_level,
-                                                        options_.normal_bits), bricks = temp_ + "/" + kBrickFileName,
+    const std::string key =
+        JournalKey(options_.resume_key, meta_, options_.zstd_level, options_.normal_bits);
+    const std::string bricks = temp_ + "/" + kBrickFileName,
                       journal = temp_ + "/" + kJournalFileName;
     if (fs::exists(journal, ec)) {
       StatusOr<JournalContents> j = BrickJournal::Read(journal, bricks);

@@ -9,8 +9,8 @@
 
 #include <array>
 #include <cmath>
-#include <cstdlib>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 
@@ -22,9 +22,9 @@ namespace vox::ingest_internal {
 // numpy's names and descr strings -> a canonical "f4", "u1", "i2", ...
 inline StatusOr<std::string> CanonicalDtype(const std::string& dtype) {
   static const std::pair<const char*, const char*> kNames[] = {
-      {"float32", "f4"}, {"float64", "f8"}, {"uint8", "u1"}, {"uint16", "u2"}, {"uint32", "u4"},
-      {"uint64", "u8"}, {"int8", "i1"}, {"int16", "i2"}, {"int32", "i4"}, {"int64", "i8"},
-      {"float", "f4"}, {"double", "f8"}};
+      {"float32", "f4"}, {"float64", "f8"}, {"uint8", "u1"}, {"uint16", "u2"},
+      {"uint32", "u4"},  {"uint64", "u8"},  {"int8", "i1"},  {"int16", "i2"},
+      {"int32", "i4"},   {"int64", "i8"},   {"float", "f4"}, {"double", "f8"}};
   for (auto& [name, code] : kNames)
     if (dtype == name) return std::string(code);
   std::string d = dtype;
@@ -74,7 +74,8 @@ inline Status CheckArrayPlacement(const ArrayView& a, const ArrayPlacement& plac
                                   const std::string& what) {
   if (!(place.voxel_size > 0) || !std::isfinite(place.voxel_size))
     return InvalidArgumentError(what + ": voxel_size must be positive");
-  if (!std::isfinite(place.threshold)) return InvalidArgumentError(what + ": threshold must be finite");
+  if (!std::isfinite(place.threshold))
+    return InvalidArgumentError(what + ": threshold must be finite");
   for (int c = 0; c < 3; ++c)
     if (std::llabs(place.origin[size_t(c)]) + a.shape[size_t(c)] > (int64_t(1) << 30))
       return InvalidArgumentError(what + ": origin + shape leaves OpenVDB's index range");

@@ -80,9 +80,9 @@ std::string JournalKey(const std::string& caller_key, const StoreMeta& m, int zs
   char buf[512];
   std::snprintf(buf, sizeof buf, "\n%d %d %d %lld %lld %lld %.17g %.17g %.17g %d%d%d%d%d %d %d",
                 int(m.grid_class), m.levels, m.brick_level, (long long)m.origin.x,
-                (long long)m.origin.y, (long long)m.origin.z, m.isovalue, m.threshold,
-                m.voxel_size, m.has_normal, m.has_density, m.has_color, m.has_coverage,
-                m.has_temperature, zstd_level, normal_bits);
+                (long long)m.origin.y, (long long)m.origin.z, m.isovalue, m.threshold, m.voxel_size,
+                m.has_normal, m.has_density, m.has_color, m.has_coverage, m.has_temperature,
+                zstd_level, normal_bits);
   k += buf;
   for (int i = 0; i < 4; ++i)
     for (int j = 0; j < 4; ++j) {

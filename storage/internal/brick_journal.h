@@ -13,11 +13,10 @@
 #define VOX_STORAGE_INTERNAL_BRICK_JOURNAL_H_
 
 #include <cstdint>
+#include <glm/vec3.hpp>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <glm/vec3.hpp>
 
 #include "core/util/status.h"
 #include "storage/internal/format.h"
@@ -28,7 +27,7 @@ namespace vox::storage_internal {
 inline constexpr const char kJournalFileName[] = "journal";
 
 struct JournalRecord {
-  BrickEntry entry;         // where the brick's record lies in bricks.vxb, its sizes and CRC
+  BrickEntry entry;           // where the brick's record lies in bricks.vxb, its sizes and CRC
   glm::u64vec3 lo{0}, hi{0};  // its voxels' bounds in the brick
 };
 
@@ -51,8 +50,7 @@ class BrickJournal {
   ~BrickJournal();
   // Creates `path` (failing if it exists) with its header.
   static StatusOr<std::unique_ptr<BrickJournal>> Create(const std::string& path,
-                                                        const std::string& key,
-                                                        uint64_t store_id);
+                                                        const std::string& key, uint64_t store_id);
   // Reads the journal at `path` and verifies its records against the brick
   // file `bricks_path` (header included). Corruption when the header is not
   // a journal's; records past the first bad one are not returned.

@@ -5,12 +5,12 @@
 // per element of every 8^3 block holding one above the threshold: all of
 // them here, 1.5 GiB) would be killed by the cgroup's OOM killer. Needs root
 // and a writable memory cgroup; skips otherwise.
+#include <gtest/gtest.h>
+
 #include <cstdint>
 #include <cstdio>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "storage/sample.h"
 #include "storage/store.h"

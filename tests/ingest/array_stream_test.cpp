@@ -4,13 +4,13 @@
 // metadata but for the store id, source and build options; every voxel with
 // its brick, payload and density; the pyramid's levels likewise), and the
 // voxels the elements above the threshold, counted here from the array.
+#include <gtest/gtest.h>
+
 #include <cstdint>
 #include <cstring>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "ingest/array_ingest.h"
 #include "storage/lod.h"
@@ -31,8 +31,7 @@ struct TestArray {
 // Elements of `dtype` (T) of `shape`, from `value(i, j, k)`, laid out in C or
 // Fortran order.
 template <class T, class F>
-TestArray MakeArray(const std::string& dtype, std::array<int64_t, 3> shape, bool fortran,
-                    F value) {
+TestArray MakeArray(const std::string& dtype, std::array<int64_t, 3> shape, bool fortran, F value) {
   TestArray a;
   a.bytes.resize(size_t(shape[0] * shape[1] * shape[2]) * sizeof(T));
   for (int64_t i = 0; i < shape[0]; ++i)
@@ -99,9 +98,9 @@ TEST_F(ArrayStreamTest, Float32CorderAcrossBricks) {
 }
 
 TEST_F(ArrayStreamTest, Uint8FortranOrder) {
-  const TestArray a = MakeArray<uint8_t>("|u1", {40, 50, 36}, true, [](int64_t i, int64_t j, int64_t k) {
-    return (i * 7 + j * 13 + k * 29) % 256;
-  });
+  const TestArray a = MakeArray<uint8_t>(
+      "|u1", {40, 50, 36}, true,
+      [](int64_t i, int64_t j, int64_t k) { return (i * 7 + j * 13 + k * 29) % 256; });
   ArrayPlacement place;
   place.origin = {5, -7, 0};
   place.threshold = 100;
@@ -110,27 +109,29 @@ TEST_F(ArrayStreamTest, Uint8FortranOrder) {
 
 TEST_F(ArrayStreamTest, Float64BallWithNegativeThresholdAndEmptyBricks) {
   // A ball at one end and one voxel at the other: bricks between are empty.
-  const TestArray a = MakeArray<double>("<f8", {150, 20, 20}, false, [](int64_t i, int64_t j, int64_t k) {
-    if (i == 149 && j == 19 && k == 0) return 2.5;
-    const double r2 = double((i - 9) * (i - 9) + (j - 9) * (j - 9) + (k - 9) * (k - 9));
-    return r2 < 64 ? 1.0 - r2 / 64 : -1.0;
-  });
+  const TestArray a =
+      MakeArray<double>("<f8", {150, 20, 20}, false, [](int64_t i, int64_t j, int64_t k) {
+        if (i == 149 && j == 19 && k == 0) return 2.5;
+        const double r2 = double((i - 9) * (i - 9) + (j - 9) * (j - 9) + (k - 9) * (k - 9));
+        return r2 < 64 ? 1.0 - r2 / 64 : -1.0;
+      });
   ArrayPlacement place;
   place.threshold = -0.5;
   Check(a, place, CountAbove<double>(a, -0.5));
 }
 
 TEST_F(ArrayStreamTest, Int16SmallerThanABrick) {
-  const TestArray a = MakeArray<int16_t>("int16", {3, 4, 5}, false, [](int64_t i, int64_t j, int64_t k) {
-    return int16_t(i * 100 - j * 50 + k);
-  });
+  const TestArray a = MakeArray<int16_t>(
+      "int16", {3, 4, 5}, false,
+      [](int64_t i, int64_t j, int64_t k) { return int16_t(i * 100 - j * 50 + k); });
   ArrayPlacement place;
   place.origin = {1000, 0, -1000};
   Check(a, place, CountAbove<int16_t>(a, 0));
 }
 
 TEST_F(ArrayStreamTest, NothingAboveTheThresholdIsAnEmptyStore) {
-  const TestArray a = MakeArray<float>("float32", {10, 10, 10}, false, [](auto...) { return 0.5f; });
+  const TestArray a =
+      MakeArray<float>("float32", {10, 10, 10}, false, [](auto...) { return 0.5f; });
   ArrayPlacement place;
   place.threshold = 0.5;
   Check(a, place, 0);

@@ -6,6 +6,7 @@
 // match its journal record is written again; a journal of another ingest
 // (another threshold) is started over.
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -19,8 +20,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "tests/common/run_command.h"
 #include "tests/common/spawn.h"
@@ -58,16 +57,28 @@ class IngestResumeTest : public ::testing::Test {
     for (int64_t i = 0; i < kN; ++i)
       for (int64_t j = 0; j < kN; ++j)
         for (int64_t k = 0; k < kN; ++k)
-          v[size_t((i * kN + j) * kN + k)] =
-              float(0.5 + 0.3 * std::sin(0.21 * i) * std::cos(0.17 * j) + 0.2 * std::sin(0.3 * k + i));
+          v[size_t((i * kN + j) * kN + k)] = float(
+              0.5 + 0.3 * std::sin(0.21 * i) * std::cos(0.17 * j) + 0.2 * std::sin(0.3 * k + i));
     std::FILE* f = std::fopen(raw_.c_str(), "wb");
     ASSERT_NE(f, nullptr);
     ASSERT_EQ(std::fwrite(v.data(), sizeof(float), v.size(), f), v.size());
     ASSERT_EQ(std::fclose(f), 0);
   }
   std::vector<std::string> Args(const std::string& out, const std::string& threshold) {
-    return {VOX_INGEST_BINARY, raw_, out, "--shape", "160,160,160", "--dtype", "float32",
-            "--threshold", threshold, "--threads", "1", "--zstd-level", "19", "--resume"};
+    return {VOX_INGEST_BINARY,
+            raw_,
+            out,
+            "--shape",
+            "160,160,160",
+            "--dtype",
+            "float32",
+            "--threshold",
+            threshold,
+            "--threads",
+            "1",
+            "--zstd-level",
+            "19",
+            "--resume"};
   }
   static std::string Shell(const std::vector<std::string>& args) {
     std::string cmd;
@@ -77,7 +88,8 @@ class IngestResumeTest : public ::testing::Test {
   // Starts a resumable ingest of `out` and signals it once its journal
   // holds `records` bricks; returns the records the journal held then.
   int64_t StartAndStop(const std::string& out, int sig, int64_t records, int* status) {
-    const std::string journal = dir_.File("." + fs::path(out).filename().string() + ".resume/journal");
+    const std::string journal =
+        dir_.File("." + fs::path(out).filename().string() + ".resume/journal");
     const pid_t pid = testing::SpawnInGroup(Args(out, "0.6"));
     EXPECT_GT(pid, 0);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
@@ -144,14 +156,14 @@ TEST_F(IngestResumeTest, TerminatedKeepsTheBricksAndAnotherIngestStartsOver) {
 
 TEST_F(IngestResumeTest, TheSignalMessageNamesWhatIsKept) {
   const std::string out = dir_.File("out.store");
-  auto r = testing::RunCommand("(" + Shell(Args(out, "0.6")) +
-                               " & p=$!; while [ ! -e '" + dir_.File(".out.store.resume/journal") +
+  auto r = testing::RunCommand("(" + Shell(Args(out, "0.6")) + " & p=$!; while [ ! -e '" +
+                               dir_.File(".out.store.resume/journal") +
                                "' ]; do sleep 0.01; done; kill -INT $p; wait $p)");
   EXPECT_EQ(r.code, 128 + SIGINT) << r.output;
-  EXPECT_NE(r.output.find("the bricks written so far are kept in '" +
-                          dir_.File(".out.store.resume") +
-                          "': run it again with --resume to continue"),
-            std::string::npos)
+  EXPECT_NE(
+      r.output.find("the bricks written so far are kept in '" + dir_.File(".out.store.resume") +
+                    "': run it again with --resume to continue"),
+      std::string::npos)
       << r.output;
 }
 

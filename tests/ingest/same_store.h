@@ -6,10 +6,10 @@
 #ifndef VOX_TESTS_INGEST_SAME_STORE_H_
 #define VOX_TESTS_INGEST_SAME_STORE_H_
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "storage/lod.h"
 #include "storage/store.h"
