@@ -12,62 +12,19 @@
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
+#include "ingest/internal/array_values.h"
+
 namespace vox {
 
-namespace {
-
-// numpy's names and descr strings -> a canonical "f4", "u1", "i2", ...
-StatusOr<std::string> Canonical(const std::string& dtype) {
-  static const std::pair<const char*, const char*> kNames[] = {
-      {"float32", "f4"}, {"float64", "f8"}, {"uint8", "u1"}, {"uint16", "u2"}, {"uint32", "u4"},
-      {"uint64", "u8"}, {"int8", "i1"}, {"int16", "i2"}, {"int32", "i4"}, {"int64", "i8"},
-      {"float", "f4"}, {"double", "f8"}};
-  for (auto& [name, code] : kNames)
-    if (dtype == name) return std::string(code);
-  std::string d = dtype;
-  if (!d.empty() && (d[0] == '<' || d[0] == '|' || d[0] == '=')) d = d.substr(1);
-  static const char* kCodes[] = {"f4", "f8", "u1", "u2", "u4", "u8", "i1", "i2", "i4", "i8"};
-  for (const char* c : kCodes)
-    if (d == c) return d;
-  return InvalidArgumentError("dtype '" + dtype +
-                              "' is not supported: give float32, float64, (u)int8, (u)int16, "
-                              "(u)int32 or (u)int64, little-endian");
-}
-
-template <class T>
-float Load(const void* base, size_t index) {
-  T v;
-  std::memcpy(&v, static_cast<const char*>(base) + index * sizeof(T), sizeof(T));
-  return float(v);
-}
-
-using Loader = float (*)(const void*, size_t);
-
-Loader LoaderOf(const std::string& code) {
-  if (code == "f4") return Load<float>;
-  if (code == "f8") return Load<double>;
-  if (code == "u1") return Load<uint8_t>;
-  if (code == "u2") return Load<uint16_t>;
-  if (code == "u4") return Load<uint32_t>;
-  if (code == "u8") return Load<uint64_t>;
-  if (code == "i1") return Load<int8_t>;
-  if (code == "i2") return Load<int16_t>;
-  if (code == "i4") return Load<int32_t>;
-  return Load<int64_t>;
-}
-
-Status CheckShape(const std::array<int64_t, 3>& s, const std::string& what) {
-  for (int a = 0; a < 3; ++a)
-    if (s[size_t(a)] <= 0 || s[size_t(a)] > (int64_t(1) << 31))
-      return InvalidArgumentError(what + ": shape " + std::to_string(s[0]) + " x " + std::to_string(s[1]) +
-                                  " x " + std::to_string(s[2]) + " is not 3 positive sizes below 2^31");
-  return OkStatus();
-}
-
-}  // namespace
+using ingest_internal::CanonicalDtype;
+using ingest_internal::CheckArrayPlacement;
+using ingest_internal::CheckArrayShape;
+using ingest_internal::ElementIndex;
+using ingest_internal::ElementLoader;
+using ingest_internal::LoaderOf;
 
 StatusOr<int> DtypeSize(const std::string& dtype) {
-  VOX_ASSIGN_OR_RETURN(std::string code, Canonical(dtype));
+  VOX_ASSIGN_OR_RETURN(std::string code, CanonicalDtype(dtype));
   return code[1] - '0';
 }
 
@@ -99,7 +56,7 @@ StatusOr<std::unique_ptr<MappedArray>> Map(const std::string& path, size_t* leng
 StatusOr<std::unique_ptr<MappedArray>> MappedArray::OpenRaw(const std::string& path,
                                                             const std::array<int64_t, 3>& shape,
                                                             const std::string& dtype) {
-  VOX_RETURN_IF_ERROR(CheckShape(shape, "'" + path + "'"));
+  VOX_RETURN_IF_ERROR(CheckArrayShape(shape, "'" + path + "'"));
   VOX_ASSIGN_OR_RETURN(int size, DtypeSize(dtype));
   std::unique_ptr<MappedArray> m(new MappedArray());
   VOX_RETURN_IF_ERROR(Map(path, &m->length_, &m->base_).status());
@@ -145,7 +102,7 @@ StatusOr<std::unique_ptr<MappedArray>> MappedArray::OpenNpy(const std::string& p
   v.dtype = descr[1];
   v.fortran_order = fortran[1] == "True";
   for (int a = 0; a < 3; ++a) v.shape[size_t(a)] = std::stoll(shape[a + 1]);
-  VOX_RETURN_IF_ERROR(CheckShape(v.shape, "'" + path + "'"));
+  VOX_RETURN_IF_ERROR(CheckArrayShape(v.shape, "'" + path + "'"));
   auto size = DtypeSize(v.dtype);
   if (!size.ok()) return bad(size.status().message());
   const size_t offset = start + header_len;
@@ -160,16 +117,11 @@ StatusOr<std::unique_ptr<MappedArray>> MappedArray::OpenNpy(const std::string& p
 
 Status ArrayToVdb(const ArrayView& a, const ArrayPlacement& place, const std::string& vdb_path,
                   const std::string& what) {
-  VOX_RETURN_IF_ERROR(CheckShape(a.shape, what));
-  auto code = Canonical(a.dtype);
+  VOX_RETURN_IF_ERROR(CheckArrayShape(a.shape, what));
+  auto code = CanonicalDtype(a.dtype);
   if (!code.ok()) return InvalidArgumentError(what + ": " + code.status().message());
-  if (!(place.voxel_size > 0) || !std::isfinite(place.voxel_size))
-    return InvalidArgumentError(what + ": voxel_size must be positive");
-  if (!std::isfinite(place.threshold)) return InvalidArgumentError(what + ": threshold must be finite");
-  for (int c = 0; c < 3; ++c)
-    if (std::llabs(place.origin[size_t(c)]) + a.shape[size_t(c)] > (int64_t(1) << 30))
-      return InvalidArgumentError(what + ": origin + shape leaves OpenVDB's index range");
-  const Loader load = LoaderOf(*code);
+  VOX_RETURN_IF_ERROR(CheckArrayPlacement(a, place, what));
+  const ElementLoader load = LoaderOf(*code);
   try {
     openvdb::initialize();
     auto grid = openvdb::FloatGrid::create(0.0f);
@@ -182,8 +134,7 @@ Status ArrayToVdb(const ArrayView& a, const ArrayPlacement& place, const std::st
     for (int64_t i = 0; i < nx; ++i)
       for (int64_t j = 0; j < ny; ++j)
         for (int64_t k = 0; k < nz; ++k) {
-          const size_t index = a.fortran_order ? size_t((k * ny + j) * nx + i) : size_t((i * ny + j) * nz + k);
-          const float v = load(a.data, index);
+          const float v = load(a.data, ElementIndex(a, i, j, k));
           if (!(v > threshold)) continue;
           acc.setValue(openvdb::Coord(int(i + place.origin[0]), int(j + place.origin[1]), int(k + place.origin[2])), v);
         }

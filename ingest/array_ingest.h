@@ -1,14 +1,21 @@
-// vox::ArrayToVdb: a dense array (numpy's memory, a .npy file, a raw file)
-// as an OpenVDB fog volume, so that it is ingested (ingest.h) exactly as a
-// .vdb holding the same grid would be: element [i, j, k] becomes voxel
-// (i, j, k) + origin (index units), active with its value as the density
-// where the value exceeds `threshold`, in a grid named "density" whose
-// index-to-world map is a uniform scale by voxel_size.
+// A dense array (numpy's memory, a .npy file, a raw file) as a fog volume:
+// element [i, j, k] becomes voxel (i, j, k) + origin (index units), occupied
+// with its value as the density where the value exceeds `threshold`, in a
+// grid named "density" whose index-to-world map is a uniform scale by
+// voxel_size.
 //
-// Files are mapped (mmap), not read whole: the pages of the input are read
-// as the grid is built, a slab of x at a time, and the memory held is the
-// grid's, about 4 bytes per voxel above the threshold (plus its leaves'
-// inactive voxels) and none for the rest of the array.
+// vox::IngestArray writes the store straight from the array, brick by brick
+// (array_stream.cpp): no grid and no temporary file, and the memory held is
+// the writer's and the pyramid's whatever the array's size (a mapped file's
+// pages are read as the bricks need them and belong to the page cache). The
+// store is the one vox::Ingest makes of the same array written as a .vdb by
+// vox::ArrayToVdb (the same metadata and bricks; the store id, its source and
+// build options aside).
+//
+// vox::ArrayToVdb writes the array as an OpenVDB fog volume (the Python
+// module's vox.ingest_array, and the tests' second way to the same store);
+// it holds the grid in memory, about 4 bytes per voxel of every leaf that
+// holds an element above the threshold.
 //
 // Thread safety: the functions may be called from any thread.
 #ifndef VOX_INGEST_ARRAY_INGEST_H_
@@ -20,6 +27,7 @@
 #include <string>
 
 #include "core/util/status.h"
+#include "ingest/ingest.h"
 
 namespace vox {
 
@@ -66,6 +74,21 @@ StatusOr<int> DtypeSize(const std::string& dtype);
 // `what` names the input in errors (a file, "the array").
 Status ArrayToVdb(const ArrayView& array, const ArrayPlacement& placement, const std::string& vdb_path,
                   const std::string& what);
+
+// Ingests the array into a store at options.output (ingest.h's contract: a
+// failed ingest leaves no store, an existing one is replaced only with
+// options.force). options.input names the array in messages and, unless
+// options.source is set, as the store's source. The array's threshold is
+// placement.threshold (options.threshold, when set, must equal it);
+// options.grid_name, color_grid, temperature_grid and isovalue are refused.
+StatusOr<IngestStats> IngestArray(const ArrayView& array, const ArrayPlacement& placement,
+                                  const IngestOptions& options, ProgressSink* progress = nullptr);
+// The same with another writer (tests).
+StatusOr<IngestStats> IngestArrayWithWriter(const ArrayView& array,
+                                            const ArrayPlacement& placement,
+                                            const IngestOptions& options,
+                                            const WriterFactory& factory,
+                                            ProgressSink* progress = nullptr);
 
 }  // namespace vox
 

@@ -63,6 +63,13 @@ struct IngestOptions {
   // Recorded as the store's source (StoreMeta::source_file); empty: input.
   // An array ingested through a temporary .vdb names the array here.
   std::string source;
+  // Resumable (vox-ingest --resume): the bricks are written in
+  // `.NAME.resume` beside the output with a journal (WriteOptions::resume_key)
+  // that an interrupted, failed or killed run leaves behind; a later run of
+  // the same input, options and placement keeps the bricks it verifies,
+  // writes the others and builds the pyramid from the whole base store, and
+  // the store published is the one an uninterrupted run makes (its id aside).
+  bool resume = false;
 };
 
 struct IngestStats {

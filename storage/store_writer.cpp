@@ -1,6 +1,7 @@
 // StoreWriter: streams bricks into a temporary directory beside the target,
 // then writes the index, fsyncs and renames into place (FORMAT.md).
 #include <fcntl.h>
+#include <sys/file.h>
 #include <stdio.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -14,10 +15,12 @@
 #include <filesystem>
 #include <mutex>
 #include <random>
+#include <unordered_map>
 #include <unordered_set>
 
 #include "core/util/file.h"
 #include "storage/internal/brick_codec.h"
+#include "storage/internal/brick_journal.h"
 #include "storage/internal/format.h"
 #include "storage/store.h"
 #include "storage/store_writer.h"
@@ -139,28 +142,41 @@ void WaitAtTestGate(const std::string& target) {
 class StoreWriterImpl : public StoreWriter {
  public:
   StoreWriterImpl(std::string target, std::string temp, CheckedTarget checked, StoreMeta meta,
-                  WriteOptions options, uint64_t store_id)
+                  WriteOptions options, uint64_t store_id, bool resumable = false)
       : target_(std::move(target)),
         temp_(std::move(temp)),
         checked_(checked),
         meta_(std::move(meta)),
         options_(options),
         store_id_(store_id),
+        resumable_(resumable),
         depth_(meta_.levels - meta_.brick_level),
         flags_(AttrFlags(meta_)) {}
 
   ~StoreWriterImpl() override {
-    if (!finished_) {
-      bricks_.reset();
+    bricks_.reset();
+    journal_.reset();
+    if (!finished_ && !resumable_) {
       std::error_code ec;
       fs::remove_all(temp_, ec);
     }
+    if (lock_fd_ >= 0) close(lock_fd_);
   }
 
   Status Init() {
+    if (resumable_) return InitResumable();
     VOX_ASSIGN_OR_RETURN(bricks_, WritableFile::Create(temp_ + "/" + kBrickFileName));
     return bricks_->Append(EncodeFileHeader(kBrickMagic, store_id_));
   }
+
+  uint64_t resumed_bricks() const override { return resumed_.size(); }
+  bool Resumed(const glm::u64vec3& c, uint32_t* voxels) const override {
+    auto it = resumed_.find(c);
+    if (it == resumed_.end()) return false;
+    *voxels = it->second;
+    return true;
+  }
+  std::string resume_note() const override { return resume_note_; }
 
   Status AddBrick(const glm::u64vec3& c, std::vector<BrickVoxel> voxels) override {
     {
@@ -255,6 +271,12 @@ class StoreWriterImpl : public StoreWriter {
     if (!s.ok()) return FailLocked(s);
     entries_.push_back(e);
     AddBoundsLocked(c, lo, hi, attrs.size());
+    if (journal_) {
+      // The brick's bytes reach the file before its record does.
+      s = bricks_->Flush();
+      if (s.ok()) s = journal_->Append({e, lo, hi});
+      if (!s.ok()) return FailLocked(s);
+    }
     return OkStatus();
   }
 
@@ -356,6 +378,14 @@ class StoreWriterImpl : public StoreWriter {
       meta_.bbox_max = glm::i64vec3(-1);
     }
 
+    // A resumable store's journal goes first: the directory published is
+    // the store alone (a kill from here on starts the next run over).
+    if (journal_) {
+      journal_.reset();
+      if (unlink((temp_ + "/" + kJournalFileName).c_str()) != 0)
+        return IoError("cannot remove '" + temp_ + "/" + kJournalFileName + "': " +
+                       std::strerror(errno));
+    }
     // The index file: header, blocks with trailers, footer.
     VOX_ASSIGN_OR_RETURN(auto index, WritableFile::Create(temp_ + "/" + kIndexFileName));
     VOX_RETURN_IF_ERROR(index->Append(EncodeFileHeader(kIndexMagic, store_id_)));
@@ -406,11 +436,79 @@ class StoreWriterImpl : public StoreWriter {
     return why.empty() ? "" : "it is no longer a vox store: " + why;
   }
 
+  // The resumable directory: locked (one writer at a time), then either an
+  // earlier run's bricks kept (those its journal verifies) or a fresh start.
+  Status InitResumable() {
+    std::error_code ec;
+    fs::create_directory(temp_, ec);
+    if (ec) return IoError("cannot create '" + temp_ + "': " + ec.message());
+    lock_fd_ = open(temp_.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (lock_fd_ < 0) return IoError("cannot open '" + temp_ + "': " + std::strerror(errno));
+    if (flock(lock_fd_, LOCK_EX | LOCK_NB) != 0)
+      return UnavailableError("'" + temp_ + "' is in use by another resumable ingest of '" +
+                              target_ + "'");
+    const std::string key =
+        JournalKey(options_.resume_key, meta_, options_.zstd_level, options_.normal_bits);
+    const std::string bricks = temp_ + "/" + kBrickFileName,
+                      journal = temp_ + "/" + kJournalFileName;
+    if (fs::exists(journal, ec)) {
+      StatusOr<JournalContents> j = BrickJournal::Read(journal, bricks);
+      if (!j.ok()) {
+        resume_note_ = "starting over: " + j.status().message();
+      } else if (j->key != key) {
+        resume_note_ = "starting over: '" + temp_ + "' holds another ingest's bricks (another "
+                       "input, options or placement)";
+      } else {
+        return Adopt(*j, key);
+      }
+    } else if (!fs::is_empty(temp_, ec)) {
+      resume_note_ = "starting over: '" + temp_ + "' has no journal";
+    }
+    for (const auto& e : fs::directory_iterator(temp_, ec)) fs::remove_all(e.path(), ec);
+    VOX_ASSIGN_OR_RETURN(bricks_, WritableFile::Create(bricks));
+    VOX_RETURN_IF_ERROR(bricks_->Append(EncodeFileHeader(kBrickMagic, store_id_)));
+    VOX_RETURN_IF_ERROR(bricks_->Flush());
+    VOX_ASSIGN_OR_RETURN(journal_, BrickJournal::Create(journal, key, store_id_));
+    return OkStatus();
+  }
+
+  // Keeps the verified bricks of an earlier run: the brick file and the
+  // journal cut after them, anything else (a half-written index or
+  // pyramid) removed.
+  Status Adopt(const JournalContents& j, const std::string& key) {
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(temp_, ec)) {
+      const std::string name = e.path().filename().string();
+      if (name != kBrickFileName && name != kJournalFileName) fs::remove_all(e.path(), ec);
+    }
+    store_id_ = j.store_id;
+    VOX_ASSIGN_OR_RETURN(bricks_, WritableFile::OpenAppend(temp_ + "/" + kBrickFileName,
+                                                           j.bricks_end));
+    VOX_ASSIGN_OR_RETURN(journal_,
+                         BrickJournal::Reopen(temp_ + "/" + kJournalFileName,
+                                              BrickJournal::JournalBytes(key, j.records.size())));
+    for (const JournalRecord& r : j.records) {
+      const glm::u64vec3 c(r.entry.x, r.entry.y, r.entry.z);
+      if (!seen_.insert(c).second) return CorruptionError("a journal lists a brick twice");
+      entries_.push_back(r.entry);
+      AddBoundsLocked(c, r.lo, r.hi, r.entry.voxel_count);
+      resumed_[c] = r.entry.voxel_count;
+    }
+    resume_note_ = "resuming: " + std::to_string(j.records.size()) + " bricks of an earlier run "
+                   "verified in '" + temp_ + "'";
+    return OkStatus();
+  }
+
   const std::string target_, temp_;
   const CheckedTarget checked_;
   StoreMeta meta_;
   const WriteOptions options_;
-  const uint64_t store_id_;
+  uint64_t store_id_;
+  const bool resumable_ = false;
+  int lock_fd_ = -1;
+  std::unique_ptr<BrickJournal> journal_;
+  std::unordered_map<glm::u64vec3, uint32_t, CoordHash> resumed_;
+  std::string resume_note_;
   const int depth_;
   const uint8_t flags_;
   std::unique_ptr<WritableFile> bricks_;
@@ -426,6 +524,14 @@ class StoreWriterImpl : public StoreWriter {
 };
 
 }  // namespace
+
+std::string ResumeDirectory(const std::string& dir) {
+  std::string target = dir;
+  while (target.size() > 1 && target.back() == '/') target.pop_back();
+  std::string parent, name;
+  SplitPath(target, &parent, &name);
+  return (parent == "/" ? "" : parent) + "/." + name + ".resume";
+}
 
 StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& dir,
                                                            const StoreMeta& meta,
@@ -471,10 +577,13 @@ StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& di
   std::random_device rd;
   uint64_t id = (uint64_t(rd()) << 32) ^ rd() ^
                 uint64_t(std::chrono::steady_clock::now().time_since_epoch().count());
-  StatusOr<std::string> temp = CreateTemporary(target, /*directory=*/true);
+  const bool resumable = !options.resume_key.empty() && meta.levels > meta.brick_level;
+  StatusOr<std::string> temp = resumable ? StatusOr<std::string>(ResumeDirectory(target))
+                                         : CreateTemporary(target, /*directory=*/true);
   if (!temp.ok()) return temp.status().WithContext("store '" + target + "'");
   auto w = std::make_unique<StoreWriterImpl>(target, *temp, *checked, meta, options,
-                                             options.store_id != 0 ? options.store_id : id);
+                                             options.store_id != 0 ? options.store_id : id,
+                                             resumable);
   Status init = w->Init();
   if (!init.ok()) return init.WithContext("writing store '" + target + "'");
   return std::unique_ptr<StoreWriter>(std::move(w));

@@ -44,6 +44,18 @@ struct WriteOptions {
   // the directory (e.g. the level-of-detail pyramid, storage/lod.h) is
   // published with the store, and an error leaves no store at the target.
   std::function<Status(const std::string& temp_dir)> before_publish;
+  // Resumable writing (vox-ingest --resume) when non-empty: the store is
+  // built in `.NAME.resume` beside the target (not a temporary of this
+  // process), with a journal of the bricks written
+  // (storage/internal/brick_journal.h) that outlives an error, an interrupt
+  // or a kill. A later writer of the same target with the same key and
+  // metadata keeps the bricks the journal verifies against the brick file
+  // (Resumed) and takes the others; with another key, or an unreadable
+  // journal, it starts over. Only one writer at a time uses the directory
+  // (a lock). It is renamed into place by Finish; it never looks like a
+  // store until then (no index). Stores whose bricks are single voxels
+  // (levels == brick_level) are not journaled.
+  std::string resume_key;
 };
 
 class StoreWriter {
@@ -65,7 +77,19 @@ class StoreWriter {
   // The temporary directory the store is built in until Finish renames it
   // (what before_publish is given); empty for writers without one.
   virtual std::string temp_dir() const { return {}; }
+  // Resumable writing: the bricks kept from an earlier run, and whether
+  // `brick_coord` is one of them (with its voxel count in *voxels); such a
+  // brick is not added again. `resume_note` says what happened to an
+  // earlier run's directory (empty: there was none).
+  virtual uint64_t resumed_bricks() const { return 0; }
+  virtual bool Resumed(const glm::u64vec3& /*brick_coord*/, uint32_t* /*voxels*/) const {
+    return false;
+  }
+  virtual std::string resume_note() const { return {}; }
 };
+
+// The directory a resumable write of the store `dir` uses: `.NAME.resume` beside it.
+std::string ResumeDirectory(const std::string& dir);
 
 }  // namespace vox
 

@@ -298,6 +298,17 @@ StatusOr<std::unique_ptr<WritableFile>> WritableFile::Create(const std::string& 
   return std::unique_ptr<WritableFile>(new WritableFile(path, fd));
 }
 
+StatusOr<std::unique_ptr<WritableFile>> WritableFile::OpenAppend(const std::string& path,
+                                                                 uint64_t keep) {
+  int fd = open(path.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd < 0) return ErrnoError("cannot open", path, errno);
+  std::unique_ptr<WritableFile> f(new WritableFile(path, fd));
+  if (ftruncate(fd, off_t(keep)) != 0 || lseek(fd, off_t(keep), SEEK_SET) < 0)
+    return ErrnoError("cannot truncate", path, errno);
+  f->size_ = keep;
+  return f;
+}
+
 WritableFile::~WritableFile() {
   if (fd_ >= 0) close(fd_);
 }

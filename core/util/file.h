@@ -96,6 +96,9 @@ class WritableFile {
  public:
   // Creates `path`, failing if it exists.
   static StatusOr<std::unique_ptr<WritableFile>> Create(const std::string& path);
+  // Opens the existing `path` to append after its first `keep` bytes (the
+  // rest is cut off).
+  static StatusOr<std::unique_ptr<WritableFile>> OpenAppend(const std::string& path, uint64_t keep);
   ~WritableFile();
   WritableFile(const WritableFile&) = delete;
   WritableFile& operator=(const WritableFile&) = delete;
@@ -107,10 +110,11 @@ class WritableFile {
   Status Close();
   uint64_t size() const { return size_; }
   const std::string& path() const { return path_; }
+  // Hands the buffer to the OS (no fsync): it survives the process.
+  Status Flush();
 
  private:
   WritableFile(std::string path, int fd) : path_(std::move(path)), fd_(fd) {}
-  Status Flush();
   std::string path_;
   int fd_ = -1;
   std::string buf_;

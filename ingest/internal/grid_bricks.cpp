@@ -264,6 +264,14 @@ Status GridIngest<ValueT>::WriteBricks(StoreWriter* writer) {
       [&](Item& it) {
         if (failed.load()) return;
         const BrickWork& bw = *it.work;
+        uint32_t kept = 0;
+        if (writer->Resumed(
+                glm::u64vec3(KeyCoord(bw.key, 0), KeyCoord(bw.key, 1), KeyCoord(bw.key, 2)),
+                &kept)) {
+          it.voxels = kept;  // written by an earlier run (resumable writing)
+          it.work.reset();
+          return;
+        }
         try {
           StatusOr<std::vector<BrickVoxel>> extracted = ExtractBrick(bw, &it.lod);
           if (!extracted.ok()) return fail(extracted.status());

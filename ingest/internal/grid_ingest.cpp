@@ -34,6 +34,7 @@
 #include <random>
 
 #include "core/util/stopwatch.h"
+#include "ingest/internal/resume_key.h"
 
 namespace vox::ingest_internal {
 
@@ -150,6 +151,7 @@ StatusOr<std::unique_ptr<StoreWriter>> GridIngest<ValueT>::CreateWriter() {
   wo.zstd_level = cx_.options.zstd_level;
   wo.normal_bits = cx_.options.normal_bits;
   wo.force = cx_.options.force;
+  wo.resume_key = ResumeKeyOf(cx_.options, "");
   if (cx_.options.lod) {
     // The level-of-detail pyramid, built with the bricks (LodStream; or,
     // for a writer without a temporary directory, from the finished base
@@ -176,7 +178,11 @@ StatusOr<std::unique_ptr<StoreWriter>> GridIngest<ValueT>::CreateWriter() {
   auto writer_or = cx_.factory(cx_.options.output, meta, wo);
   if (!writer_or.ok()) return writer_or.status();
   std::unique_ptr<StoreWriter> writer = std::move(writer_or).value();
-  if (cx_.options.lod && !writer->temp_dir().empty()) {
+  if (!writer->resume_note().empty()) Message(writer->resume_note());
+  // Bricks kept from an earlier run are not built again, so the pyramid is
+  // built from the whole base store before it is published (BuildLod: the
+  // same pyramid, byte for byte).
+  if (cx_.options.lod && !writer->temp_dir().empty() && writer->resumed_bricks() == 0) {
     Message("building the level-of-detail pyramid with the bricks");
     VOX_ASSIGN_OR_RETURN(lod_, LodStream::Create(writer->temp_dir(), meta, wo, LodOptions()));
   }

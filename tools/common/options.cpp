@@ -151,6 +151,10 @@ constexpr OptionSpec kIngestOptions[] = {
      "memory the ingest may hold, MiB or with a unit (512, 2G; default: the process's memory "
      "cgroup limit or available memory)"},
     {"--force", kSwitch, "", kOutputGroup, "replace an existing store"},
+    {"--resume", kSwitch, "", kOutputGroup,
+     "resumable: build the store in .STORE.resume beside it with a journal of its bricks, kept "
+     "when the run is interrupted or killed; run again with --resume to keep the verified bricks "
+     "and write the rest"},
     {"--quiet", kSwitch, "", kOutputGroup, "no progress output"},
 };
 
@@ -160,7 +164,9 @@ OptionTable IngestOptionTable() { return kIngestOptions; }
 
 Status ApplyIngestFlag(IngestCommand* c, const std::string& flag, const std::string& v) {
   IngestOptions& o = c->options;
-  if (flag == "--force") {
+  if (flag == "--resume") {
+    o.resume = true;
+  } else if (flag == "--force") {
     o.force = true;
   } else if (flag == "--quiet") {
     c->quiet = true;

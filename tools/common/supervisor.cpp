@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "storage/store_writer.h"
 #include "tools/common/signals.h"
 
 namespace vox {
@@ -187,7 +188,7 @@ int RunSupervised(char** argv, const std::string& input, const std::string& outp
   return ReportChild(input, output, child, status, n == 1);
 }
 
-void StartSignalThread(const std::string& output) {
+void StartSignalThread(const std::string& output, bool resume) {
   sigset_t set;
   sigemptyset(&set);
   sigaddset(&set, SIGINT);
@@ -197,14 +198,26 @@ void StartSignalThread(const std::string& output) {
   // directory and replaces what is at the output (--force, --add-lod) only
   // when complete, so the output is as it was before the run.
   std::error_code ec;
-  const std::string kept = std::filesystem::exists(output, ec)
+  const bool existed = std::filesystem::exists(output, ec);
+  const std::string kept = existed
                                ? "no store written: '" + output + "' is as it was before"
                                : "no store written at '" + output + "', nothing left behind";
-  std::thread([set, output, kept] {
+  // A resumable ingest's bricks stay in its directory (once it has one).
+  const std::string resume_dir = resume ? ResumeDirectory(output) : std::string();
+  const std::string kept_resumable =
+      (existed ? "no store written: '" + output + "' is as it was before"
+               : "no store written at '" + output + "'") +
+      "; the bricks written so far are kept in '" + resume_dir +
+      "': run it again with --resume to continue";
+  std::thread([set, output, kept, kept_resumable, resume_dir] {
     int sig = 0;
     if (sigwait(&set, &sig) != 0) return;
+    std::error_code exists_ec;
+    const std::string what =
+        !resume_dir.empty() && std::filesystem::exists(resume_dir, exists_ec) ? kept_resumable
+                                                                              : kept;
     std::fprintf(stderr, "\nvox-ingest: %s; %s\n",
-                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", kept.c_str());
+                 sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", what.c_str());
     RemoveOwnTemporaries(output, getpid());
     std::_Exit(128 + sig);
   }).detach();

@@ -45,8 +45,10 @@ int RunSupervised(char** argv, const std::string& input, const std::string& outp
                   const std::function<int()>& work);
 
 // In the child: blocks SIGINT and SIGTERM in every thread created later and
-// starts the thread that takes them (see above).
-void StartSignalThread(const std::string& output);
+// starts the thread that takes them (see above). `resume`: a resumable
+// ingest, whose bricks written so far stay in `.NAME.resume` beside the
+// output for the next run (the message says so).
+void StartSignalThread(const std::string& output, bool resume = false);
 
 
 // Test hooks of the child, read from the environment:

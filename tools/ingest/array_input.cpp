@@ -1,13 +1,9 @@
 #include "tools/ingest/array_input.h"
 
-#include <signal.h>
-#include <unistd.h>
-
 #include <cstdlib>
 #include <cstring>
 #include <memory>
 
-#include "ingest/array_ingest.h"
 #include "tools/common/cli.h"
 #include "tools/common/options.h"
 
@@ -36,44 +32,12 @@ bool ParseTriple(const std::string& text, bool positive, std::array<int64_t, 3>*
   return *p == '\0';
 }
 
-// The temporary .vdb being written, for the signal handler below.
-char g_temp_vdb[4096];
-
-// SIGINT, SIGTERM or SIGHUP while the array is converted: removes what
-// there is of the temporary .vdb, says what was kept and exits 128 + the
-// signal (async-signal-safe calls only).
-extern "C" void OnSignalWhileConverting(int sig) {
-  ::unlink(g_temp_vdb);
-  static const char kMessage[] =
-      "\nvox-ingest: interrupted while converting the array: no store written (the output is as "
-      "it was before), the temporary .vdb removed\n";
-  ssize_t ignored = ::write(STDERR_FILENO, kMessage, sizeof kMessage - 1);
-  (void)ignored;
-  ::_exit(128 + sig);
-}
-
-// Catches those signals while it lives; then back to their defaults.
-class ConversionSignals {
- public:
-  explicit ConversionSignals(const std::string& temp_vdb) {
-    std::snprintf(g_temp_vdb, sizeof g_temp_vdb, "%s", temp_vdb.c_str());
-    struct sigaction sa;
-    std::memset(&sa, 0, sizeof sa);
-    sa.sa_handler = OnSignalWhileConverting;
-    sigemptyset(&sa.sa_mask);
-    for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
-  }
-  ~ConversionSignals() {
-    for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, SIG_DFL);
-  }
-};
-
 }  // namespace
 
 ArrayInput PrepareArrayInput(int argc, char** argv) {
   ArrayInput in;
   std::string shape_text, dtype, origin_text;
-  ArrayPlacement place;
+  ArrayPlacement& place = in.placement;
   std::vector<std::string> rest;
   std::vector<size_t> positional;  // indices into rest
   for (int i = 1; i < argc; ++i) {
@@ -99,7 +63,6 @@ ArrayInput PrepareArrayInput(int argc, char** argv) {
       }
       continue;
     }
-    if (a == "--threshold" && i + 1 < argc) place.threshold = std::strtod(argv[i + 1], nullptr);
     if (a.empty() || a[0] != '-') positional.push_back(rest.size());
     rest.push_back(a);
     // A flag's value is no input or output (--flag=value carries its own).
@@ -111,7 +74,7 @@ ArrayInput PrepareArrayInput(int argc, char** argv) {
     if (in.wanted) in.error = "an array input takes an input file and an output store";
     return in;
   }
-  const std::string input = rest[positional[0]], output = rest[positional[1]];
+  const std::string input = rest[positional[0]];
   const bool npy = EndsWith(input, ".npy");
   if (!npy && !EndsWith(input, ".raw") && !in.wanted) return in;  // a .vdb
   in.wanted = true;
@@ -119,14 +82,6 @@ ArrayInput PrepareArrayInput(int argc, char** argv) {
     in.error = "--origin takes X,Y,Z (integers, index units), not '" + origin_text + "'";
     return in;
   }
-  while (!output.empty() && output.back() == '/') rest[positional[1]].pop_back();
-  in.temp_vdb = rest[positional[1]] + ".input-" + std::to_string(::getpid()) + ".vdb";
-  if (rest[positional[1]].size() + 32 >= sizeof g_temp_vdb) {
-    in.error = "the output path is too long";
-    return in;
-  }
-  const ConversionSignals signals(in.temp_vdb);
-  std::unique_ptr<MappedArray> array;
   if (npy) {
     if (!shape_text.empty() || !dtype.empty()) {
       in.error = "a .npy file carries its shape and dtype: no --shape or --dtype";
@@ -138,7 +93,7 @@ ArrayInput PrepareArrayInput(int argc, char** argv) {
       in.exit_code = 1;
       return in;
     }
-    array = std::move(m).value();
+    in.array = std::move(m).value();
   } else {
     std::array<int64_t, 3> shape{};
     if (!ParseTriple(shape_text, true, &shape) || dtype.empty()) {
@@ -151,19 +106,8 @@ ArrayInput PrepareArrayInput(int argc, char** argv) {
       in.exit_code = 1;
       return in;
     }
-    array = std::move(m).value();
+    in.array = std::move(m).value();
   }
-  Status st = ArrayToVdb(array->view(), place, in.temp_vdb, "'" + input + "'");
-  if (!st.ok()) {
-    in.error = st.message();
-    in.exit_code = 1;
-    in.temp_vdb.clear();
-    return in;
-  }
-  rest[positional[0]] = in.temp_vdb;
-  // The store records the array as its source, not the temporary .vdb
-  // (unless --source says otherwise: a later flag wins).
-  rest.insert(rest.begin(), {"--source", input + " (an array, through a temporary .vdb, removed)"});
   in.args.push_back(argv[0]);
   in.args.insert(in.args.end(), rest.begin(), rest.end());
   return in;

@@ -3,6 +3,8 @@
 //   vox-ingest --add-lod store/ [--zstd-level L] [--force] [--quiet]
 //   vox-ingest data.npy store/ [--voxel-size S] [--origin X,Y,Z] [--threshold T] [options]
 //   vox-ingest data.raw store/ --shape X,Y,Z --dtype float32 [...]   (array_input.h)
+// An array is written into the store brick by brick (ingest/array_ingest.h,
+// IngestArray), streamed from its mapped file.
 // The options are tools/common/options.h's ingest table (vox-ingest --help).
 // Exit codes: 0 done, 1 the ingest failed (or its child process crashed),
 // 2 bad command line, 128+N killed by signal N (SIGINT, SIGTERM, SIGKILL: the
@@ -43,6 +45,12 @@ const vox::CommandLineSpec kCommandLine{
     "Exit codes: 0 done, 1 the ingest failed (or its child process crashed), 2 bad command\n"
     "line, 128+N killed by signal N (the temporary store directory is removed).\n"};
 
+// The array input (null: a .vdb) and the command line as given, which the
+// ingest child is re-executed with.
+vox::ArrayInput* g_array = nullptr;
+char** g_argv = nullptr;
+int g_argc = 0;
+
 int UsageError(const std::string& message) {
   return vox::UsageError(kCommandLine.program, message);
 }
@@ -56,7 +64,9 @@ static int RunTool(int argc, char** argv) {
   vox::IngestCommand command;
   vox::IngestOptions& o = command.options;
   std::vector<std::string> positional;
-  o.command_line = vox::CommandLineText("vox-ingest", argc, argv);
+  // The command line as given (an array's flags included).
+  o.command_line = g_array ? vox::CommandLineText("vox-ingest", g_argc, g_argv)
+                           : vox::CommandLineText("vox-ingest", argc, argv);
   const auto apply = [&](const std::string& flag, const std::string& value) {
     return vox::ApplyIngestFlag(&command, flag, value);
   };
@@ -99,17 +109,25 @@ static int RunTool(int argc, char** argv) {
   o.output = positional[1];
   if (vox::Status s = vox::CheckIngestCommand(command); !s.ok()) return UsageError(s.message());
 
-  return vox::RunSupervised(argv, o.input, o.output,
+  return vox::RunSupervised(g_array ? g_argv : argv, o.input, o.output,
                             [&] { return IngestAndReport(o, command.limits, quiet); });
 }
 
 static int IngestAndReport(const vox::IngestOptions& o, const vox::IngestLimits& limits,
                            bool quiet) {
-  vox::StartSignalThread(o.output);
+  vox::StartSignalThread(o.output, o.resume);
   std::unique_ptr<vox::ProgressSink> progress;
   if (!quiet) progress = vox::MakeStderrProgress(isatty(STDERR_FILENO) != 0);
   const std::unique_ptr<vox::ProgressSink> test_hook = vox::MakeTestHookProgress(progress.get());
-  auto stats = vox::Ingest(o, limits, test_hook ? test_hook.get() : progress.get());
+  vox::ProgressSink* sink = test_hook ? test_hook.get() : progress.get();
+  vox::StatusOr<vox::IngestStats> stats = vox::InvalidArgumentError("no ingest");
+  if (g_array != nullptr) {
+    vox::ArrayPlacement place = g_array->placement;
+    place.threshold = o.threshold.value_or(0.0);
+    stats = vox::IngestArray(g_array->array->view(), place, o, sink);
+  } else {
+    stats = vox::Ingest(o, limits, sink);
+  }
   if (!stats.ok()) {
     std::fprintf(stderr, "vox-ingest: %s\n", stats.status().ToString().c_str());
     return 1;
@@ -131,17 +149,18 @@ static int IngestAndReport(const vox::IngestOptions& o, const vox::IngestLimits&
 }
 
 int main(int argc, char** argv) {
-  // A .npy or raw input: converted to a temporary .vdb first (array_input.h).
+  // A .npy or raw input: mapped here, ingested brick by brick (array_input.h).
   vox::ArrayInput array = vox::PrepareArrayInput(argc, argv);
   if (!array.error.empty()) {
     std::fprintf(stderr, "vox-ingest: %s\n", array.error.c_str());
     return array.exit_code;
   }
   if (!array.wanted) return vox::ToolMain("vox-ingest", argc, argv, RunTool);
+  g_array = &array;
+  g_argv = argv;
+  g_argc = argc;
   std::vector<char*> args;
   for (std::string& a : array.args) args.push_back(a.data());
   args.push_back(nullptr);
-  const int code = vox::ToolMain("vox-ingest", int(array.args.size()), args.data(), RunTool);
-  ::unlink(array.temp_vdb.c_str());
-  return code;
+  return vox::ToolMain("vox-ingest", int(array.args.size()), args.data(), RunTool);
 }
