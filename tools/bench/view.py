@@ -136,8 +136,8 @@ def main(h, a):
         drag_steps(5)  # warm-up
         start = page.frames()
         drag_steps(a.moves)
-        coarse = [t["event_to_paint"] for t in page.js("window.voxTimes")[start:]
-                  if t["scale"] != 1]
+        coarse_frames = [t for t in page.js("window.voxTimes")[start:] if t["scale"] != 1]
+        coarse = [t["event_to_paint"] for t in coarse_frames]
         rows = []
         for k in range(a.refines):
             drag_steps(3)
@@ -183,7 +183,7 @@ def main(h, a):
         ["server cgroup peak MiB, failcnt, OOM kills",
          f"{peak / H.MiB:.0f}, {failcnt}, {oom}" if cg else "n/a"],
     ])
-    rep.raw = {"coarse_ms": coarse, "refined": rows, "orbit_moves": orbit_moves, "alive": alive,
+    rep.raw = {"coarse_ms": coarse, "coarse_frames": coarse_frames, "refined": rows, "orbit_moves": orbit_moves, "alive": alive,
                "peak_bytes": peak, "failcnt": failcnt, "oom_kills": oom}
     rep.write()
     shutil.rmtree(tmp, ignore_errors=True)
