@@ -19,6 +19,7 @@ import shlex
 import shutil
 import subprocess
 import tempfile
+import threading
 import time
 import urllib.request
 
@@ -92,6 +93,18 @@ class Page:
         self.proc.wait()
 
 
+def sample_cgroup(cg_dir, peaks, done):
+    """Keeps the peaks of a cgroup v1 memory group's rss and page cache, every 50 ms, until done."""
+    while not done.wait(0.05):
+        try:
+            for line in open(cg_dir + "/memory.stat"):
+                k, v = line.split()
+                if k in ("rss", "cache"):
+                    peaks["cg_" + k] = max(peaks.get("cg_" + k, 0), int(v))
+        except (OSError, ValueError):
+            pass
+
+
 def pct(v, p):
     v = sorted(v)
     return v[min(len(v) - 1, int(round(p / 100 * (len(v) - 1))))]
@@ -110,6 +123,14 @@ def main(h, a):
     server = subprocess.Popen([view_tool, store, "--threads", str(h.threads), "--out", out_dir],
                               stdout=subprocess.PIPE, text=True, preexec_fn=pre)
     url = server.stdout.readline().split()[-1]
+    # The server's resident set (anonymous: what its budget governs; file: the store's mapped
+    # pages) and the cgroup's charge (rss and page cache), their peaks every 50 ms.
+    peaks, done = {}, threading.Event()
+    samplers = [threading.Thread(target=H.sample_rss, args=(server.pid, peaks, done))]
+    if cg:
+        samplers.append(threading.Thread(target=sample_cgroup, args=(cg.dir, peaks, done)))
+    for t in samplers:
+        t.start()
     page = None
     rep = H.Report(h, "view", "vox-view's latency")
     try:
@@ -160,7 +181,11 @@ def main(h, a):
                          "vox_render_render_ms": rs * 1e3})
         orbit_moves = drag_steps(0, until=time.monotonic() + a.orbit_seconds)
         alive = server.poll() is None
+        budget = page.js("st.last.panel.budget")
     finally:
+        done.set()
+        for t in samplers:
+            t.join()
         if page:
             page.close()
         server.terminate()
@@ -182,8 +207,14 @@ def main(h, a):
         [f"orbit of {a.orbit_seconds:.0f} s: coarse frames, server alive", f"{orbit_moves}, {alive}"],
         ["server cgroup peak MiB, failcnt, OOM kills",
          f"{peak / H.MiB:.0f}, {failcnt}, {oom}" if cg else "n/a"],
+        ["cgroup peak MiB: rss, page cache",
+         f"{peaks.get('cg_rss', 0) / H.MiB:.0f}, {peaks.get('cg_cache', 0) / H.MiB:.0f}"
+         if cg else "n/a"],
+        ["server peak resident MiB: anonymous, file; its memory budget",
+         f"{peaks.get('RssAnon', 0) / H.MiB:.0f}, {peaks.get('RssFile', 0) / H.MiB:.0f}; "
+         f"{budget / H.MiB:.0f}"],
     ])
-    rep.raw = {"coarse_ms": coarse, "coarse_frames": coarse_frames, "refined": rows, "orbit_moves": orbit_moves, "alive": alive,
+    rep.raw = {"coarse_ms": coarse, "coarse_frames": coarse_frames, "peaks": peaks, "budget": budget, "refined": rows, "orbit_moves": orbit_moves, "alive": alive,
                "peak_bytes": peak, "failcnt": failcnt, "oom_kills": oom}
     rep.write()
     shutil.rmtree(tmp, ignore_errors=True)
