@@ -33,8 +33,10 @@ def add_arguments(p):
     p.add_argument("--height", type=int, default=768)
     p.add_argument("--moves", type=int, default=50)
     p.add_argument("--refines", type=int, default=5)
+    p.add_argument("--interrupts", type=int, default=10)
     p.add_argument("--orbit-seconds", type=float, default=60)
     p.add_argument("--limit-mib", type=int, default=512)
+    p.add_argument("--view-tool", help="the vox-view to measure (default: the build's)")
 
 
 class Page:
@@ -112,7 +114,7 @@ def pct(v, p):
 
 def main(h, a):
     store = store_arg(h, a)
-    view_tool = os.path.join(h.build, "tools/view/vox-view")
+    view_tool = a.view_tool or os.path.join(h.build, "tools/view/vox-view")
     if not os.access(view_tool, os.X_OK):
         H.fail(f"{h.rel(view_tool)} is not built")
     tmp = tempfile.mkdtemp(prefix="vbench-view-", dir=h.scratch)
@@ -159,6 +161,15 @@ def main(h, a):
         drag_steps(a.moves)
         coarse_frames = [t for t in page.js("window.voxTimes")[start:] if t["scale"] != 1]
         coarse = [t["event_to_paint"] for t in coarse_frames]
+        # Moves that stop a refined frame: the view rests 0.6 s (the full-size frame starts at
+        # 0.3 s and takes longer), then moves; the coarse frame waits for the full-size one to
+        # stop (the server's wait_ms).
+        stopped = []
+        for k in range(a.interrupts):
+            drag_steps(1)
+            time.sleep(0.6)
+            drag_steps(1)
+            stopped.append(page.js("window.voxTimes[window.voxTimes.length - 1]"))
         rows = []
         for k in range(a.refines):
             drag_steps(3)
@@ -199,12 +210,18 @@ def main(h, a):
     rep.table(["measure", "value"], [
         [f"input event -> painted coarse frame, median of {len(coarse)} moves", f"{med(coarse):.0f} ms"],
         ["input event -> painted coarse frame, p95", f"{pct(coarse, 95):.0f} ms"],
+        [f"a move stopping the full-size frame: input event -> painted coarse frame, median of "
+         f"{len(stopped)}", f"{med([t['event_to_paint'] for t in stopped]):.0f} ms" if stopped else "-"],
+        ["the same: the server's wait for the full-size frame to stop, median, max",
+         f"{med([t['wait_ms'] for t in stopped]):.0f} ms, {max(t['wait_ms'] for t in stopped):.0f} ms"
+         if stopped else "-"],
         [f"refined frame, request -> paint, median of {len(rows)} views", f"{page_ms:.0f} ms"],
         ["vox-render, the saved command, warm, wall", f"{vr_ms:.0f} ms"],
         ["refined / vox-render", f"{page_ms / vr_ms:.2f}"],
         ["refined render only / vox-render render only",
          f"{med([r['page_render_ms'] for r in rows]) / med([r['vox_render_render_ms'] for r in rows]):.2f}"],
         [f"orbit of {a.orbit_seconds:.0f} s: coarse frames, server alive", f"{orbit_moves}, {alive}"],
+        ["load average (1 min) at the end", f"{os.getloadavg()[0]:.2f}"],
         ["server cgroup peak MiB, failcnt, OOM kills",
          f"{peak / H.MiB:.0f}, {failcnt}, {oom}" if cg else "n/a"],
         ["cgroup peak MiB: rss, page cache",
@@ -214,7 +231,7 @@ def main(h, a):
          f"{peaks.get('RssAnon', 0) / H.MiB:.0f}, {peaks.get('RssFile', 0) / H.MiB:.0f}; "
          f"{budget / H.MiB:.0f}"],
     ])
-    rep.raw = {"coarse_ms": coarse, "coarse_frames": coarse_frames, "peaks": peaks, "budget": budget, "refined": rows, "orbit_moves": orbit_moves, "alive": alive,
+    rep.raw = {"coarse_ms": coarse, "coarse_frames": coarse_frames, "stopping_moves": stopped, "peaks": peaks, "budget": budget, "refined": rows, "orbit_moves": orbit_moves, "alive": alive,
                "peak_bytes": peak, "failcnt": failcnt, "oom_kills": oom}
     rep.write()
     shutil.rmtree(tmp, ignore_errors=True)

@@ -339,6 +339,9 @@ static int RunTool(int argc, char** argv) {
   o.keep_image = true;
   o.quiet = true;
   o.size_given = true;
+  // Tiles of 32 pixels: a newer frame stops the one in flight between tiles, so a move waits
+  // for a quarter of a 64-pixel tile's work (the pixels do not depend on the tile size).
+  o.tile_size = 32;
   v.save.out_dir = flags.out_dir;
   if (vox::Status s = OpenViewer(&v); !s.ok()) {
     fprintf(stderr, "vox-view: %s\n", s.ToString().c_str());
