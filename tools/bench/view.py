@@ -5,14 +5,22 @@ threads, in a memory cgroup of --limit-mib (0: none, only measured), and Debian'
 the cgroup) on its page with a --width x --height canvas. Then, driving the page over the DevTools
 protocol as a person's mouse would:
   1. --moves drags of 10 pixels, each as soon as the previous move's coarse frame is painted:
-     from the input event to the painted coarse frame (quarter resolution), median and p95;
-  2. the view left still: the refined frame (the default level of detail), from its request to the
+     from the input event to the page's next paint after the coarse frame is drawn, median, p95
+     and fastest, with the coarse frames' sizes (the page picks them from its time budget);
+  2. --interrupts moves after the view rested 0.6 s, each stopping the full-size frame in
+     flight: the same latency, and the server's wait for the old frame to stop;
+  3. the view left still: the refined frame (the default level of detail), from its request to the
      paint, median over --refines views; each view saved ("Save scene") and rendered by
      vox-render with the saved command line, warm (the second of two runs): the ratio;
-  3. --orbit-seconds of continuous orbit: the server still running, the cgroup's peak and its
-     failures (failcnt, OOM kills)."""
+  4. --orbit-seconds of continuous orbit: the server still running, the cgroup's peak (its page
+     cache included) and its failures (failcnt, OOM kills); all along, the peaks of the server's
+     anonymous and file-backed resident memory and of the cgroup's rss and page cache, against
+     the budget's lines and its heap watch's target (/stats).
+The load average (1 min) is given at the start and at the end. --view-tool measures another
+vox-view binary (an older build) with the same page driving."""
 
 import base64  # noqa: F401  (kept for screenshots when debugging)
+import collections
 import json
 import os
 import shlex
@@ -193,6 +201,7 @@ def main(h, a):
         orbit_moves = drag_steps(0, until=time.monotonic() + a.orbit_seconds)
         alive = server.poll() is None
         budget = page.js("st.last.panel.budget")
+        memory = json.loads(urllib.request.urlopen(url + "stats").read())["memory"]
     finally:
         done.set()
         for t in samplers:
@@ -203,6 +212,8 @@ def main(h, a):
         server.wait()
         peak, failcnt, oom = cg.finish() if cg else (None, None, None)
     med = H.median
+    stop_ms = [t["event_to_paint"] for t in stopped]
+    waits = [t["wait_ms"] for t in stopped if "wait_ms" in t]
     page_ms = med([r["page_ms"] for r in rows])
     vr_ms = med([r["vox_render_wall_ms"] for r in rows])
     rep.add(f"Store: {h.rel(store)}; page {a.width}x{a.height}, {h.threads} threads, server in "
@@ -210,11 +221,15 @@ def main(h, a):
     rep.table(["measure", "value"], [
         [f"input event -> painted coarse frame, median of {len(coarse)} moves", f"{med(coarse):.0f} ms"],
         ["input event -> painted coarse frame, p95", f"{pct(coarse, 95):.0f} ms"],
+        ["input event -> painted coarse frame, fastest", f"{min(coarse):.0f} ms"],
+        ["coarse frames' sizes (count)",
+         ", ".join(f"{w}x{h} ({n})" for (w, h), n in sorted(collections.Counter(
+             (t.get("w", round(a.width / t["scale"])), t.get("h", round(a.height / t["scale"])))
+             for t in coarse_frames).items(), reverse=True))],
         [f"a move stopping the full-size frame: input event -> painted coarse frame, median of "
-         f"{len(stopped)}", f"{med([t['event_to_paint'] for t in stopped]):.0f} ms" if stopped else "-"],
+         f"{len(stopped)}", f"{med(stop_ms):.0f} ms" if stopped else "-"],
         ["the same: the server's wait for the full-size frame to stop, median, max",
-         f"{med([t['wait_ms'] for t in stopped]):.0f} ms, {max(t['wait_ms'] for t in stopped):.0f} ms"
-         if stopped else "-"],
+         f"{med(waits):.0f} ms, {max(waits):.0f} ms" if waits else "-"],
         [f"refined frame, request -> paint, median of {len(rows)} views", f"{page_ms:.0f} ms"],
         ["vox-render, the saved command, warm, wall", f"{vr_ms:.0f} ms"],
         ["refined / vox-render", f"{page_ms / vr_ms:.2f}"],
@@ -230,9 +245,14 @@ def main(h, a):
         ["server peak resident MiB: anonymous, file; its memory budget",
          f"{peaks.get('RssAnon', 0) / H.MiB:.0f}, {peaks.get('RssFile', 0) / H.MiB:.0f}; "
          f"{budget / H.MiB:.0f}"],
+        ["the budget's lines (MiB): brick caches, headroom; the heap watch's target",
+         f"{memory['brick_cache'] / H.MiB:.0f}, {memory['headroom'] / H.MiB:.0f}; "
+         f"{memory['heap_watch']['target'] / H.MiB:.0f}"],
     ])
-    rep.raw = {"coarse_ms": coarse, "coarse_frames": coarse_frames, "stopping_moves": stopped, "peaks": peaks, "budget": budget, "refined": rows, "orbit_moves": orbit_moves, "alive": alive,
-               "peak_bytes": peak, "failcnt": failcnt, "oom_kills": oom}
+    rep.raw = {"coarse_ms": coarse, "coarse_frames": coarse_frames, "stopping_moves": stopped,
+               "peaks": peaks, "budget": budget, "memory": memory, "refined": rows,
+               "orbit_moves": orbit_moves, "alive": alive, "peak_bytes": peak, "failcnt": failcnt,
+               "oom_kills": oom}
     rep.write()
     shutil.rmtree(tmp, ignore_errors=True)
     if not alive:
