@@ -123,6 +123,11 @@ vox::Status ApplyQuery(const Viewer& v, const httplib::Request& req, vox::Render
     return vox::InvalidArgumentError("a frame request needs cam, or az and el");
   }
   VOX_RETURN_IF_ERROR(vox::ApplyRenderFlag(o, "--size", get("w") + "x" + get("h")));
+  // Small tiles: a newer frame stops the one in flight between tiles, so a move waits for a
+  // 16-pixel tile of a full-size frame, a sixteenth of a 64-pixel one's work (the pixels do not
+  // depend on the tile size; the border rays of 16-pixel tiles add about 2% to a frame).
+  // Coarse frames (fmt=rgba8) take 32-pixel tiles, a few dozen for the two threads to share.
+  o->tile_size = get("fmt") == "rgba8" ? 32 : 16;
   if (req.has_param("lod")) VOX_RETURN_IF_ERROR(vox::ApplyRenderFlag(o, "--lod", get("lod")));
   if (req.has_param("aa"))
     VOX_RETURN_IF_ERROR(vox::ApplyRenderFlag(o, "--silhouette-aa", get("aa")));
@@ -344,9 +349,6 @@ static int RunTool(int argc, char** argv) {
   o.keep_image = true;
   o.quiet = true;
   o.size_given = true;
-  // Tiles of 32 pixels: a newer frame stops the one in flight between tiles, so a move waits
-  // for a quarter of a 64-pixel tile's work (the pixels do not depend on the tile size).
-  o.tile_size = 32;
   v.save.out_dir = flags.out_dir;
   if (vox::Status s = OpenViewer(&v); !s.ok()) {
     fprintf(stderr, "vox-view: %s\n", s.ToString().c_str());
