@@ -45,6 +45,8 @@ def add_arguments(p):
     p.add_argument("--orbit-seconds", type=float, default=60)
     p.add_argument("--limit-mib", type=int, default=512)
     p.add_argument("--view-tool", help="the vox-view to measure (default: the build's)")
+    p.add_argument("--callgrind", type=int, default=0, metavar="N",
+                   help="instead: instructions per warm coarse frame over N views, by callgrind")
 
 
 class Page:
@@ -120,11 +122,58 @@ def pct(v, p):
     return v[min(len(v) - 1, int(round(p / 100 * (len(v) - 1))))]
 
 
+def instructions(h, a, store, view_tool):
+    """Instructions (callgrind, all of the server's threads) per warm coarse frame of a quarter of
+    --width x --height: N views 0.6 degrees apart rendered once to warm the caches, then again
+    with the instruments on; as the page asks for a coarse frame (fmt=rgba8, aa=0) and as a
+    float frame with silhouette antialiasing (the /frame defaults)."""
+    shutil.which("valgrind") or H.fail("--callgrind needs valgrind")
+    w, hh = round(a.width / 4), round(a.height / 4)
+    rows = []
+    for name, extra in (("coarse, as the page asks (fmt=rgba8&aa=0)", "&fmt=rgba8&aa=0"),
+                        ("float, silhouettes antialiased (no fmt, aa)", "")):
+        tmp = tempfile.mkdtemp(prefix="vbench-view-cg-", dir=h.scratch)
+        out = os.path.join(tmp, "callgrind.out")
+        server = subprocess.Popen(["valgrind", "--tool=callgrind", "--instr-atstart=no",
+                                   f"--callgrind-out-file={out}", view_tool, store, "--threads",
+                                   str(h.threads)], stdout=subprocess.PIPE,
+                                  stderr=subprocess.DEVNULL, text=True)
+        url = server.stdout.readline().split()[-1]
+        qs = [f"{url}frame?w={w}&h={hh}&az={30 + 0.6 * i:.1f}&el=20{extra}"
+              for i in range(a.callgrind)]
+        ctl = lambda *args: H.check(["callgrind_control", *args, str(server.pid)])  # noqa: E731
+        try:
+            for q in qs:
+                urllib.request.urlopen(q, timeout=3600).read()
+            ctl("-i", "on")
+            for q in qs:
+                urllib.request.urlopen(q, timeout=3600).read()
+            ctl("-i", "off")
+            ctl("-d")
+        finally:
+            server.terminate()
+            server.wait()
+        total = 0
+        for f in os.listdir(tmp):
+            for line in open(os.path.join(tmp, f)):
+                if line.startswith("totals:"):
+                    total += int(line.split()[1])
+        shutil.rmtree(tmp, ignore_errors=True)
+        rows.append([f"{name}, {w}x{hh}", f"{total / a.callgrind / 1e6:.1f} M"])
+    return rows
+
+
 def main(h, a):
     store = store_arg(h, a)
     view_tool = a.view_tool or os.path.join(h.build, "tools/view/vox-view")
     if not os.access(view_tool, os.X_OK):
         H.fail(f"{h.rel(view_tool)} is not built")
+    if a.callgrind:
+        rep = H.Report(h, "view", "vox-view's instructions per coarse frame")
+        rep.add(f"Store: {h.rel(store)}; {h.rel(view_tool)}, {h.threads} threads, "
+                f"{a.callgrind} warm views each.", "")
+        rep.table(["frame", "instructions per frame"], instructions(h, a, store, view_tool))
+        return rep.write()
     tmp = tempfile.mkdtemp(prefix="vbench-view-", dir=h.scratch)
     out_dir = os.path.join(tmp, "saved")
     os.mkdir(out_dir)
