@@ -5,7 +5,9 @@ wait for the refined frame and save the scene; the picture changed with each
 move, the frame used the pyramid (vox-render --lod 0 differs), the saved
 command line, run as written, gives the page's float frame bit for bit, the
 files were written under fresh names beside an existing one; the exact frame
-equals vox-render --lod 0; the voxel under the cursor is vox-probe's answer
+equals vox-render --lod 0; the coarse frames are a quarter of the resolution
+or less, and the server's 8-bit ones are the page's painting of the float
+frame; the voxel under the cursor is vox-probe's answer
 for the same ray; a second identical frame reads no brick (the store stays
 open and warm); and two clients, a closed connection mid-frame and a
 malformed request leave the server running and the store untouched.
@@ -227,6 +229,25 @@ try:
             fail(f"/probe at ({px}, {py}) says {pr['answer']!r}, vox-probe {got!r}")
         if (px == 256) != pr["answer"].startswith("hit"):
             fail(f"/probe at ({px}, {py}): {pr['answer']!r}")
+    # The coarse frames: a quarter of the canvas's resolution or less, painted by the server
+    # (fmt=rgba8) into the bytes the page paints from the same frame in floats.
+    coarse = js("window.voxTimes.filter(t => t.scale !== 1)")
+    if not coarse or any(t["w"] > js("cv.width") / 4 + 0.5 for t in coarse):
+        fail(f"coarse frames not at a quarter of the resolution or less: {coarse}")
+    same = js("""(async () => {
+        const q = `frame?w=96&h=64&cam=${encodeURIComponent(JSON.stringify(st.cam))}` +
+                  `&scene=${encodeURIComponent(JSON.stringify(st.scene))}&aa=0`;
+        const f = new Float32Array(await (await fetch(q)).arrayBuffer());
+        const r = new Uint8Array(await (await fetch(q + '&fmt=rgba8')).arrayBuffer());
+        const p = paint(f, 96, 64);
+        let diff = r.length === p.length ? 0 : -1, lit = 0;
+        for (let i = 0; i < p.length && diff >= 0; i++) diff += r[i] !== p[i];
+        for (let i = 0; i < f.length; i += 4) lit += f[i + 3] > 0;
+        return [diff, lit, r.length];
+    })()""")
+    if same[0] != 0 or same[1] == 0:
+        fail(f"the server's rgba8 frame differs from the page's painting (differing bytes, "
+             f"lit pixels, bytes): {same}")
     # Warm: a second identical frame reads no brick.
     warm = url + "frame?az=200&el=-40&w=256&h=192&lod=0"
     misses = []
@@ -265,6 +286,12 @@ try:
     except urllib.error.HTTPError as e:
         if e.code != 400:
             fail(f"a malformed frame request: HTTP {e.code}, expected 400")
+    try:
+        get(url + "frame?az=1&el=10&w=8&h=8&fmt=png")
+        fail("a frame request in an unknown format was answered 200")
+    except urllib.error.HTTPError as e:
+        if e.code != 400 or b"fmt png" not in e.read():
+            fail(f"a frame request in an unknown format: HTTP {e.code}, expected 400")
     get(url + "stats")
     if view.poll() is not None:
         fail("vox-view exited")

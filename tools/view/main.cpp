@@ -12,7 +12,11 @@
 // cam.json, scene.json and vox-render command line (tools/view/saves.h).
 #include <httplib.h>
 
+#include <algorithm>
+#include <array>
 #include <atomic>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <memory>
 #include <mutex>
@@ -21,6 +25,7 @@
 #include <vector>
 
 #include "core/ray_text.h"
+#include "core/util/stopwatch.h"
 #include "render/camera.h"
 #include "render/grid_transform.h"
 #include "render/job.h"
@@ -118,10 +123,52 @@ vox::Status ApplyQuery(const Viewer& v, const httplib::Request& req, vox::Render
     return vox::InvalidArgumentError("a frame request needs cam, or az and el");
   }
   VOX_RETURN_IF_ERROR(vox::ApplyRenderFlag(o, "--size", get("w") + "x" + get("h")));
+  // Small tiles: a newer frame stops the one in flight between tiles, so a move waits for a
+  // 16-pixel tile of a full-size frame, a sixteenth of a 64-pixel one's work (the pixels do not
+  // depend on the tile size; the border rays of 16-pixel tiles add about 2% to a frame).
+  // Coarse frames (fmt=rgba8) take 32-pixel tiles, a few dozen for the two threads to share.
+  o->tile_size = get("fmt") == "rgba8" ? 32 : 16;
   if (req.has_param("lod")) VOX_RETURN_IF_ERROR(vox::ApplyRenderFlag(o, "--lod", get("lod")));
+  if (req.has_param("aa"))
+    VOX_RETURN_IF_ERROR(vox::ApplyRenderFlag(o, "--silhouette-aa", get("aa")));
   o->scene_path.clear();
   o->scene_json = req.has_param("scene") ? get("scene") : v.base_scene;
   return vox::OkStatus();
+}
+
+// A frame as the page paints it: premultiplied RGBA `rgba` (w x h, from the
+// top row) over the scene's background, its colour blended from the top
+// row's to the bottom row's, each channel through display gamma 1/2.2 in
+// 4096 steps, 8 bits per channel, alpha 255. The same arithmetic, in the
+// same order, as the page's own painting of a float frame (page.html), so
+// both give the same bytes: a quarter of the float frame's, for the coarse
+// frames that follow the mouse.
+std::string PaintedRgba8(const std::vector<float>& rgba, int w, int h, const vox::Scene& scene) {
+  static const std::array<uint8_t, 4096> gamma = [] {
+    std::array<uint8_t, 4096> g{};
+    for (int i = 0; i < 4096; ++i)
+      g[size_t(i)] = uint8_t(std::floor(std::pow(i / 4095.0, 1 / 2.2) * 255 + 0.5));
+    return g;
+  }();
+  const auto step = [](double v) {  // Math.max(0, Math.min(4095, v * 4095 + 0.5)) | 0
+    const double x = v * 4095 + 0.5;
+    return std::isnan(x) ? 0 : int(std::max(0.0, std::min(4095.0, x)));
+  };
+  std::string out(size_t(w) * size_t(h) * 4, '\0');
+  auto* d = reinterpret_cast<uint8_t*>(out.data());
+  for (int y = 0; y < h; ++y) {
+    const double t = (y + 0.5) / h;
+    double b[3];
+    for (int c = 0; c < 3; ++c)
+      b[c] = scene.background_top[c] + (scene.background_bottom[c] - scene.background_top[c]) * t;
+    for (size_t p = size_t(y) * size_t(w) * 4, e = p + size_t(w) * 4; p < e; p += 4) {
+      const double k = 1 - double(rgba[p + 3]);
+      for (int c = 0; c < 3; ++c)
+        d[p + size_t(c)] = gamma[size_t(step(rgba[p + size_t(c)] + k * b[c]))];
+      d[p + 3] = 255;
+    }
+  }
+  return out;
 }
 
 // The panel's figures out of a frame's --stats.
@@ -145,17 +192,22 @@ json PanelOf(const json& stats) {
 }
 
 void ServeFrame(Viewer* v, const httplib::Request& req, httplib::Response& res) {
+  const vox::Stopwatch handler;
   vox::RenderJobOptions o = v->base;
   if (vox::Status s = ApplyQuery(*v, req, &o); !s.ok()) return Reply(res, 400, s.ToString());
   // The scene checked before the frame: a bad one is the request's fault.
   auto scene = vox::ParseScene(o.scene_json, "scene");
   if (!scene.ok()) return Reply(res, 400, scene.status().ToString());
+  const std::string format = req.has_param("fmt") ? req.get_param_value("fmt") : "float";
+  if (format != "float" && format != "rgba8")
+    return Reply(res, 400, "fmt " + format + ": must be float or rgba8");
   const uint64_t mine = ++v->generation;
   o.interrupted = [v, mine]() -> vox::Status {
     if (v->generation.load() != mine) return vox::UnavailableError("a newer frame was requested");
     return vox::OkStatus();
   };
   std::lock_guard<std::mutex> lock(v->render_mutex);
+  const double waited = handler.Seconds();
   if (v->generation.load() != mine) return Reply(res, 409, "superseded");
   vox::RenderJobOutput out;
   if (vox::Status s = vox::RunRenderJob(o, &out, v->session.get()); !s.ok()) {
@@ -179,10 +231,25 @@ void ServeFrame(Viewer* v, const httplib::Request& req, httplib::Response& res) 
   }
   res.set_header("X-Vox-Lod", rec.lod);
   res.set_header("X-Vox-Camera", rec.camera);
-  res.set_header("X-Vox-Panel", PanelOf(stats).dump());
-  res.set_content(
-      std::string(reinterpret_cast<const char*>(out.rgba.data()), out.rgba.size() * sizeof(float)),
-      "application/octet-stream");
+  if (format == "rgba8") {
+    res.set_content(PaintedRgba8(out.rgba, out.width, out.height, *scene),
+                    "application/octet-stream");
+  } else {
+    // The float frame sent from the render's own buffer: a copy of a full-size frame (12 MiB
+    // at 1024x768) costs a quarter of a second of page faults and copying on a busy machine.
+    auto rgba = std::make_shared<std::vector<float>>(std::move(out.rgba));
+    res.set_content_provider(rgba->size() * sizeof(float), "application/octet-stream",
+                             [rgba](size_t offset, size_t length, httplib::DataSink& sink) {
+                               return sink.write(
+                                   reinterpret_cast<const char*>(rgba->data()) + offset, length);
+                             });
+  }
+  // The panel, with the handler's time to here: the wait for an earlier
+  // frame to stop, the render and the encoding.
+  json panel = PanelOf(stats);
+  panel["wait_ms"] = waited * 1e3;
+  panel["server_ms"] = handler.Seconds() * 1e3;
+  res.set_header("X-Vox-Panel", panel.dump());
 }
 
 // /probe?x=X&y=Y: the ray through image position (X, Y) (pixels of the last
