@@ -366,7 +366,8 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) 
   const uint32_t n = uint32_t(b->cells.size());
   const uint8_t* planes = b->attr_planes.data();
   const uint8_t* density_planes = planes + ((b->flags & kAttrNormal) ? size_t(4) * b->voxel_count : 0);
-  if (uint64_t(b->voxel_count) == uint64_t(1) << (3 * depth)) {
+  // (A brick deeper than 10 levels cannot be full: its voxel count is 32-bit.)
+  if (depth <= 10 && uint64_t(b->voxel_count) == uint64_t(1) << (3 * depth)) {
     // A full brick (the inside of a fog): of one density when each byte
     // plane holds one byte throughout.
     bool same = true;
