@@ -10,7 +10,7 @@
 
 #include "core/util/memory_budget.h"
 #include "core/util/stopwatch.h"
-#include "render/job.h"
+#include "render/job_options.h"
 #include "render/lod.h"
 
 namespace vox {

@@ -16,13 +16,12 @@
 #include <vector>
 
 #include "core/util/status.h"
+#include "render/job_options.h"
 #include "storage/lod.h"
 #include "storage/store.h"
 #include "storage/store_budget.h"
 
 namespace vox {
-
-struct RenderJobOptions;  // render/job.h
 
 // The stores a render reads: the base and, when level of detail is in
 // effect, its pyramid (storage/lod.h).

@@ -143,7 +143,9 @@ class LodStream::Impl {
     if ((fs::path(store_temp_dir) / si::kLodDirName).string() != target_)
       return InvalidArgumentError("the pyramid was begun in another directory");
     // The store it was built with: this one, bricks and all.
-    VOX_ASSIGN_OR_RETURN(auto base, Store::Open(store_temp_dir, OpenOptions{}));
+    OpenOptions oo;
+    oo.unfinished_ingest = true;
+    VOX_ASSIGN_OR_RETURN(auto base, Store::Open(store_temp_dir, oo));
     StoreMeta expected = meta_;
     const StoreMeta& got = base->meta();
     expected.voxel_count = got.voxel_count;

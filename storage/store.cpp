@@ -306,6 +306,10 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir, const OpenO
     return InvalidArgumentError("'" + dir + "' is not a store directory");
   std::string base = dir;
   while (base.size() > 1 && base.back() == '/') base.pop_back();
+  if (!options.unfinished_ingest &&
+      stat((base + "/" + storage_internal::kJournalFileName).c_str(), &st) == 0)
+    return InvalidArgumentError("'" + base + "' is an unfinished resumable ingest (it holds " +
+                                "its journal), not a store: vox-ingest --resume finishes it");
   // Both files are read with pread: the index once, sequentially, at open;
   // bricks as random reads without the kernel's read-ahead (a fault's
   // read-around on a mapping, or the kernel's read-ahead, would read

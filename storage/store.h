@@ -46,6 +46,9 @@ struct OpenOptions {
   // is read (ResourceExhausted, saying how much it needs), instead of the
   // process being killed by its memory limit.
   uint64_t budget_bytes = 0;
+  // A directory holding a resumable ingest's journal is an unfinished
+  // ingest and refused; the ingest itself opens it to build the pyramid.
+  bool unfinished_ingest = false;
 };
 inline constexpr int kMaxIoThreads = 256;
 

@@ -378,14 +378,6 @@ class StoreWriterImpl : public StoreWriter {
       meta_.bbox_max = glm::i64vec3(-1);
     }
 
-    // A resumable store's journal goes first: the directory published is
-    // the store alone (a kill from here on starts the next run over).
-    if (journal_) {
-      journal_.reset();
-      if (unlink((temp_ + "/" + kJournalFileName).c_str()) != 0)
-        return IoError("cannot remove '" + temp_ + "/" + kJournalFileName + "': " +
-                       std::strerror(errno));
-    }
     // The index file: header, blocks with trailers, footer.
     VOX_ASSIGN_OR_RETURN(auto index, WritableFile::Create(temp_ + "/" + kIndexFileName));
     VOX_RETURN_IF_ERROR(index->Append(EncodeFileHeader(kIndexMagic, store_id_)));
@@ -419,6 +411,19 @@ class StoreWriterImpl : public StoreWriter {
     }
 
     WaitAtTestGate(target_);
+    // A resumable store's journal stays to the last: until here an error, an
+    // interrupt or a kill (in the index or the pyramid) leaves its bricks for
+    // the next run, and a directory with a journal is refused as a store
+    // (Store::Open). Without it, the directory is the store alone; from here
+    // on an error removes it (the next run starts over).
+    if (journal_) {
+      journal_.reset();
+      resumable_ = false;
+      if (unlink((temp_ + "/" + kJournalFileName).c_str()) != 0)
+        return IoError("cannot remove '" + temp_ + "/" + kJournalFileName + "': " +
+                       std::strerror(errno));
+      VOX_RETURN_IF_ERROR(SyncDir(temp_));
+    }
     // Into place: replace the store (or empty directory) Create found, and
     // only if it is still one; else only where nothing is.
     Status s = PublishAtomically(temp_, target_, "store", checked_, MayReplace);
@@ -440,9 +445,15 @@ class StoreWriterImpl : public StoreWriter {
   // earlier run's bricks kept (those its journal verifies) or a fresh start.
   Status InitResumable() {
     std::error_code ec;
+    const fs::file_status st = fs::symlink_status(temp_, ec);
+    if (fs::exists(st) && !fs::is_directory(st))
+      return InvalidArgumentError("'" + temp_ + "' is not a directory (" +
+                                  (fs::is_symlink(st) ? "a symbolic link" : "a file") +
+                                  "), so not one vox-ingest --resume made: remove it, or "
+                                  "ingest without --resume");
     fs::create_directory(temp_, ec);
     if (ec) return IoError("cannot create '" + temp_ + "': " + ec.message());
-    lock_fd_ = open(temp_.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    lock_fd_ = open(temp_.c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
     if (lock_fd_ < 0) return IoError("cannot open '" + temp_ + "': " + std::strerror(errno));
     if (flock(lock_fd_, LOCK_EX | LOCK_NB) != 0)
       return UnavailableError("'" + temp_ + "' is in use by another resumable ingest of '" +
@@ -458,11 +469,24 @@ class StoreWriterImpl : public StoreWriter {
       } else if (j->key != key) {
         resume_note_ = "starting over: '" + temp_ + "' holds another ingest's bricks (another "
                        "input, options or placement)";
+      } else if (j->records.empty()) {
+        resume_note_ = "starting over: the earlier run in '" + temp_ + "' kept no brick";
       } else {
         return Adopt(*j, key);
       }
-    } else if (!fs::is_empty(temp_, ec)) {
-      resume_note_ = "starting over: '" + temp_ + "' has no journal";
+    } else {
+      // Without a journal, only what a run killed before writing it leaves
+      // (its brick file) is removed; anything else is not vox's to delete.
+      for (const auto& e : fs::directory_iterator(temp_, ec)) {
+        const std::string name = e.path().filename().string();
+        if (name != kBrickFileName || !e.is_regular_file(ec) || e.is_symlink(ec))
+          return InvalidArgumentError("'" + temp_ + "' holds '" + name +
+                                      "' but no journal of vox-ingest --resume: no run to "
+                                      "continue, and not removed (it may not be vox's); remove "
+                                      "it, or ingest without --resume");
+      }
+      if (ec) return IoError("cannot list '" + temp_ + "': " + ec.message());
+      if (!fs::is_empty(temp_, ec)) resume_note_ = "starting over: '" + temp_ + "' has no journal";
     }
     for (const auto& e : fs::directory_iterator(temp_, ec)) fs::remove_all(e.path(), ec);
     VOX_ASSIGN_OR_RETURN(bricks_, WritableFile::Create(bricks));
@@ -531,6 +555,10 @@ std::string ResumeDirectory(const std::string& dir) {
   std::string parent, name;
   SplitPath(target, &parent, &name);
   return (parent == "/" ? "" : parent) + "/." + name + ".resume";
+}
+
+std::string ResumeJournal(const std::string& dir) {
+  return ResumeDirectory(dir) + "/" + kJournalFileName;
 }
 
 StatusOr<std::unique_ptr<StoreWriter>> StoreWriter::Create(const std::string& dir,

@@ -52,9 +52,11 @@ struct WriteOptions {
   // metadata keeps the bricks the journal verifies against the brick file
   // (Resumed) and takes the others; with another key, or an unreadable
   // journal, it starts over. Only one writer at a time uses the directory
-  // (a lock). It is renamed into place by Finish; it never looks like a
-  // store until then (no index). Stores whose bricks are single voxels
-  // (levels == brick_level) are not journaled.
+  // (a lock); it refuses a `.NAME.resume` that is not a directory or holds
+  // files of its own without a journal. It is renamed into place by Finish,
+  // which removes the journal just before; until then Store::Open refuses
+  // the directory (it holds a journal). Stores whose bricks are single
+  // voxels (levels == brick_level) are not journaled.
   std::string resume_key;
 };
 
@@ -90,6 +92,9 @@ class StoreWriter {
 
 // The directory a resumable write of the store `dir` uses: `.NAME.resume` beside it.
 std::string ResumeDirectory(const std::string& dir);
+// Its journal: while it is there, the directory holds bricks for the next
+// run to continue from.
+std::string ResumeJournal(const std::string& dir);
 
 }  // namespace vox
 

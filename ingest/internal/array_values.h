@@ -76,9 +76,12 @@ inline Status CheckArrayPlacement(const ArrayView& a, const ArrayPlacement& plac
     return InvalidArgumentError(what + ": voxel_size must be positive");
   if (!std::isfinite(place.threshold))
     return InvalidArgumentError(what + ": threshold must be finite");
-  for (int c = 0; c < 3; ++c)
-    if (std::llabs(place.origin[size_t(c)]) + a.shape[size_t(c)] > (int64_t(1) << 30))
+  constexpr int64_t kRange = int64_t(1) << 30;
+  for (int c = 0; c < 3; ++c) {
+    const int64_t o = place.origin[size_t(c)];  // (checked before llabs: not INT64_MIN)
+    if (o < -kRange || o > kRange || std::llabs(o) + a.shape[size_t(c)] > kRange)
       return InvalidArgumentError(what + ": origin + shape leaves OpenVDB's index range");
+  }
   return OkStatus();
 }
 

@@ -24,8 +24,6 @@
 
 namespace vox::storage_internal {
 
-inline constexpr const char kJournalFileName[] = "journal";
-
 struct JournalRecord {
   BrickEntry entry;           // where the brick's record lies in bricks.vxb, its sizes and CRC
   glm::u64vec3 lo{0}, hi{0};  // its voxels' bounds in the brick

@@ -28,6 +28,9 @@ inline constexpr uint16_t kFormatMinor = 3;
 inline constexpr char kIndexFileName[] = "index.vxi";
 inline constexpr char kBrickFileName[] = "bricks.vxb";
 inline constexpr char kLodDirName[] = "lod";  // the level-of-detail pyramid (storage/lod.h)
+// A resumable ingest's journal (brick_journal.h): a directory holding one is
+// an unfinished ingest, never opened as a store.
+inline constexpr char kJournalFileName[] = "journal";
 
 inline constexpr size_t kFileHeaderSize = 32;  // both files
 inline constexpr size_t kFooterSize = 96;      // index file

@@ -4,7 +4,11 @@
 // them), writes the rest and publishes the store an uninterrupted run makes
 // (the same metadata, voxels, bricks and pyramid). A brick whose bytes do not
 // match its journal record is written again; a journal of another ingest
-// (another threshold) is started over.
+// (another threshold), or one without bricks, is started over. Interrupted
+// with the store complete (its index and pyramid written, about to be
+// published), the directory keeps its journal, is refused as a store, and
+// the next run publishes it. A `.NAME.resume` vox did not make (a file of
+// the user's in it, a symbolic link) is refused, never emptied.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -21,6 +25,7 @@
 #include <thread>
 #include <vector>
 
+#include "storage/store.h"
 #include "tests/common/run_command.h"
 #include "tests/common/spawn.h"
 #include "tests/ingest/ingest_test_util.h"
@@ -47,6 +52,14 @@ int64_t JournalRecords(const std::string& path) {
   }
   ::close(fd);
   return records;
+}
+
+// Cuts a journal after its header: a journal of no brick.
+void CutJournal(const std::string& path) {
+  const int64_t records = JournalRecords(path);
+  ASSERT_GE(records, 0);
+  fs::resize_file(path, fs::file_size(path) - uint64_t(records) * 84);
+  ASSERT_EQ(JournalRecords(path), 0);
 }
 
 class IngestResumeTest : public ::testing::Test {
@@ -165,6 +178,85 @@ TEST_F(IngestResumeTest, TheSignalMessageNamesWhatIsKept) {
                     "': run it again with --resume to continue"),
       std::string::npos)
       << r.output;
+}
+
+TEST_F(IngestResumeTest, AJournalOfNoBrickStartsOver) {
+  const std::string out = dir_.File("out.store"), resume_dir = dir_.File(".out.store.resume");
+  int status = 0;
+  StartAndStop(out, SIGKILL, 0, &status);
+  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL) << "the ingest ended first";
+  CutJournal(resume_dir + "/journal");
+  auto resumed = testing::RunCommand(Shell(Args(out, "0.6")));
+  ASSERT_EQ(resumed.code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("starting over: the earlier run in '" + resume_dir +
+                                "' kept no brick"),
+            std::string::npos)
+      << resumed.output;
+  EXPECT_FALSE(fs::exists(resume_dir));
+  auto store = Store::Open(out, OpenOptions{});
+  ASSERT_TRUE(store.ok()) << store.status().ToString();
+  EXPECT_GT((*store)->meta().brick_count, 30u);
+}
+
+TEST_F(IngestResumeTest, InterruptedWhenCompleteThenResumedPublishes) {
+  const std::string ref = dir_.File("ref.store"), out = dir_.File("out.store");
+  const std::string resume_dir = dir_.File(".out.store.resume"), gate = dir_.File("gate");
+  auto whole = testing::RunCommand(Shell(Args(ref, "0.6")) + " --quiet");
+  ASSERT_EQ(whole.code, 0) << whole.output;
+  uint64_t bricks = 0;
+  {
+    auto s = Store::Open(ref, OpenOptions{});
+    ASSERT_TRUE(s.ok()) << s.status().ToString();
+    bricks = (*s)->meta().brick_count;
+  }
+  ASSERT_EQ(::mkfifo(gate.c_str(), 0600), 0);
+  // The ingest stops at the gate (its index and pyramid written, just before
+  // publishing) until the shell opens the gate; it is terminated there.
+  auto r = testing::RunCommand("(VOX_TEST_PUBLISH_GATE='" + gate + "' " +
+                               Shell(Args(out, "0.6")) + " & p=$!; exec 3>'" + gate +
+                               "'; kill -TERM $p; wait $p)");
+  EXPECT_EQ(r.code, 128 + SIGTERM) << r.output;
+  EXPECT_NE(r.output.find("the bricks written so far are kept in '" + resume_dir +
+                          "': run it again with --resume to continue"),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(out));
+  ASSERT_TRUE(fs::exists(resume_dir + "/index.vxi")) << "not stopped at the gate";
+  EXPECT_EQ(JournalRecords(resume_dir + "/journal"), int64_t(bricks));
+  auto unfinished = Store::Open(resume_dir, OpenOptions{});
+  ASSERT_FALSE(unfinished.ok());
+  EXPECT_NE(unfinished.status().message().find("unfinished resumable ingest"), std::string::npos)
+      << unfinished.status().ToString();
+  fs::remove(gate);
+
+  auto resumed = testing::RunCommand(Shell(Args(out, "0.6")));
+  ASSERT_EQ(resumed.code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("resuming: " + std::to_string(bricks) + " bricks"),
+            std::string::npos)
+      << resumed.output;
+  EXPECT_FALSE(fs::exists(resume_dir));
+  EXPECT_GT(testutil::ExpectSameStoreAndPyramid(ref, out), 0u);
+}
+
+TEST_F(IngestResumeTest, ADirectoryVoxDidNotMakeIsRefusedNotEmptied) {
+  const std::string out = dir_.File("out.store"), resume_dir = dir_.File(".out.store.resume");
+  fs::create_directory(resume_dir);
+  const std::string notes = resume_dir + "/notes.txt";
+  { std::FILE* f = std::fopen(notes.c_str(), "w"); ASSERT_NE(f, nullptr); std::fclose(f); }
+  auto r = testing::RunCommand(Shell(Args(out, "0.6")));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("holds 'notes.txt' but no journal"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(notes));
+  EXPECT_FALSE(fs::exists(out));
+
+  // A symbolic link in its place, to a directory of the user's.
+  fs::rename(resume_dir, dir_.File("mine"));
+  fs::create_directory_symlink(dir_.File("mine"), resume_dir);
+  r = testing::RunCommand(Shell(Args(out, "0.6")));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("is not a directory (a symbolic link)"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(dir_.File("mine/notes.txt")));
+  EXPECT_FALSE(fs::exists(out));
 }
 
 }  // namespace

@@ -84,41 +84,54 @@ struct WorkerEnv {
   }
 };
 
+// What an ended resumable ingest keeps for the next run: its directory
+// beside the output, when it holds its journal ("" when not resumable).
+std::string KeptForResume(const std::string& output, bool resume) {
+  if (!resume) return "";
+  std::error_code ec;
+  return std::filesystem::exists(ResumeJournal(output), ec) ? ResumeDirectory(output) : "";
+}
+
 // How the child ended, as the parent reports it and the tool's exit code.
 int ReportChild(const std::string& input, const std::string& output, pid_t child, int status,
-                bool finished) {
+                bool finished, bool resume) {
+  if (WIFEXITED(status) && (finished || WEXITSTATUS(status) == 128 + SIGINT ||
+                            WEXITSTATUS(status) == 128 + SIGTERM))
+    return WEXITSTATUS(status);
+  RemoveOwnTemporaries(output, child);
+  const std::string kept_dir = KeptForResume(output, resume);
+  const std::string kept =
+      kept_dir.empty() ? "its unfinished store is removed"
+                       : "no store written; the bricks written so far are kept in '" + kept_dir +
+                             "': run it again with --resume to continue";
   if (WIFEXITED(status)) {
-    const int code = WEXITSTATUS(status);
-    if (finished || code == 128 + SIGINT || code == 128 + SIGTERM) return code;
-    RemoveOwnTemporaries(output, child);
     std::fprintf(stderr,
                  "vox-ingest: %s: the ingest child process (pid %d) crashed: it exited with "
                  "code %d before finishing (a sanitizer report or an exit in a library; see "
-                 "the messages above); its unfinished store is removed\n",
-                 input.c_str(), int(child), code);
+                 "the messages above); %s\n",
+                 input.c_str(), int(child), WEXITSTATUS(status), kept.c_str());
     return 1;
   }
   const int sig = WIFSIGNALED(status) ? WTERMSIG(status) : SIGKILL;
-  RemoveOwnTemporaries(output, child);
   if (sig == SIGKILL || sig == SIGINT || sig == SIGTERM || sig == SIGHUP) {
-    std::fprintf(stderr,
-                 "vox-ingest: the ingest was killed by signal %d (%s)%s; its unfinished "
-                 "store is removed\n",
-                 sig, strsignal(sig), sig == SIGKILL ? ", perhaps for lack of memory" : "");
+    std::fprintf(stderr, "vox-ingest: the ingest was killed by signal %d (%s)%s; %s\n", sig,
+                 strsignal(sig), sig == SIGKILL ? ", perhaps for lack of memory" : "",
+                 kept.c_str());
     return 128 + sig;
   }
   std::fprintf(stderr,
                "vox-ingest: %s: the ingest child process (pid %d) crashed with %s while "
-               "reading the grid%s; its unfinished store is removed\n",
+               "reading the grid%s; %s\n",
                input.c_str(), int(child), SignalName(sig).c_str(),
-               sig == SIGBUS ? " (the file may have been truncated while it was read)" : "");
+               sig == SIGBUS ? " (the file may have been truncated while it was read)" : "",
+               kept.c_str());
   return 1;
 }
 
 }  // namespace
 
 int RunSupervised(char** argv, const std::string& input, const std::string& output,
-                  const std::function<int()>& work) {
+                  const std::function<int()>& work, bool resume) {
   if (const char* fd = std::getenv(kWorkerEnv)) {  // this is the worker
     const int done_fd = std::atoi(fd);
     unsetenv(kWorkerEnv);
@@ -185,7 +198,7 @@ int RunSupervised(char** argv, const std::string& input, const std::string& outp
   while ((n = read(done[0], &byte, 1)) < 0 && errno == EINTR) {
   }
   close(done[0]);
-  return ReportChild(input, output, child, status, n == 1);
+  return ReportChild(input, output, child, status, n == 1, resume);
 }
 
 void StartSignalThread(const std::string& output, bool resume) {
@@ -214,8 +227,9 @@ void StartSignalThread(const std::string& output, bool resume) {
     if (sigwait(&set, &sig) != 0) return;
     std::error_code exists_ec;
     const std::string what =
-        !resume_dir.empty() && std::filesystem::exists(resume_dir, exists_ec) ? kept_resumable
-                                                                              : kept;
+        !resume_dir.empty() && std::filesystem::exists(ResumeJournal(output), exists_ec)
+            ? kept_resumable
+            : kept;
     std::fprintf(stderr, "\nvox-ingest: %s; %s\n",
                  sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", what.c_str());
     RemoveOwnTemporaries(output, getpid());

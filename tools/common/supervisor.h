@@ -41,8 +41,10 @@ namespace vox {
 // Errors `work` reports itself (OpenVDB's exceptions on a corrupt file
 // become a Status) are its own messages. Without fork or exec, `work` runs
 // here.
+// `resume`: a resumable ingest (vox-ingest --resume), whose report says
+// what its `.NAME.resume` keeps for the next run.
 int RunSupervised(char** argv, const std::string& input, const std::string& output,
-                  const std::function<int()>& work);
+                  const std::function<int()>& work, bool resume = false);
 
 // In the child: blocks SIGINT and SIGTERM in every thread created later and
 // starts the thread that takes them (see above). `resume`: a resumable

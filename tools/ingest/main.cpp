@@ -43,7 +43,8 @@ const vox::CommandLineSpec kCommandLine{
     "level-of-detail pyramid), or adds the pyramid to an existing store.",
     vox::IngestOptionTable(),
     "Exit codes: 0 done, 1 the ingest failed (or its child process crashed), 2 bad command\n"
-    "line, 128+N killed by signal N (the temporary store directory is removed).\n"};
+    "line, 128+N killed by signal N (the temporary store directory is removed; with --resume\n"
+    "the bricks written so far are kept for the next run).\n"};
 
 // The array input (null: a .vdb) and the command line as given, which the
 // ingest child is re-executed with.
@@ -110,7 +111,8 @@ static int RunTool(int argc, char** argv) {
   if (vox::Status s = vox::CheckIngestCommand(command); !s.ok()) return UsageError(s.message());
 
   return vox::RunSupervised(g_array ? g_argv : argv, o.input, o.output,
-                            [&] { return IngestAndReport(o, command.limits, quiet); });
+                            [&] { return IngestAndReport(o, command.limits, quiet); },
+                            o.resume);
 }
 
 static int IngestAndReport(const vox::IngestOptions& o, const vox::IngestLimits& limits,
