@@ -7,6 +7,8 @@
 #include <unistd.h>
 #include <zstd.h>
 
+#include <glm/vector_relational.hpp>
+
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
@@ -511,8 +513,20 @@ class StoreWriterImpl : public StoreWriter {
     VOX_ASSIGN_OR_RETURN(journal_,
                          BrickJournal::Reopen(temp_ + "/" + kJournalFileName,
                                               BrickJournal::JournalBytes(key, j.records.size())));
+    const uint64_t bricks_side = uint64_t(1) << meta_.brick_level,
+                   voxels_side = uint64_t(1) << depth_;
     for (const JournalRecord& r : j.records) {
       const glm::u64vec3 c(r.entry.x, r.entry.y, r.entry.z);
+      // Its CRC vouches for the bytes, not for what they say: a record
+      // outside the store's grid is refused before it is used.
+      const bool inside = glm::all(glm::lessThan(c, glm::u64vec3(bricks_side))) &&
+                          glm::all(glm::lessThanEqual(r.lo, r.hi)) &&
+                          glm::all(glm::lessThan(r.hi, glm::u64vec3(voxels_side))) &&
+                          r.entry.voxel_count > 0 &&
+                          uint64_t(r.entry.voxel_count) <= voxels_side * voxels_side * voxels_side;
+      if (!inside)
+        return CorruptionError("the journal in '" + temp_ + "' lists a brick outside the store's "
+                               "grid: remove the directory to start over");
       if (!seen_.insert(c).second) return CorruptionError("a journal lists a brick twice");
       entries_.push_back(r.entry);
       AddBoundsLocked(c, r.lo, r.hi, r.entry.voxel_count);
@@ -528,7 +542,7 @@ class StoreWriterImpl : public StoreWriter {
   StoreMeta meta_;
   const WriteOptions options_;
   uint64_t store_id_;
-  const bool resumable_ = false;
+  bool resumable_ = false;  // until the journal is removed, just before publishing
   int lock_fd_ = -1;
   std::unique_ptr<BrickJournal> journal_;
   std::unordered_map<glm::u64vec3, uint32_t, CoordHash> resumed_;
