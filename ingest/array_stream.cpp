@@ -240,6 +240,7 @@ LodBuildOptions ArrayIngest::LodOptions() {
   lo.normal_bits = o_.normal_bits;
   lo.threads = o_.threads;
   lo.cancel = &lod_cancel_;
+  lo.unfinished_ingest = true;
   lo.progress = [this](uint64_t, uint64_t) {
     if (Cancelled()) lod_cancel_ = true;
   };

@@ -72,6 +72,9 @@ struct LodBuildOptions {
   const std::atomic<bool>* cancel = nullptr;
   // Called after each base brick (from the calling thread).
   std::function<void(uint64_t bricks_done, uint64_t bricks_total)> progress;
+  // The ingest's own build, before it publishes the store: its directory
+  // may still hold a resumable ingest's journal (OpenOptions::unfinished_ingest).
+  bool unfinished_ingest = false;
 };
 
 struct LodBuildStats {

@@ -314,7 +314,7 @@ StatusOr<LodBuildStats> BuildLod(const std::string& store_dir, const LodBuildOpt
   OpenOptions oo;
   // Each worker walks a brick and may look into its neighbours.
   oo.cache_bytes = options.cache_bytes * size_t(BuildThreads(options));
-  oo.unfinished_ingest = true;  // an ingest's, before it is published
+  oo.unfinished_ingest = options.unfinished_ingest;
   VOX_ASSIGN_OR_RETURN(auto base, Store::Open(store_dir, oo));
   if (base->meta().lod_level != 0)
     return InvalidArgumentError("'" + store_dir + "' is a level-of-detail store, not a base store");

@@ -196,6 +196,7 @@ LodBuildOptions GridIngest<ValueT>::LodOptions() {
   lo.normal_bits = cx_.options.normal_bits;
   lo.threads = cx_.options.threads;
   lo.cancel = &lod_cancel_;
+  lo.unfinished_ingest = true;
   lo.progress = [this](uint64_t, uint64_t) {
     if (cx_.progress && cx_.progress->Cancelled()) lod_cancel_ = true;
   };

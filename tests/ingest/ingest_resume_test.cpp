@@ -211,10 +211,13 @@ TEST_F(IngestResumeTest, InterruptedWhenCompleteThenResumedPublishes) {
   }
   ASSERT_EQ(::mkfifo(gate.c_str(), 0600), 0);
   // The ingest stops at the gate (its index and pyramid written, just before
-  // publishing) until the shell opens the gate; it is terminated there.
-  auto r = testing::RunCommand("(VOX_TEST_PUBLISH_GATE='" + gate + "' " +
-                               Shell(Args(out, "0.6")) + " & p=$!; exec 3>'" + gate +
-                               "'; kill -TERM $p; wait $p)");
+  // publishing) until a writer opens the gate and closes it; it is
+  // terminated there, the gate held open until it has exited (an ingest
+  // that never reaches the gate fails the test after 120 s, not hangs it).
+  auto r = testing::RunCommand(
+      "(VOX_TEST_PUBLISH_GATE='" + gate + "' " + Shell(Args(out, "0.6")) +
+      " & p=$!; timeout 120 sh -c 'exec 3>\"$0\"; kill -TERM \"$1\"; "
+      "while kill -0 \"$1\" 2>/dev/null; do sleep 0.05; done' '" + gate + "' $p; wait $p)");
   EXPECT_EQ(r.code, 128 + SIGTERM) << r.output;
   EXPECT_NE(r.output.find("the bricks written so far are kept in '" + resume_dir +
                           "': run it again with --resume to continue"),

@@ -84,12 +84,13 @@ struct WorkerEnv {
   }
 };
 
-// What an ended resumable ingest keeps for the next run: its directory
-// beside the output, when it holds its journal ("" when not resumable).
+// What an ended resumable ingest keeps for the next run, when its
+// directory beside the output holds its journal ("" when it does not).
 std::string KeptForResume(const std::string& output, bool resume) {
-  if (!resume) return "";
   std::error_code ec;
-  return std::filesystem::exists(ResumeJournal(output), ec) ? ResumeDirectory(output) : "";
+  if (!resume || !std::filesystem::exists(ResumeJournal(output), ec)) return "";
+  return "the bricks written so far are kept in '" + ResumeDirectory(output) +
+         "': run it again with --resume to continue";
 }
 
 // How the child ended, as the parent reports it and the tool's exit code.
@@ -99,11 +100,9 @@ int ReportChild(const std::string& input, const std::string& output, pid_t child
                             WEXITSTATUS(status) == 128 + SIGTERM))
     return WEXITSTATUS(status);
   RemoveOwnTemporaries(output, child);
-  const std::string kept_dir = KeptForResume(output, resume);
-  const std::string kept =
-      kept_dir.empty() ? "its unfinished store is removed"
-                       : "no store written; the bricks written so far are kept in '" + kept_dir +
-                             "': run it again with --resume to continue";
+  const std::string kept_for_resume = KeptForResume(output, resume);
+  const std::string kept = kept_for_resume.empty() ? "its unfinished store is removed"
+                                                   : "no store written; " + kept_for_resume;
   if (WIFEXITED(status)) {
     std::fprintf(stderr,
                  "vox-ingest: %s: the ingest child process (pid %d) crashed: it exited with "
@@ -212,24 +211,16 @@ void StartSignalThread(const std::string& output, bool resume) {
   // when complete, so the output is as it was before the run.
   std::error_code ec;
   const bool existed = std::filesystem::exists(output, ec);
-  const std::string kept = existed
-                               ? "no store written: '" + output + "' is as it was before"
-                               : "no store written at '" + output + "', nothing left behind";
-  // A resumable ingest's bricks stay in its directory (once it has one).
-  const std::string resume_dir = resume ? ResumeDirectory(output) : std::string();
-  const std::string kept_resumable =
-      (existed ? "no store written: '" + output + "' is as it was before"
-               : "no store written at '" + output + "'") +
-      "; the bricks written so far are kept in '" + resume_dir +
-      "': run it again with --resume to continue";
-  std::thread([set, output, kept, kept_resumable, resume_dir] {
+  const std::string written = existed ? "no store written: '" + output + "' is as it was before"
+                                      : "no store written at '" + output + "'";
+  std::thread([set, output, written, existed, resume] {
     int sig = 0;
     if (sigwait(&set, &sig) != 0) return;
-    std::error_code exists_ec;
-    const std::string what =
-        !resume_dir.empty() && std::filesystem::exists(ResumeJournal(output), exists_ec)
-            ? kept_resumable
-            : kept;
+    // A resumable ingest's bricks stay in its directory (once it holds a journal).
+    const std::string for_resume = KeptForResume(output, resume);
+    const std::string what = !for_resume.empty() ? written + "; " + for_resume
+                             : existed           ? written
+                                                 : written + ", nothing left behind";
     std::fprintf(stderr, "\nvox-ingest: %s; %s\n",
                  sig == SIGINT ? "interrupted (SIGINT)" : "terminated (SIGTERM)", what.c_str());
     RemoveOwnTemporaries(output, getpid());
