@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <glm/vec3.hpp>
 #include <string>
@@ -101,6 +102,15 @@ struct TraceCounters {
   void Add(const TraceCounters& o);
   std::string ToString() const;
 };
+
+// 2^e, exactly, without libm's ldexp for the exponents of normal doubles.
+inline double Pow2(int e) {
+  if (e < -1022 || e > 1023) return std::ldexp(1.0, e);
+  const uint64_t bits = uint64_t(e + 1023) << 52;
+  double d;
+  std::memcpy(&d, &bits, sizeof d);
+  return d;
+}
 
 namespace internal {
 // The ray parameter where the ray enters (entry) or leaves the closed voxel

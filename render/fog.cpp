@@ -62,7 +62,7 @@ namespace {
 // most t_end.
 double BlockExitT(const Ray& gr, const Hit& h, int level, int levels, double t_end) {
   const glm::i64vec3 box(h.voxel.x >> levels, h.voxel.y >> levels, h.voxel.z >> levels);
-  const double s = std::ldexp(1.0, -(level + levels));
+  const double s = Pow2(-(level + levels));
   return std::min(t_end, VoxelExitT(Ray{gr.origin * s, gr.dir * s}, box));
 }
 
@@ -113,16 +113,16 @@ glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx
 }
 
 glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone,
-                                  const glm::dvec3* view_w) const {
+                                  const glm::dvec3* view_w, double start_width) const {
   const glm::dvec3 p_w = xf_.GridToWorld(p_g);
   // With a pyramid, the transmittance ray's cells widen along it (as fast as
   // the primary ray's cone, or volume.shadow_lod's rate if faster), from
-  // exact voxels where it starts: the light's path far from the point is
-  // seen coarsely, near it exactly.
+  // start_width voxels (0: exact voxels) where it starts: the light's path
+  // far from the point is seen coarsely, near it finely.
   Cone shadow_cone;
   const Cone* sc = nullptr;
   if (cone != nullptr) {
-    shadow_cone = Cone{0.0, cone->spread};
+    shadow_cone = Cone{start_width, cone->spread};
     const double g = scene_.volume.shadow_lod;
     if (g > 0) shadow_cone.spread = std::max(shadow_cone.spread, 1.0 / (g * volume_->meta().voxel_size));
     sc = &shadow_cone;
@@ -142,42 +142,61 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
 constexpr double kMaxLatticeLogRatio = 0.5;
 // The lattice's least spacing in pixel footprints.
 constexpr double kMinLatticeFootprints = 4.0;
+// The width, in lattice spacings, at which a lattice point's transmittance
+// rays start (LatticeLight).
+constexpr double kLatticeStartWidth = 0.25;
 
 glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext& cx, const Cone* cone,
                                 render_internal::FogLightCache* cache) const {
   const glm::dvec3 p_g = gr.origin + t * gr.dir;
   // The lattice's spacing: the largest power of two voxels within half the
-  // sample spacing h (world units). It is used where that spacing is at
-  // least kMinLatticeFootprints pixel footprints (the cone's width), so that
-  // neighbouring pixels share its points; elsewhere (thick fog, whose light
-  // varies within a voxel; close views; the exact frame, without a cone)
-  // each sample has its own rays.
+  // sample spacing h (world units), or finer where the light varies too much
+  // across that block, down to kMinLatticeFootprints pixel footprints (the
+  // cone's width), so that neighbouring pixels share its points; below that
+  // (thick fog, whose light varies within a voxel; close views; the exact
+  // frame, without a cone) each sample has its own rays.
   const double h_vox = h / volume_->meta().voxel_size;
   if (!scene_.volume.light_lattice || cone == nullptr) return LightAtPoint(p_g, cx, cone);
   const double min_spacing = kMinLatticeFootprints * std::max(1.0, cone->Width(t));
   if (!(0.5 * h_vox >= min_spacing)) return LightAtPoint(p_g, cx, cone);
-  const int level = std::min(kMaxLightLatticeLevel, std::ilogb(0.5 * h_vox));
-  const double s = std::ldexp(1.0, level);
+  const int top = std::min(kMaxLightLatticeLevel, std::ilogb(0.5 * h_vox));
+  const int finest = std::min(top, std::max(0, int(std::ceil(std::log2(min_spacing)))));
+  for (int level = top; level >= finest; --level) {
+    glm::dvec3 out;
+    bool ok = true;
+    if (!LatticeLight(p_g, level, cx, cone, cache, &out, &ok)) continue;
+    return ok ? out : glm::dvec3(0.0);
+  }
+  return LightAtPoint(p_g, cx, cone);
+}
+
+bool Renderer::LatticeLight(const glm::dvec3& p_g, int level, TraceContext& cx, const Cone* cone,
+                            render_internal::FogLightCache* cache, glm::dvec3* out,
+                            bool* ok) const {
+  const double s = Pow2(level);
   const glm::dvec3 u = p_g / s - 0.5;
   const glm::dvec3 f0 = glm::floor(u);
   const glm::i64vec3 i0(f0);
   const glm::dvec3 f = u - f0;
   glm::dvec3 corner[8];
-  const bool ok = cache->Block(level, i0,
-                               [&](const glm::dvec3& q, glm::dvec3* log_light) {
-                                 const glm::dvec3 l = LightAtPoint(q, cx, cone);
-                                 if (cx.failed()) return false;
-                                 *log_light = glm::log(l);  // -inf where no light arrives
-                                 return true;
-                               },
-                               corner);
-  if (!ok) return glm::dvec3(0.0);
+  // A lattice point's rays start a quarter of its spacing wide: the point
+  // stands for the block around it, whose finer detail the interpolation
+  // does not keep either.
+  const double start_width = kLatticeStartWidth * s;
+  *ok = cache->Block(level, i0,
+                     [&](const glm::dvec3& q, glm::dvec3* log_light) {
+                       const glm::dvec3 l = LightAtPoint(q, cx, cone, nullptr, start_width);
+                       if (cx.failed()) return false;
+                       *log_light = glm::log(l);  // -inf where no light arrives
+                       return true;
+                     },
+                     corner);
+  if (!*ok) return true;
   // Trilinear in the logarithm: exact where the light decays exponentially
   // across the block, as in fog of even density. Where the corners' light
   // differs by more than e^kMaxLatticeLogRatio (the block straddles a
   // shadow's edge or the rim of thick fog), or a corner has none where
-  // others have some, the sample has its own rays.
-  glm::dvec3 out;
+  // others have some, a finer block is tried.
   // A white light through grey fog: the three channels are one.
   bool grey = true;
   for (int c = 0; c < 8 && grey; ++c) grey = corner[c].x == corner[c].y && corner[c].x == corner[c].z;
@@ -189,17 +208,17 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
       hi = std::max(hi, v[c]);
     }
     if (hi == -kInf) {  // no light in this channel anywhere
-      out[k] = 0.0;
+      (*out)[k] = 0.0;
       continue;
     }
-    if (!(hi - lo <= kMaxLatticeLogRatio)) return LightAtPoint(p_g, cx, cone);
+    if (!(hi - lo <= kMaxLatticeLogRatio)) return false;
     const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
     const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
     const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
-    out[k] = std::exp(y0 + f.z * (y1 - y0));
+    (*out)[k] = std::exp(y0 + f.z * (y1 - y0));
   }
-  if (grey) out.y = out.z = out.x;
-  return out;
+  if (grey) out->y = out->z = out->x;
+  return true;
 }
 
 namespace {

@@ -155,7 +155,7 @@ int LodTracer::LevelForWidth(double w) const {
 }
 
 double LodTracer::LevelStart(const Cone& cone, int l) const {
-  const double target = std::ldexp(1.0, l) / factor_;  // the width where level l begins
+  const double target = Pow2(l) / factor_;  // the width where level l begins
   if (cone.w0 >= target) return 0.0;
   if (!(cone.spread > 0)) return kInf;
   return std::max(0.0, (target - cone.w0) / cone.spread);

@@ -226,7 +226,7 @@ Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, 
     } else {
       const double start = std::max(t_a, t_in);
       if (start >= t_out) break;
-      const double s = std::ldexp(1.0, -l);
+      const double s = Pow2(-l);
       const Ray cr{(gr.origin + start * gr.dir) * s, gr.dir * s};
       seg.volume = levels_[size_t(l - 1)];
       const LodLevelTracer& tracer =

@@ -338,12 +338,17 @@ class Renderer {
   // transmittance rays to the shadowing lights; with `view_w` (the world
   // direction towards the camera) each light weighted by the phase function.
   glm::dvec3 LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone,
-                          const glm::dvec3* view_w = nullptr) const;
+                          const glm::dvec3* view_w = nullptr, double start_width = 0.0) const;
   // The light reaching fog at ray parameter t of primary ray gr, for light
   // samples h apart there: interpolated on `cache`'s lattice
   // (render/internal/fog_light.h) unless volume.light_lattice is off.
   glm::dvec3 LightInFog(const Ray& gr, double t, double h, TraceContext& cx, const Cone* cone,
                         render_internal::FogLightCache* cache) const;
+  // The light at p_g interpolated on the lattice of spacing 2^level voxels:
+  // false when the block's corners differ too much to interpolate; *ok
+  // false when the frame failed.
+  bool LatticeLight(const glm::dvec3& p_g, int level, TraceContext& cx, const Cone* cone,
+                    render_internal::FogLightCache* cache, glm::dvec3* out, bool* ok) const;
 
   // tracer_'s occupied box (options_.clip_to_occupied), on `t` too.
   void ApplyOccupiedBox(RenderTracer* t) const;

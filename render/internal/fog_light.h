@@ -18,6 +18,8 @@
 #include <glm/vec3.hpp>
 #include <vector>
 
+#include "core/ray.h"
+
 namespace vox::render_internal {
 
 // A lattice of spacing 2^level voxels: point i lies at (i + 1/2) 2^level in
@@ -64,7 +66,7 @@ class FogLightCache {
       return true;
     }
     if (used_ + 8 > kMaxPoints) Clear();
-    const double s = std::ldexp(1.0, level);
+    const double s = vox::Pow2(level);
     constexpr int64_t kFar = int64_t(1) << 30;  // (lattice indices of any grid fit)
     const bool keep = std::abs(i0.x) < kFar && std::abs(i0.y) < kFar && std::abs(i0.z) < kFar;
     for (int c = 0; c < 8; ++c) {
