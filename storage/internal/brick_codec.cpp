@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <mutex>
 #include <type_traits>
 
 #if defined(__SSE2__)
@@ -437,6 +438,68 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) 
 
 }  // namespace
 
+std::span<const CompactCell> FullPool(int depth) {
+  static std::once_flag once[kMaxFullPoolDepth + 1];
+  static std::vector<CompactCell> pools[kMaxFullPoolDepth + 1];
+  if (depth < 1 || depth > kMaxFullPoolDepth) return {};
+  std::call_once(once[depth], [depth] {
+    std::vector<CompactCell>& pool = pools[depth];
+    // Level l holds 8^l cells from start = (8^l - 1) / 7; cell j's children
+    // are cells (or, at the last level, payloads) 8j..8j+7 of the next.
+    for (int l = 0; l < depth; ++l) {
+      const uint32_t cells = uint32_t(1) << (3 * l), next = (uint32_t(1) << (3 * (l + 1))) / 7;
+      for (uint32_t j = 0; j < cells; ++j)
+        pool.push_back(MakeCompactCell(l == depth - 1 ? 8 * j : next + 8 * j, 0xffu));
+    }
+  });
+  return pools[depth];
+}
+
+namespace {
+
+bool AllBytesAre(const uint8_t* p, size_t n, uint8_t byte) {
+  const uint64_t want = uint64_t(byte) * 0x0101010101010101ull;
+  uint64_t diff = 0;
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    uint64_t v;
+    std::memcpy(&v, p + i, 8);
+    diff |= v ^ want;
+  }
+  for (; i < n; ++i) diff |= uint64_t(p[i] ^ byte);
+  return diff == 0;
+}
+
+// A brick record of `depth` levels with every voxel occupied, all with
+// voxel 0's attributes, as a full_of_one DecodedBrick; null when it is not
+// one. `masks` and `planes` are the record's (DeltaPlanes form: each plane
+// holds voxel 0's byte, then the differences, which are all zero).
+std::shared_ptr<DecodedBrick> DecodeFullOfOne(const uint8_t* masks, uint32_t num_cells,
+                                              const uint8_t* planes, uint32_t voxel_count,
+                                              int depth, uint8_t flags) {
+  if (depth > kMaxFullPoolDepth || voxel_count != uint32_t(1) << (3 * depth)) return nullptr;
+  const std::span<const CompactCell> pool = FullPool(depth);
+  if (num_cells != pool.size() || !AllBytesAre(masks, num_cells, 0xff)) return nullptr;
+  const size_t bytes = AttrBytesPerVoxel(flags);
+  for (size_t k = 0; k < bytes; ++k)
+    if (!AllBytesAre(planes + k * voxel_count + 1, voxel_count - 1, 0)) return nullptr;
+  auto b = std::make_shared<DecodedBrick>();
+  b->full_of_one = true;
+  b->shared_cells = pool.data();
+  b->shared_cell_count = uint32_t(pool.size());
+  b->attr_planes.resize(bytes);
+  for (size_t k = 0; k < bytes; ++k) b->attr_planes[k] = planes[k * voxel_count];
+  b->voxel_count = voxel_count;
+  b->flags = flags;
+  if (flags & kAttrDensity) {
+    const float d = ReadDensity(b->attr_planes.data(), 1, flags, 0);
+    if (d >= 0 && std::isfinite(d)) b->uniform_density = d;
+  }
+  return b;
+}
+
+}  // namespace
+
 StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_t n,
                                                        const BrickEntry& entry, int depth,
                                                        uint8_t flags) {
@@ -468,6 +531,9 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
   if (depth < 1 || depth > kMaxLevels)
     return CorruptionError("brick depth " + std::to_string(depth) + " out of range");
   const uint8_t* masks = raw + kBrickHeaderSize;
+  // (a full pre-order pool of all masks 0xff is valid by construction)
+  if (auto full = DecodeFullOfOne(masks, num_cells, masks + num_cells, voxel_count, depth, flags))
+    return full;
   thread_local std::vector<uint8_t> level;
   level.resize(num_cells);
   MaskChecker check{masks, num_cells, voxel_count, level.data(), 1, 0, nullptr};

@@ -79,6 +79,21 @@ struct DecodedBrick {
   // inside of a fog volume): that density, else -1. A ray crosses such a
   // brick as one cell.
   float uniform_density = -1.0f;
+  // Every voxel of the brick's grid occupied, all with voxel 0's attributes
+  // (the inside of a fog volume, made from a level set or of one
+  // temperature): attr_planes holds that one voxel, and `cells` is empty,
+  // the pool being FullPool(depth), shared by all such bricks.
+  bool full_of_one = false;
+  const CompactCell* shared_cells = nullptr;
+  uint32_t shared_cell_count = 0;
+
+  // The cell pool in traversal form, and the attributes' planes: ReadDensity
+  // and ReadAttributes of payload p read attr_planes with AttrCount() and
+  // AttrIndex(p).
+  const CompactCell* CellData() const { return full_of_one ? shared_cells : cells.data(); }
+  uint32_t CellCount() const { return full_of_one ? shared_cell_count : uint32_t(cells.size()); }
+  uint32_t AttrCount() const { return full_of_one ? 1u : voxel_count; }
+  uint32_t AttrIndex(uint32_t payload) const { return full_of_one ? 0u : payload; }
   // Otherwise, for bricks with densities: per voxel (payload order), the
   // levels of the largest aligned block around it (2^levels voxels a side,
   // within the brick) whose voxels are all occupied and of one density, or
@@ -90,7 +105,8 @@ struct DecodedBrick {
   // block make_shared puts beside it. (The cache adds its own per-entry
   // overhead; see ShardedPageCache.)
   size_t charge() const {
-    return sizeof(DecodedBrick) + BrickBlockBytes(cells.data(), cells.capacity() * sizeof(CompactCell)) +
+    return sizeof(DecodedBrick) +
+           (cells.empty() ? 0 : BrickBlockBytes(cells.data(), cells.capacity() * sizeof(CompactCell))) +
            BrickBlockBytes(attr_planes.data(), attr_planes.capacity()) +
            (uniform_levels.empty() ? 0 : BrickBlockBytes(uniform_levels.data(), uniform_levels.capacity())) +
            kOverheadBytes;
@@ -106,10 +122,18 @@ struct DecodedBrick {
   static constexpr size_t kOverheadBytes = 16 + 3 * 16 + 64 + 8 + 32;
 };
 
+// The traversal-form pool of a brick of `depth` levels whose every cell is
+// occupied (all masks 0xff), built once per depth and kept for the
+// process's life; depth at most kMaxFullPoolDepth.
+inline constexpr int kMaxFullPoolDepth = 6;
+std::span<const CompactCell> FullPool(int depth);
+
 // Rebuilds the cell pool (level order, as LevelOrderPool would make it from
 // the BuildCells pool) from raw brick bytes, checking every field against
 // the table row and the store's depth and flags. The pool is valid by
-// construction: indices in range, leaves exactly at depth.
+// construction: indices in range, leaves exactly at depth. A full brick of
+// depth at most kMaxFullPoolDepth whose voxels all have one value decodes
+// as full_of_one.
 // Errors are Corruption without a file name (the caller adds it).
 StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_t n,
                                                        const BrickEntry& entry, int depth,

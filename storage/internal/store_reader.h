@@ -58,7 +58,7 @@ class StoreImpl : public Store {
   StatusOr<BrickView> FetchBrick(uint32_t id) override {
     VOX_ASSIGN_OR_RETURN(auto b, Get(id));
     const DecodedBrick* data = b.get();
-    return BrickView{b->cells.data(), uint32_t(b->cells.size()), std::move(b), data};
+    return BrickView{b->CellData(), b->CellCount(), std::move(b), data};
   }
 
   StatusOr<BrickView> FetchBrickIfReady(uint32_t id) override {
@@ -69,7 +69,7 @@ class StoreImpl : public Store {
                               "' is not in memory");
     }
     const DecodedBrick* data = b.get();
-    return BrickView{b->cells.data(), uint32_t(b->cells.size()), std::move(b), data};
+    return BrickView{b->CellData(), b->CellCount(), std::move(b), data};
   }
 
   StatusOr<VoxelAttributes> Attributes(uint32_t brick, uint32_t payload) override {
@@ -96,7 +96,8 @@ class StoreImpl : public Store {
       *density = b->uniform_density;
       *uniform_levels = depth_;
     } else {
-      *density = ReadDensity(b->attr_planes.data(), b->voxel_count, b->flags, hit.payload);
+      *density =
+          ReadDensity(b->attr_planes.data(), b->AttrCount(), b->flags, b->AttrIndex(hit.payload));
       const uint8_t l =
           b->uniform_levels.empty() ? DecodedBrick::kNotUniform : b->uniform_levels[hit.payload];
       *uniform_levels = l == DecodedBrick::kNotUniform ? -1 : int(l);
@@ -261,7 +262,7 @@ class StoreImpl : public Store {
       return InvalidArgumentError("payload " + std::to_string(payload) + " outside brick " +
                                   std::to_string(brick) + " (" + std::to_string(b.voxel_count) +
                                   " voxels) of store '" + dir_ + "'");
-    return ReadAttributes(b.attr_planes.data(), b.voxel_count, b.flags, payload);
+    return ReadAttributes(b.attr_planes.data(), b.AttrCount(), b.flags, b.AttrIndex(payload));
   }
 
   const std::string dir_;

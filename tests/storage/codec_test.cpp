@@ -272,6 +272,57 @@ TEST(BrickDecoder, FindsBlocksOfOneDensity) {
   }
 }
 
+// A full brick whose voxels all have one value (the inside of a fog) decodes
+// to the shared full pool and one voxel's attributes, and reads back as the
+// brick it encodes: every payload's attributes, the pool LevelOrderPool
+// makes. One voxel that differs in any attribute keeps the whole brick.
+TEST(BrickDecoder, FullBrickOfOneValueSharesThePool) {
+  for (int depth = 1; depth <= 3; ++depth) {
+    const uint64_t side = uint64_t(1) << depth;
+    std::vector<LeafPoint> pts;
+    for (uint64_t z = 0; z < side; ++z)
+      for (uint64_t y = 0; y < side; ++y)
+        for (uint64_t x = 0; x < side; ++x) pts.push_back(LeafPoint{x, y, z, kEmptyRef});
+    std::sort(pts.begin(), pts.end(), MortonLess);
+    for (size_t i = 0; i < pts.size(); ++i) pts[i].ref = MakeLeafRef(uint32_t(i));
+    const auto cells = BuildCells(pts, depth);
+    const auto expect_pool = LevelOrderPool(cells, depth, false);
+    ASSERT_TRUE(expect_pool.ok());
+    const uint8_t flags = kAttrDensity | kAttrTemperature | kAttrColor;
+    for (int odd : {-1, 0, int(pts.size()) - 1}) {
+      std::vector<VoxelAttributes> attrs(pts.size());
+      for (VoxelAttributes& a : attrs) {
+        a.density = 0.75f;
+        a.temperature = 1500.0f;
+        a.color = glm::vec3(0.25f, 0.5f, 1.0f);
+      }
+      if (odd >= 0) attrs[size_t(odd)].temperature = 1501.0f;
+      const std::string raw = EncodeBrickRaw(cells, attrs, depth, flags);
+      BrickEntry e;
+      e.num_cells = uint32_t(cells.size());
+      e.voxel_count = uint32_t(pts.size());
+      auto d = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, depth, flags);
+      ASSERT_TRUE(d.ok()) << d.status().ToString();
+      const DecodedBrick& b = **d;
+      EXPECT_EQ(b.full_of_one, odd < 0) << "depth " << depth << ", odd " << odd;
+      EXPECT_EQ(b.uniform_density, 0.75f);  // (temperature does not break a block of one density)
+      ASSERT_EQ(b.CellCount(), expect_pool->size());
+      EXPECT_EQ(0, std::memcmp(b.CellData(), expect_pool->data(), expect_pool->size() * sizeof(CompactCell)));
+      EXPECT_TRUE(ValidateLevelOrderPool(b.CellData(), b.CellCount(), depth, pts.size()).ok());
+      if (odd < 0) EXPECT_EQ(b.attr_planes.size(), AttrBytesPerVoxel(flags));
+      for (uint32_t i = 0; i < pts.size(); ++i) {
+        const VoxelAttributes a = ReadAttributes(b.attr_planes.data(), b.AttrCount(), flags, b.AttrIndex(i));
+        EXPECT_EQ(a.density, attrs[i].density);
+        EXPECT_EQ(a.temperature, attrs[i].temperature) << "voxel " << i;
+        EXPECT_EQ(a.color, glm::vec3(0.25f, 0.5f, 1.0f));
+      }
+    }
+  }
+  // A full brick deeper than the shared pools decodes as any other.
+  EXPECT_TRUE(FullPool(kMaxFullPoolDepth + 1).empty());
+  EXPECT_EQ(FullPool(kMaxFullPoolDepth).size(), (size_t(1) << (3 * kMaxFullPoolDepth)) / 7);
+}
+
 TEST(BrickDecoder, MutatedBricksNeverYieldABadPool) {
   auto vol = GenerateShape("noise:32");
   ASSERT_TRUE(vol.ok());
