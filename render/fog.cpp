@@ -138,8 +138,11 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
 }
 
 // The largest log-ratio of the light at a lattice block's corners that is
-// interpolated (a factor of about 1.65).
-constexpr double kMaxLatticeLogRatio = 0.5;
+// interpolated (a factor of e). At the light's terminator (the fog's
+// silhouette seen from the light) the light changes as the square root of
+// the depth: blocks there differ by up to e^0.8 and stay within the error
+// of the light's sampling.
+constexpr double kMaxLatticeLogRatio = 1.0;
 // The lattice's least spacing in pixel footprints.
 constexpr double kMinLatticeFootprints = 4.0;
 // The width, in lattice spacings, at which a lattice point's transmittance
