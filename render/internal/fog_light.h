@@ -11,6 +11,7 @@
 #define VOX_RENDER_INTERNAL_FOG_LIGHT_H_
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -44,14 +45,17 @@ class FogLightCache {
   // Points kept at most; the cache starts again when full (its values do not
   // depend on what it held, so nothing but time changes).
   static constexpr size_t kMaxPoints = size_t(1) << 16;
-  // Bytes it holds at most (its open-addressed slots, at most half of them
-  // used), for the memory budget.
-  static constexpr size_t kMaxBytes = 2 * kMaxPoints * 48;
+  // Blocks whose eight values are kept together, at most (a direct-mapped
+  // table beside the points': neighbouring pixels ask for the same blocks,
+  // one lookup instead of eight).
+  static constexpr size_t kMaxBlocks = size_t(1) << 12;
+  // Bytes it holds at most (the points' open-addressed slots, at most half
+  // of them used, and the blocks'), for the memory budget.
+  static constexpr size_t kMaxBytes = 2 * kMaxPoints * 48 + kMaxBlocks * 208;
 
   void Clear() {
     slots_.assign(slots_.size(), Slot{});
     used_ = 0;
-    block_valid_ = false;
   }
 
   // The log-light (per channel; -inf where no light arrives) at the eight
@@ -61,14 +65,23 @@ class FogLightCache {
   // failure.
   template <class Light>
   bool Block(int level, const glm::i64vec3& i0, Light&& light, glm::dvec3 out[8]) {
-    if (block_valid_ && block_level_ == level && block_i0_ == i0) {
-      for (int c = 0; c < 8; ++c) out[c] = block_[c];
-      return true;
+    constexpr int64_t kFar = int64_t(1) << 30;  // (lattice indices of any grid fit)
+    const bool keep = std::abs(i0.x) < kFar && std::abs(i0.y) < kFar && std::abs(i0.z) < kFar;
+    const LatticePoint b{int32_t(i0.x), int32_t(i0.y), int32_t(i0.z), level};
+    BlockSlot* block = nullptr;
+    if (keep) {
+      // (the table grows with the points kept, so a cache that serves one
+      // ray stays small)
+      const size_t want = std::clamp<size_t>(std::bit_ceil(used_ / 4 + 1), 16, kMaxBlocks);
+      if (blocks_.size() < want) blocks_.assign(want, BlockSlot{});
+      block = &blocks_[LatticePointHash(b) & (blocks_.size() - 1)];
+      if (block->key == b) {
+        for (int c = 0; c < 8; ++c) out[c] = block->value[c];
+        return true;
+      }
     }
     if (used_ + 8 > kMaxPoints) Clear();
     const double s = vox::Pow2(level);
-    constexpr int64_t kFar = int64_t(1) << 30;  // (lattice indices of any grid fit)
-    const bool keep = std::abs(i0.x) < kFar && std::abs(i0.y) < kFar && std::abs(i0.z) < kFar;
     for (int c = 0; c < 8; ++c) {
       const glm::i64vec3 i(i0.x + (c & 1), i0.y + ((c >> 1) & 1), i0.z + ((c >> 2) & 1));
       const glm::dvec3 q((double(i.x) + 0.5) * s, (double(i.y) + 0.5) * s, (double(i.z) + 0.5) * s);
@@ -87,10 +100,10 @@ class FogLightCache {
       }
       out[c] = slot->value;
     }
-    for (int c = 0; c < 8; ++c) block_[c] = out[c];
-    block_valid_ = true;
-    block_level_ = level;
-    block_i0_ = i0;
+    if (block != nullptr) {
+      for (int c = 0; c < 8; ++c) block->value[c] = out[c];
+      block->key = b;
+    }
     return true;
   }
 
@@ -114,12 +127,15 @@ class FogLightCache {
       if (o.used) *Find(o.key) = o;
   }
 
+  struct BlockSlot {
+    LatticePoint key{0, 0, 0, -1};  // the block's lowest corner (level -1: empty)
+    glm::dvec3 value[8];
+  };
+  static_assert(sizeof(BlockSlot) <= 208);
+
   std::vector<Slot> slots_;  // a power of two of them (or none yet)
   size_t used_ = 0;
-  bool block_valid_ = false;
-  int block_level_ = 0;
-  glm::i64vec3 block_i0_{0};
-  glm::dvec3 block_[8];
+  std::vector<BlockSlot> blocks_;  // a power of two of them (or none yet)
 };
 
 }  // namespace vox::render_internal
