@@ -3,8 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
+#include <vector>
 #include <limits>
 
+#include "render/internal/fog_light.h"
 #include "render/internal/fog_math.h"
 
 namespace vox::render_internal {
@@ -30,6 +33,56 @@ TEST(FogMathTest, MatchesLibm) {
   EXPECT_EQ(ExpNeg(std::numeric_limits<double>::infinity()), 0.0);
   EXPECT_TRUE(std::isnan(ExpNeg(std::nan(""))));
   EXPECT_TRUE(std::isnan(ExpNegShare(std::nan(""))));
+}
+
+
+// The light lattice's cache (render/internal/fog_light.h): every block it
+// answers holds the light at its eight points whatever was asked before,
+// through its block table, its points' table, restarts when full and
+// indices too far to keep; each point is computed once while kept.
+TEST(FogLightCacheTest, AnswersDoNotDependOnWhatWasAskedBefore) {
+  auto value = [](const glm::dvec3& q) { return glm::dvec3(q.x + 1e3 * q.y, q.z, -q.x); };
+  FogLightCache cache;
+  int calls = 0;
+  auto light = [&](const glm::dvec3& q, glm::dvec3* out) {
+    ++calls;
+    *out = value(q);
+    return true;
+  };
+  std::mt19937_64 rng(7);
+  std::vector<glm::i64vec3> blocks;
+  for (int i = 0; i < 64; ++i)
+    blocks.push_back(glm::i64vec3(int64_t(rng() % 9) - 4, int64_t(rng() % 9) - 4, int64_t(rng() % 9) - 4));
+  blocks.push_back(glm::i64vec3(int64_t(1) << 40, 0, 0));  // too far to keep
+  int far_asks = 0;
+  for (int pass = 0; pass < 2; ++pass) {
+    for (int trial = 0; trial < 4000; ++trial) {
+      const glm::i64vec3 i0 = blocks[rng() % blocks.size()];
+      far_asks += pass == 1 && i0.x > 1000;
+      const int level = int(rng() % 3);
+      glm::dvec3 out[8];
+      ASSERT_TRUE(cache.Block(level, i0, light, out));
+      const double s = std::ldexp(1.0, level);
+      for (int c = 0; c < 8; ++c) {
+        const glm::dvec3 q((double(i0.x + (c & 1)) + 0.5) * s, (double(i0.y + ((c >> 1) & 1)) + 0.5) * s,
+                           (double(i0.z + ((c >> 2) & 1)) + 0.5) * s);
+        ASSERT_EQ(out[c], value(q)) << "trial " << trial << ", corner " << c;
+      }
+    }
+    // Kept points are not computed again (these few never fill the cache):
+    // the second pass computes only the far block's points, each time.
+    if (pass == 0) calls = 0;
+  }
+  EXPECT_GT(far_asks, 0);
+  EXPECT_EQ(calls, 8 * far_asks);
+  // A failing light keeps nothing: the block is computed again next time.
+  FogLightCache failing;
+  int n = 0;
+  glm::dvec3 out[8];
+  EXPECT_FALSE(failing.Block(0, glm::i64vec3(0), [&](const glm::dvec3&, glm::dvec3*) { return ++n < 4; }, out));
+  n = 0;
+  EXPECT_TRUE(failing.Block(0, glm::i64vec3(0), light, out));
+  EXPECT_EQ(out[7], value(glm::dvec3(1.5)));
 }
 
 }  // namespace
