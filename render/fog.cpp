@@ -2,6 +2,7 @@
 // primary ray, and the transmittance of the rays towards the lights.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "render/internal/fog_math.h"
 #include "render/internal/tracing.h"
@@ -382,15 +383,26 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
   // `level` > 0 for coarse cells): its medium per channel (FogModel), the
   // light it scatters and the light it emits, each seen through the cell
   // up to where it arises.
+  // (the medium of the last cell's density and temperature, kept: the
+  // inside of a fog repeats them)
+  double last_rho = std::numeric_limits<double>::quiet_NaN(), last_temp = 0.0;
+  FogSample m;
   auto cell = [&](double t0, double t1, double rho, double temp) {
     if (*first_t == kInf) *first_t = t0;
     const double len = std::max(0.0, t1 - t0);
-    const FogSample m = model.At(rho, temp);
+    if (!(rho == last_rho && temp == last_temp)) {
+      m = model.At(rho, temp);
+      last_rho = rho;
+      last_temp = temp;
+    }
     const glm::dvec3& st = m.extinction;
     const double st_max = std::max({st.x, st.y, st.z});
     if (st_max <= 0 && !model.emits()) return true;
     const glm::dvec3 seg_tau = st * len;
-    const glm::dvec3 seg_trans(ExpNeg(seg_tau.x), ExpNeg(seg_tau.y), ExpNeg(seg_tau.z));
+    glm::dvec3 seg_trans;
+    seg_trans.x = ExpNeg(seg_tau.x);
+    seg_trans.y = seg_tau.y == seg_tau.x ? seg_trans.x : ExpNeg(seg_tau.y);
+    seg_trans.z = seg_tau.z == seg_tau.x ? seg_trans.x : ExpNeg(seg_tau.z);
     if (passes_.scattering && st_max > 0) {
       const glm::dvec3 in_cell =
           light.Integrate(t0, t1, st, trans, [&](double t, double seen) { return step_from(t, st_max, seen); });
