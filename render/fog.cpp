@@ -140,9 +140,10 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
 
 // The largest log-ratio of the light at a lattice block's corners that is
 // interpolated (a factor of e). At the light's terminator (the fog's
-// silhouette seen from the light) the light changes as the square root of
-// the depth: blocks there differ by up to e^0.8 and stay within the error
-// of the light's sampling.
+// silhouette seen from the light) the light falls as the square root of
+// the depth, so blocks there differ most; interpolating up to a factor of e
+// keeps the default frames' error (docs/performance.md) and leaves far
+// fewer samples to trace their own rays.
 constexpr double kMaxLatticeLogRatio = 1.0;
 // The lattice's least spacing in pixel footprints.
 constexpr double kMinLatticeFootprints = 4.0;
