@@ -359,6 +359,20 @@ struct MaskChecker {
 
 namespace {
 
+// Whether the n bytes at p all equal `byte`.
+bool AllBytesAre(const uint8_t* p, size_t n, uint8_t byte) {
+  const uint64_t want = uint64_t(byte) * 0x0101010101010101ull;
+  uint64_t diff = 0;
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    uint64_t v;
+    std::memcpy(&v, p + i, 8);
+    diff |= v ^ want;
+  }
+  for (; i < n; ++i) diff |= uint64_t(p[i] ^ byte);
+  return diff == 0;
+}
+
 // Sets b's uniform_density, or its uniform_levels: bottom-up, each full
 // cell's one density (or -1); top-down, each cell's largest block of one
 // density around it. `level_start[l]`: the first cell of level l (level
@@ -374,12 +388,7 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) 
     bool same = true;
     for (size_t k = 0; k < 4 && same; ++k) {
       const uint8_t* q = density_planes + k * b->voxel_count;
-      const uint64_t want = uint64_t(q[0]) * 0x0101010101010101ull;
-      for (uint32_t i = 0; i < b->voxel_count && same; i += 8) {  // (a multiple of 8 voxels)
-        uint64_t v;
-        std::memcpy(&v, q + i, 8);
-        same = v == want;
-      }
+      same = AllBytesAre(q, b->voxel_count, q[0]);
     }
     const float d = same ? ReadDensity(planes, b->voxel_count, b->flags, 0) : -1.0f;
     if (d >= 0 && std::isfinite(d)) {
@@ -456,19 +465,6 @@ std::span<const CompactCell> FullPool(int depth) {
 }
 
 namespace {
-
-bool AllBytesAre(const uint8_t* p, size_t n, uint8_t byte) {
-  const uint64_t want = uint64_t(byte) * 0x0101010101010101ull;
-  uint64_t diff = 0;
-  size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    uint64_t v;
-    std::memcpy(&v, p + i, 8);
-    diff |= v ^ want;
-  }
-  for (; i < n; ++i) diff |= uint64_t(p[i] ^ byte);
-  return diff == 0;
-}
 
 // A brick record of `depth` levels with every voxel occupied, all with
 // voxel 0's attributes, as a full_of_one DecodedBrick; null when it is not

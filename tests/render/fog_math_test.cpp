@@ -1,5 +1,6 @@
 // Fog's exponentials (render/internal/fog_math.h) against libm's exp and
-// expm1 across the polynomials' range, its edges and beyond.
+// expm1 across the polynomials' range, its edges and beyond; the light
+// lattice's cache (render/internal/fog_light.h).
 #include <gtest/gtest.h>
 
 #include <cmath>
