@@ -69,6 +69,16 @@ double BlockExitT(const Ray& gr, const Hit& h, int level, int levels, double t_e
 
 }  // namespace
 
+namespace {
+
+// e^(-tau) per channel; one exponential for grey fog's three equal channels.
+glm::dvec3 TransmittanceOf(const glm::dvec3& tau) {
+  if (tau.x == tau.y && tau.x == tau.z) return glm::dvec3(std::exp(-tau.x));
+  return glm::exp(-tau);
+}
+
+}  // namespace
+
 glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx,
                                    const Cone* cone) const {
   ++cx.c->rays[kRayVolume];
@@ -94,7 +104,7 @@ glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx
         },
         &cx.c->trace);
     if (!s.ok()) cx.Fail(s);
-    return glm::exp(-tau);
+    return TransmittanceOf(tau);
   }
   Status s = cx.tracer->Traverse(
       gr,
@@ -110,7 +120,7 @@ glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx
       },
       &cx.c->trace);
   if (!s.ok()) cx.Fail(s);
-  return glm::exp(-tau);
+  return TransmittanceOf(tau);
 }
 
 glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone,
@@ -319,12 +329,14 @@ class LightAlongRay {
     tb_ = t;
     lb_ = light_at_(t, h);
     geometric_ = tb_ > ta_;
-    for (int k = 0; k < 3; ++k) {
+    // A white light in grey fog: one rate for the three channels.
+    const bool grey = la_[0] == la_[1] && la_[0] == la_[2] && lb_[0] == lb_[1] && lb_[0] == lb_[2];
+    for (int k = 0; k < (grey ? 1 : 3); ++k) {
       geometric_ = geometric_ && la_[k] > 0 && lb_[k] > 0;
       if (geometric_) rate_[k] = std::log(la_[k] / lb_[k]) / (tb_ - ta_);
     }
-    grey_ = geometric_ && rate_[0] == rate_[1] && rate_[0] == rate_[2] && la_[0] == la_[1] &&
-            la_[0] == la_[2];
+    if (grey) rate_[1] = rate_[2] = rate_[0];
+    grey_ = geometric_ && grey;
     lt_ = -kInf;  // l_ is recomputed from la_ at the new rates
   }
 
@@ -341,7 +353,7 @@ class LightAlongRay {
 }  // namespace
 
 glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmittance,
-                         double* first_t, const Cone* cone) const {
+                         double* first_t, const Cone* cone, const StartPlane* start) const {
   const VolumeMedium& v = scene_.volume;
   const FogModel& model = fog_model_;  // render/fog_material.h
   const bool has_density = volume_->meta().has_density;
@@ -417,6 +429,39 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     trans *= seg_trans;
     return !cx.failed() && std::min({tau.x, tau.y, tau.z}) <= kMaxOpticalDepth;
   };
+  // Runs of cells of one density and temperature that follow each other
+  // along the ray (the inside of a fog: its uniform blocks and full bricks)
+  // are integrated as one cell: the integral over the run is the same, and
+  // each cell's set-up (its exponentials, the light's integral) is paid
+  // once per run. The run is closed where it would pass the optical depth
+  // at which the ray stops, so the walk stops where it did cell by cell.
+  double run_t0 = 0.0, run_t1 = -kInf, run_rho = 0.0, run_temp = 0.0, run_st = 0.0;
+  auto flush = [&] {
+    if (!(run_t1 > -kInf)) return true;
+    const double t0 = run_t0, t1 = run_t1;
+    run_t1 = -kInf;
+    return cell(t0, t1, run_rho, run_temp);
+  };
+  auto add = [&](double t0, double t1, double rho, double temp) {
+    if (run_t1 > -kInf && rho == run_rho && temp == run_temp &&
+        std::abs(t0 - run_t1) <= 1e-12 * (1.0 + std::abs(run_t1)) &&
+        (t1 - run_t0) * run_st + std::min({tau.x, tau.y, tau.z}) <= kMaxOpticalDepth) {
+      run_t1 = std::max(run_t1, t1);
+      return true;
+    }
+    if (!flush()) return false;
+    if (rho != last_rho || temp != last_temp) {
+      m = model.At(rho, temp);
+      last_rho = rho;
+      last_temp = temp;
+    }
+    run_t0 = t0;
+    run_t1 = t1;
+    run_rho = rho;
+    run_temp = temp;
+    run_st = std::max({m.extinction.x, m.extinction.y, m.extinction.z});
+    return true;
+  };
   Status s;
   if (cone != nullptr && !lod_->Exact(gr, *cone)) {
     s = lod_->Traverse(
@@ -428,10 +473,10 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
               !Density(seg.hit, cx, &rho, seg.volume, wants_temp ? &temp : nullptr, &levels))
             return Visit::kStop;
           if (levels > 0) t1 = BlockExitT(gr, seg.hit, seg.level, levels, seg.t_end);
-          if (!cell(seg.t0, t1, rho, temp)) return Visit::kStop;
+          if (!add(seg.t0, t1, rho, temp)) return Visit::kStop;
           return SkipBlock(levels);
         },
-        &cx.c->trace);
+        &cx.c->trace, start);
   } else {
     s = cx.tracer->Traverse(
         gr,
@@ -443,13 +488,14 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
             return Visit::kStop;
           const double t1 =
               levels > 0 ? BlockExitT(gr, h, 0, levels, kInf) : VoxelExitT(gr, h.voxel);
-          if (!cell(h.t, t1, rho, temp)) return Visit::kStop;
+          if (!add(h.t, t1, rho, temp)) return Visit::kStop;
           return SkipBlock(levels);
         },
-        &cx.c->trace);
+        &cx.c->trace, start);
   }
+  if (s.ok()) flush();
   if (!s.ok()) cx.Fail(s);
-  *transmittance = glm::exp(-tau);
+  *transmittance = TransmittanceOf(tau);
   return scattered;
 }
 

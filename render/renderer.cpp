@@ -189,7 +189,7 @@ void Renderer::ShadePixel(const WorldRay& wr, TraceContext& cx, Sample* out,
   if (fog_) {
     glm::dvec3 T(1.0);
     double first_t = kInf;
-    glm::dvec3 l = Fog(gr, cx, &T, &first_t, lod ? cone : nullptr);
+    glm::dvec3 l = Fog(gr, cx, &T, &first_t, lod ? cone : nullptr, start);
     // Premultiplied: the background only when the scene puts it in the EXR
     // (seen through each channel's transmittance; alpha: their mean).
     out->color = scene_.background_in_exr ? l + T * Background(wr.dir) : l;

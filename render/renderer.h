@@ -323,10 +323,11 @@ class Renderer {
   static Cone SecondaryCone(const Cone& cone, double t) { return Cone{cone.Width(t), cone.spread}; }
 
   // fog.cpp: volumes.
-  // `cone`: trace with LOD (nullptr: exactly).
+  // `cone`: trace with LOD (nullptr: exactly). `start` (may be null): the
+  // primary ray's beam StartPlane (no fog before it in the base volume).
   // *transmittance: per channel (fog_material.h: RGB extinction).
   glm::dvec3 Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmittance, double* first_t,
-                 const Cone* cone = nullptr) const;
+                 const Cone* cone = nullptr, const StartPlane* start = nullptr) const;
   // The density (and, with `temperature`, the temperature) of fog voxel h;
   // *uniform_levels (when given): see Volume::PinnedDensity (-1: not known,
   // always so with a temperature).

@@ -75,7 +75,7 @@ class Renderer::TileRays {
   TileRays(const Renderer& r, const TileRect& rect)
       : camera_(r.camera_), rect_(rect), spp_(r.scene_.samples_per_pixel),
         block_(std::max(1, r.options_.beam_block)) {
-    if (r.options_.beam && !r.fog_) planes_ = r.BeamPlanes(rect);
+    if (r.options_.beam) planes_ = r.BeamPlanes(rect);
     screen_x_.resize(size_t(spp_) * size_t(rect.w));
     screen_y_.resize(size_t(spp_) * size_t(rect.h));
     for (int k = 0; k < spp_; ++k) {

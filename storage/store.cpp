@@ -103,8 +103,9 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id, con
                              ", the brick table says " + std::to_string(e.raw_size));
     ZSTD_DCtx* dctx = ThreadDCtx();
     if (dctx == nullptr) return ResourceExhaustedError("cannot allocate a zstd context");
-    raw.resize(e.raw_size);
-    size_t n = ZSTD_decompressDCtx(dctx, raw.data(), raw.size(), record, e.stored_size);
+    // (grown, never shrunk: a resize back up would zero the bytes zstd writes)
+    if (raw.size() < e.raw_size) raw.resize(e.raw_size);
+    size_t n = ZSTD_decompressDCtx(dctx, raw.data(), e.raw_size, record, e.stored_size);
     if (ZSTD_isError(n))
       return CorruptionError(where() + ": zstd: " + ZSTD_getErrorName(n));
     if (n != e.raw_size)

@@ -4,7 +4,6 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
-#include <mutex>
 #include <type_traits>
 
 #if defined(__SSE2__)
@@ -13,6 +12,7 @@
 
 #include <glm/gtc/packing.hpp>
 
+#include "storage/internal/brick_uniform.h"
 #include "storage/internal/coding.h"
 
 namespace vox::storage_internal {
@@ -354,145 +354,6 @@ struct MaskChecker {
     return true;
   }
 };
-
-}  // namespace
-
-namespace {
-
-// Whether the n bytes at p all equal `byte`.
-bool AllBytesAre(const uint8_t* p, size_t n, uint8_t byte) {
-  const uint64_t want = uint64_t(byte) * 0x0101010101010101ull;
-  uint64_t diff = 0;
-  size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    uint64_t v;
-    std::memcpy(&v, p + i, 8);
-    diff |= v ^ want;
-  }
-  for (; i < n; ++i) diff |= uint64_t(p[i] ^ byte);
-  return diff == 0;
-}
-
-// Sets b's uniform_density, or its uniform_levels: bottom-up, each full
-// cell's one density (or -1); top-down, each cell's largest block of one
-// density around it. `level_start[l]`: the first cell of level l (level
-// order), level_start[depth] the cell count.
-void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) {
-  const uint32_t n = uint32_t(b->cells.size());
-  const uint8_t* planes = b->attr_planes.data();
-  const uint8_t* density_planes = planes + ((b->flags & kAttrNormal) ? size_t(4) * b->voxel_count : 0);
-  // (A brick deeper than 10 levels cannot be full: its voxel count is 32-bit.)
-  if (depth <= 10 && uint64_t(b->voxel_count) == uint64_t(1) << (3 * depth)) {
-    // A full brick (the inside of a fog): of one density when each byte
-    // plane holds one byte throughout.
-    bool same = true;
-    for (size_t k = 0; k < 4 && same; ++k) {
-      const uint8_t* q = density_planes + k * b->voxel_count;
-      same = AllBytesAre(q, b->voxel_count, q[0]);
-    }
-    const float d = same ? ReadDensity(planes, b->voxel_count, b->flags, 0) : -1.0f;
-    if (d >= 0 && std::isfinite(d)) {
-      b->uniform_density = d;
-      return;
-    }
-  }
-  thread_local std::vector<float> one;  // per cell: its density when of one, else -1
-  thread_local std::vector<int8_t> levels;  // per cell: its block's levels, or -1
-  one.assign(n, -1.0f);
-  bool any = false;
-  for (int l = depth - 1; l >= 0; --l)
-    for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {
-      const CompactCell c = b->cells[i];
-      if (ChildMask(c) != 0xffu) continue;
-      const uint32_t first = c.bits >> 8;
-      float d;
-      if (l == depth - 1) {
-        // Its 8 voxels are payloads first..first+7: one density when each
-        // byte plane holds 8 equal bytes there.
-        bool same = true;
-        for (size_t k = 0; k < 4 && same; ++k) {
-          uint64_t v;
-          std::memcpy(&v, density_planes + k * b->voxel_count + first, 8);
-          same = v == uint64_t(density_planes[k * b->voxel_count + first]) * 0x0101010101010101ull;
-        }
-        d = same ? ReadDensity(planes, b->voxel_count, b->flags, first) : -1.0f;
-        if (!(d >= 0 && std::isfinite(d))) d = -1.0f;
-      } else {
-        d = one[first];
-        for (uint32_t k = 1; k < 8 && d >= 0; ++k)
-          if (one[first + k] != d) d = -1.0f;
-      }
-      one[i] = d;
-      any = any || d >= 0;
-    }
-  if (!any) return;
-  if (one[0] >= 0) {  // the root: the whole brick
-    b->uniform_density = one[0];
-    return;
-  }
-  levels.assign(n, -1);
-  b->uniform_levels.assign(b->voxel_count, DecodedBrick::kNotUniform);
-  for (int l = 0; l < depth; ++l)
-    for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {
-      int8_t mine = levels[i] >= 0 ? levels[i] : one[i] >= 0 ? int8_t(depth - l) : int8_t(-1);
-      const CompactCell c = b->cells[i];
-      const uint32_t first = c.bits >> 8, kids = Popcount8(ChildMask(c));
-      if (l < depth - 1) {
-        for (uint32_t k = 0; k < kids; ++k) levels[first + k] = mine;
-      } else if (mine >= 0) {
-        for (uint32_t k = 0; k < kids; ++k) b->uniform_levels[first + k] = uint8_t(mine);
-      }
-    }
-}
-
-}  // namespace
-
-std::span<const CompactCell> FullPool(int depth) {
-  static std::once_flag once[kMaxFullPoolDepth + 1];
-  static std::vector<CompactCell> pools[kMaxFullPoolDepth + 1];
-  if (depth < 1 || depth > kMaxFullPoolDepth) return {};
-  std::call_once(once[depth], [depth] {
-    std::vector<CompactCell>& pool = pools[depth];
-    // Level l holds 8^l cells from start = (8^l - 1) / 7; cell j's children
-    // are cells (or, at the last level, payloads) 8j..8j+7 of the next.
-    for (int l = 0; l < depth; ++l) {
-      const uint32_t cells = uint32_t(1) << (3 * l), next = (uint32_t(1) << (3 * (l + 1))) / 7;
-      for (uint32_t j = 0; j < cells; ++j)
-        pool.push_back(MakeCompactCell(l == depth - 1 ? 8 * j : next + 8 * j, 0xffu));
-    }
-  });
-  return pools[depth];
-}
-
-namespace {
-
-// A brick record of `depth` levels with every voxel occupied, all with
-// voxel 0's attributes, as a full_of_one DecodedBrick; null when it is not
-// one. `masks` and `planes` are the record's (DeltaPlanes form: each plane
-// holds voxel 0's byte, then the differences, which are all zero).
-std::shared_ptr<DecodedBrick> DecodeFullOfOne(const uint8_t* masks, uint32_t num_cells,
-                                              const uint8_t* planes, uint32_t voxel_count,
-                                              int depth, uint8_t flags) {
-  if (depth > kMaxFullPoolDepth || voxel_count != uint32_t(1) << (3 * depth)) return nullptr;
-  const std::span<const CompactCell> pool = FullPool(depth);
-  if (num_cells != pool.size() || !AllBytesAre(masks, num_cells, 0xff)) return nullptr;
-  const size_t bytes = AttrBytesPerVoxel(flags);
-  for (size_t k = 0; k < bytes; ++k)
-    if (!AllBytesAre(planes + k * voxel_count + 1, voxel_count - 1, 0)) return nullptr;
-  auto b = std::make_shared<DecodedBrick>();
-  b->full_of_one = true;
-  b->shared_cells = pool.data();
-  b->shared_cell_count = uint32_t(pool.size());
-  b->attr_planes.resize(bytes);
-  for (size_t k = 0; k < bytes; ++k) b->attr_planes[k] = planes[k * voxel_count];
-  b->voxel_count = voxel_count;
-  b->flags = flags;
-  if (flags & kAttrDensity) {
-    const float d = ReadDensity(b->attr_planes.data(), 1, flags, 0);
-    if (d >= 0 && std::isfinite(d)) b->uniform_density = d;
-  }
-  return b;
-}
 
 }  // namespace
 

@@ -3,7 +3,7 @@
 // and orthographic cameras (outside the volume, inside it, inside an occupied
 // voxel), several splits and beam block sizes, several samples per pixel,
 // lights with shadows and the normal and voxel layers; the beam must save
-// walk work; a bad block size is refused.
+// walk work; the same for fog; a bad block size is refused.
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -106,6 +106,44 @@ TEST(BeamRender, SamePixelsWithAndWithoutTheBeam) {
         cells_off += off.counters.trace.cells_visited;
         ++k;
       }
+  EXPECT_LT(cells_on, cells_off);
+}
+
+TEST(BeamRender, FogSamePixelsWithAndWithoutTheBeam) {
+  // A fog of two spheres of different densities, lit with shadows: a fog
+  // ray starts its walk at its block's plane, and the integral is the same.
+  const StoreMeta meta = TestMeta(6, GridClass::kFogVolume, 0.5);
+  Part a = Sphere({10, 12, 14}, 6), b = Sphere({22, 20, 12}, 4);
+  a.density = 0.7f;
+  b.density = 2.5f;
+  auto vol = MakeVolume(meta, {a, b});
+  ASSERT_NE(vol, nullptr);
+  auto scene = ParseScene(
+      R"({"lights": [{"type": "directional", "direction": [-1, -2, -1], "intensity": 1,
+                      "shadows": true}], "samples_per_pixel": 2})",
+      "scene");
+  ASSERT_TRUE(scene.ok()) << scene.status().ToString();
+  const std::vector<Camera> cams = {
+      Cam(Projection::kPerspective, {36, 30, 40}, {16, 16, 14}, 53, 41),
+      Cam(Projection::kPerspective, {10, 12, 14}, {30, 14, 16}, 32, 32),  // inside the fog
+      Cam(Projection::kOrthographic, {16, 16, 60}, {16, 16, 0}, 40, 36)};
+  uint64_t cells_on = 0, cells_off = 0;
+  for (size_t k = 0; k < cams.size(); ++k) {
+    const Out off = Render(vol.get(), cams[k], *scene, false, 3, 8);
+    const Out on = Render(vol.get(), cams[k], *scene, true, 3, 8);
+    ASSERT_EQ(off.img.ch.size(), on.img.ch.size());
+    for (const auto& [name, px] : off.img.ch) {
+      const std::vector<float>& q = on.img.ch.at(name);
+      ASSERT_EQ(px.size(), q.size());
+      for (size_t i = 0; i < px.size(); ++i)
+        ASSERT_EQ(std::memcmp(&px[i], &q[i], sizeof(float)), 0)
+            << "camera " << k << " channel " << name << " pixel " << i << ": " << px[i] << " vs "
+            << q[i];
+    }
+    EXPECT_GT(on.counters.hit_pixels, on.counters.pixels / 20) << "camera " << k;
+    cells_on += on.counters.trace.cells_visited;
+    cells_off += off.counters.trace.cells_visited;
+  }
   EXPECT_LT(cells_on, cells_off);
 }
 

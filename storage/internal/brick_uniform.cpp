@@ -1,0 +1,150 @@
+// Bricks and blocks of one density (brick_uniform.h).
+#include "storage/internal/brick_uniform.h"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <mutex>
+#include <span>
+#include <vector>
+
+#include "core/octree.h"
+#include "storage/internal/format.h"
+
+namespace vox::storage_internal {
+
+bool AllBytesAre(const uint8_t* p, size_t n, uint8_t byte) {
+  const uint64_t want = uint64_t(byte) * 0x0101010101010101ull;
+  uint64_t diff = 0;
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    uint64_t v;
+    std::memcpy(&v, p + i, 8);
+    diff |= v ^ want;
+  }
+  for (; i < n; ++i) diff |= uint64_t(p[i] ^ byte);
+  return diff == 0;
+}
+
+void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) {
+  const uint32_t n = uint32_t(b->cells.size());
+  const uint8_t* planes = b->attr_planes.data();
+  const uint8_t* density_planes = planes + ((b->flags & kAttrNormal) ? size_t(4) * b->voxel_count : 0);
+  // (A brick deeper than 10 levels cannot be full: its voxel count is 32-bit.)
+  if (depth <= 10 && uint64_t(b->voxel_count) == uint64_t(1) << (3 * depth)) {
+    // A full brick (the inside of a fog): of one density when each byte
+    // plane holds one byte throughout.
+    bool same = true;
+    for (size_t k = 0; k < 4 && same; ++k) {
+      const uint8_t* q = density_planes + k * b->voxel_count;
+      same = AllBytesAre(q, b->voxel_count, q[0]);
+    }
+    const float d = same ? ReadDensity(planes, b->voxel_count, b->flags, 0) : -1.0f;
+    if (d >= 0 && std::isfinite(d)) {
+      b->uniform_density = d;
+      return;
+    }
+  }
+  // Bottom-up: each full cell's one density (its bits), or kMixed.
+  constexpr uint32_t kMixed = 0xffffffffu;  // (a NaN's bits: never a block's density)
+  thread_local std::vector<uint32_t> one;
+  thread_local std::vector<int8_t> levels;  // per cell: its block's levels, or -1
+  one.assign(n, kMixed);
+  const size_t count = b->voxel_count;
+  const uint8_t* d0 = density_planes;
+  const uint8_t* d1 = d0 + count;
+  const uint8_t* d2 = d1 + count;
+  const uint8_t* d3 = d2 + count;
+  auto same8 = [](const uint8_t* p) {  // the 8 bytes at p are one
+    uint64_t v;
+    std::memcpy(&v, p, 8);
+    return v == uint64_t(p[0]) * 0x0101010101010101ull;
+  };
+  bool any = false;
+  for (uint32_t i = level_start[depth - 1]; i < level_start[depth]; ++i) {
+    // A last-level cell's 8 voxels are payloads first..first+7: of one
+    // density when each byte plane holds 8 equal bytes there.
+    const CompactCell c = b->cells[i];
+    if (ChildMask(c) != 0xffu) continue;
+    const uint32_t first = c.bits >> 8;
+    if (!(same8(d0 + first) && same8(d1 + first) && same8(d2 + first) && same8(d3 + first))) continue;
+    const uint32_t bits = uint32_t(d0[first]) | uint32_t(d1[first]) << 8 |
+                          uint32_t(d2[first]) << 16 | uint32_t(d3[first]) << 24;
+    const float d = std::bit_cast<float>(bits);
+    if (!(d >= 0 && std::isfinite(d))) continue;
+    one[i] = bits;
+    any = true;
+  }
+  if (!any) return;  // (no block of 2^3: none larger either)
+  for (int l = depth - 2; l >= 0; --l)
+    for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {
+      const CompactCell c = b->cells[i];
+      if (ChildMask(c) != 0xffu) continue;
+      const uint32_t first = c.bits >> 8, d = one[first];
+      bool same = d != kMixed;
+      for (uint32_t k = 1; k < 8 && same; ++k) same = one[first + k] == d;
+      if (same) one[i] = d;
+    }
+  if (one[0] != kMixed) {  // the root: the whole brick
+    b->uniform_density = std::bit_cast<float>(one[0]);
+    return;
+  }
+  // Top-down: a cell in a block of one density takes the largest such
+  // block's levels. Such a cell is full, as all its descendants are.
+  levels.assign(n, -1);
+  b->uniform_levels.assign(count, DecodedBrick::kNotUniform);
+  for (int l = 0; l < depth; ++l)
+    for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {
+      const int8_t mine = levels[i] >= 0 ? levels[i] : one[i] != kMixed ? int8_t(depth - l) : int8_t(-1);
+      if (mine < 0) continue;
+      const uint32_t first = b->cells[i].bits >> 8;
+      if (l < depth - 1) {
+        std::memset(&levels[first], mine, 8);
+      } else {
+        std::memset(&b->uniform_levels[first], uint8_t(mine), 8);
+      }
+    }
+}
+
+std::span<const CompactCell> FullPool(int depth) {
+  static std::once_flag once[kMaxFullPoolDepth + 1];
+  static std::vector<CompactCell> pools[kMaxFullPoolDepth + 1];
+  if (depth < 1 || depth > kMaxFullPoolDepth) return {};
+  std::call_once(once[depth], [depth] {
+    std::vector<CompactCell>& pool = pools[depth];
+    // Level l holds 8^l cells from start = (8^l - 1) / 7; cell j's children
+    // are cells (or, at the last level, payloads) 8j..8j+7 of the next.
+    for (int l = 0; l < depth; ++l) {
+      const uint32_t cells = uint32_t(1) << (3 * l), next = (uint32_t(1) << (3 * (l + 1))) / 7;
+      for (uint32_t j = 0; j < cells; ++j)
+        pool.push_back(MakeCompactCell(l == depth - 1 ? 8 * j : next + 8 * j, 0xffu));
+    }
+  });
+  return pools[depth];
+}
+
+std::shared_ptr<DecodedBrick> DecodeFullOfOne(const uint8_t* masks, uint32_t num_cells,
+                                              const uint8_t* planes, uint32_t voxel_count,
+                                              int depth, uint8_t flags) {
+  if (depth > kMaxFullPoolDepth || voxel_count != uint32_t(1) << (3 * depth)) return nullptr;
+  const std::span<const CompactCell> pool = FullPool(depth);
+  if (num_cells != pool.size() || !AllBytesAre(masks, num_cells, 0xff)) return nullptr;
+  const size_t bytes = AttrBytesPerVoxel(flags);
+  for (size_t k = 0; k < bytes; ++k)
+    if (!AllBytesAre(planes + k * voxel_count + 1, voxel_count - 1, 0)) return nullptr;
+  auto b = std::make_shared<DecodedBrick>();
+  b->full_of_one = true;
+  b->shared_cells = pool.data();
+  b->shared_cell_count = uint32_t(pool.size());
+  b->attr_planes.resize(bytes);
+  for (size_t k = 0; k < bytes; ++k) b->attr_planes[k] = planes[k * voxel_count];
+  b->voxel_count = voxel_count;
+  b->flags = flags;
+  if (flags & kAttrDensity) {
+    const float d = ReadDensity(b->attr_planes.data(), 1, flags, 0);
+    if (d >= 0 && std::isfinite(d)) b->uniform_density = d;
+  }
+  return b;
+}
+
+}  // namespace vox::storage_internal

@@ -1,0 +1,36 @@
+// Bricks and blocks of one density: the inside of a fog. A full brick whose
+// voxels all hold one value decodes to that value and a cell pool shared by
+// every such brick (FullPool); in other bricks, aligned blocks of 2^k voxels
+// of one density are found once at decode, so that rays cross each block as
+// one cell (Volume::PinnedDensity).
+#ifndef VOX_STORAGE_INTERNAL_BRICK_UNIFORM_H_
+#define VOX_STORAGE_INTERNAL_BRICK_UNIFORM_H_
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+
+#include "storage/internal/brick_codec.h"
+
+namespace vox::storage_internal {
+
+// Whether the n bytes at p all equal `byte`.
+bool AllBytesAre(const uint8_t* p, size_t n, uint8_t byte);
+
+// A brick record of `depth` levels with every voxel occupied, all with
+// voxel 0's attributes, as a full_of_one DecodedBrick; null when it is not
+// one. `masks` and `planes` are the record's (DeltaPlanes form: each plane
+// holds voxel 0's byte, then the differences, which are all zero).
+std::shared_ptr<DecodedBrick> DecodeFullOfOne(const uint8_t* masks, uint32_t num_cells,
+                                              const uint8_t* planes, uint32_t voxel_count,
+                                              int depth, uint8_t flags);
+
+// Sets b's uniform_density, or its uniform_levels: bottom-up, each full
+// cell's one density; top-down, each cell's largest block of one density
+// around it. `level_start[l]`: the first cell of level l (level order),
+// level_start[depth] the cell count. b's planes are decoded (not deltas).
+void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start);
+
+}  // namespace vox::storage_internal
+
+#endif  // VOX_STORAGE_INTERNAL_BRICK_UNIFORM_H_
