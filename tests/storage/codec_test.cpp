@@ -10,6 +10,7 @@
 
 #include "core/shapes.h"
 #include "storage/internal/brick_codec.h"
+#include "storage/internal/brick_uniform.h"
 #include "storage/internal/format.h"
 #include "storage/internal/store_impl.h"
 #include "tests/storage/test_util.h"
@@ -321,6 +322,24 @@ TEST(BrickDecoder, FullBrickOfOneValueSharesThePool) {
   // A full brick deeper than the shared pools decodes as any other.
   EXPECT_TRUE(FullPool(kMaxFullPoolDepth + 1).empty());
   EXPECT_EQ(FullPool(kMaxFullPoolDepth).size(), (size_t(1) << (3 * kMaxFullPoolDepth)) / 7);
+}
+
+// The byte scan full bricks are recognised by: one differing byte anywhere
+// (in the wide steps, between them, in the tail) is found.
+TEST(BrickDecoder, AllBytesAreFindsAnyDifferingByte) {
+  for (size_t n : {size_t(0), size_t(1), size_t(7), size_t(63), size_t(64), size_t(65), size_t(200)})
+    for (uint8_t byte : {uint8_t(0), uint8_t(0xff), uint8_t(0x5a)}) {
+      std::vector<uint8_t> v(n + 1, byte);
+      v[n] = uint8_t(~byte);  // past the end: never read
+      EXPECT_TRUE(AllBytesAre(v.data(), n, byte)) << n;
+      for (size_t i = 0; i < n; ++i) {
+        for (uint8_t flip : {uint8_t(1), uint8_t(0x80)}) {
+          v[i] = uint8_t(byte ^ flip);
+          EXPECT_FALSE(AllBytesAre(v.data(), n, byte)) << "n " << n << ", byte " << i;
+          v[i] = byte;
+        }
+      }
+    }
 }
 
 TEST(BrickDecoder, MutatedBricksNeverYieldABadPool) {
