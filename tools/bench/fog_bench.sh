@@ -46,11 +46,12 @@ cpu_wall() {  # runs "$@", prints "cpu wall" seconds of the whole process
   # 10 ms, a twentieth of these frames)
   python3 -c '
 import resource, subprocess, sys, time
-w = time.monotonic()
+def cpu():  # (children reaped before, e.g. by a launcher script, excluded)
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+c, w = cpu(), time.monotonic()
 subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
-w = time.monotonic() - w
-r = resource.getrusage(resource.RUSAGE_CHILDREN)
-print("%.4f %.4f" % (r.ru_utime + r.ru_stime, w))' "$@"
+print("%.4f %.4f" % (cpu() - c, time.monotonic() - w))' "$@"
 }
 
 median() { sort -n | awk '{ v[NR] = $1 } END { print v[int((NR + 1) / 2)] }'; }
