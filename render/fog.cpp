@@ -92,12 +92,13 @@ glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
           if (seg.t0 >= t_max) return Visit::kStop;
-          double t1 = seg.t1, rho = 1.0;
+          double rho = 1.0;
           int levels = -1;
           if ((seg.level > 0 || has_density) &&
               !Density(seg.hit, cx, &rho, seg.volume, nullptr, &levels))
             return Visit::kStop;
-          if (levels > 0) t1 = BlockExitT(gr, seg.hit, seg.level, levels, seg.t_end);
+          const double t1 =
+              levels > 0 ? BlockExitT(gr, seg.hit, seg.level, levels, seg.t_end) : seg.ExitT();
           tau += model.Extinction(rho) * std::max(0.0, std::min(t1, t_max) - seg.t0);
           if (opaque()) return Visit::kStop;
           return SkipBlock(levels);
@@ -467,12 +468,13 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     s = lod_->Traverse(
         *cx.tracer, cx.lod, gr, *cone,
         [&](const LodSegment& seg) {
-          double t1 = seg.t1, rho = 1.0, temp = 0.0;
+          double rho = 1.0, temp = 0.0;
           int levels = -1;
           if ((seg.level > 0 || has_density || wants_temp) &&
               !Density(seg.hit, cx, &rho, seg.volume, wants_temp ? &temp : nullptr, &levels))
             return Visit::kStop;
-          if (levels > 0) t1 = BlockExitT(gr, seg.hit, seg.level, levels, seg.t_end);
+          const double t1 =
+              levels > 0 ? BlockExitT(gr, seg.hit, seg.level, levels, seg.t_end) : seg.ExitT();
           if (!add(seg.t0, t1, rho, temp)) return Visit::kStop;
           return SkipBlock(levels);
         },

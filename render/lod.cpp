@@ -198,10 +198,11 @@ StatusOr<bool> LodTracer::FirstHit(const LodLevelTracer& base, const LodThread* 
       base, thread, gr, cone,
       [&](const LodSegment& seg) {
         if (run_active && seg.t0 <= run_end + eps * (1.0 + run_end)) {
-          run_end = std::max(run_end, seg.t1);
+          run_end = std::max(run_end, seg.ExitT());
           return true;
         }
         *out = seg;
+        out->walk = nullptr;  // (the walk's ray ends with it: ExitT is for visitors)
         found = true;
         if (attrs != nullptr) {
           // While the traversal pins the cell's brick.

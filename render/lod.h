@@ -88,10 +88,17 @@ struct LodCounters {
 struct LodSegment {
   int level = 0;        // 0: a base voxel
   Hit hit;              // as level `level`'s tracer reports it (voxel in that level's grid)
-  double t0 = 0, t1 = 0;  // where the ray (unscaled) enters and leaves it, clipped to the segment
-  double t_end = 0;       // where the ray's segment at this level ends (infinite for the last)
-  int n2 = 0;             // the second-step levels of this level's walk (Visit::kSkipBrick's reach)
+  double t0 = 0;        // where the ray (unscaled) enters it
+  double t_end = 0;     // where the ray's segment at this level ends (infinite for the last)
+  int n2 = 0;           // the second-step levels of this level's walk (Visit::kSkipBrick's reach)
   Volume* volume = nullptr;  // level `level`'s volume (HitAttributes while visiting)
+  // Where the ray (unscaled) leaves the cell, clipped to the segment: computed
+  // when asked, while visiting (a visitor that leaves a larger block never
+  // needs it).
+  double ExitT() const { return std::min(walk_t0 + VoxelExitT(*walk, hit.voxel), t_end); }
+
+  const Ray* walk = nullptr;  // the level's walk: its ray (in that level's grid) ...
+  double walk_t0 = 0;         // ... starts at this parameter of the unscaled ray
 };
 
 // The tracer of one coarse or base level.
@@ -170,7 +177,8 @@ class LodTracer {
 
   // The first occupied cell along the ray, after the run of cells it starts
   // in when `skip_start_run` (cells each entered within eps * (1 + t) of
-  // where the previous was left), with its attributes when `attrs`.
+  // where the previous was left), with its attributes when `attrs`. (*out's
+  // ExitT is not for use after the walk.)
   // False on a miss.
   StatusOr<bool> FirstHit(const LodLevelTracer& base, const LodThread* thread, const Ray& gr,
                           const Cone& cone, bool skip_start_run, double eps, LodSegment* out,
@@ -211,13 +219,14 @@ Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, 
     if (l == 0) {
       seg.volume = base_;
       seg.n2 = base.n2();
+      seg.walk = &gr;
+      seg.walk_t0 = 0.0;
       VOX_RETURN_IF_ERROR(base.Traverse(
           gr,
           [&](const Hit& h) {
             if (h.t >= t_b) return Visit::kStop;  // the segment ends
             seg.hit = h;
             seg.t0 = h.t;
-            seg.t1 = std::min(VoxelExitT(gr, h.voxel), t_b);
             const Visit v = AsVisit(visit(seg));
             stopped = v == Visit::kStop;
             return v;
@@ -232,6 +241,8 @@ Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, 
       const LodLevelTracer& tracer =
           thread != nullptr ? thread->level(l) : tracers_[size_t(l - 1)];
       seg.n2 = tracer.n2();
+      seg.walk = &cr;
+      seg.walk_t0 = start;
       VOX_RETURN_IF_ERROR(tracer.Traverse(
           cr,
           [&](const Hit& h) {
@@ -239,7 +250,6 @@ Status LodTracer::Traverse(const LodLevelTracer& base, const LodThread* thread, 
             if (t0 >= t_b) return Visit::kStop;
             seg.hit = h;
             seg.t0 = t0;
-            seg.t1 = std::min(start + VoxelExitT(cr, h.voxel), t_b);
             const Visit v = AsVisit(visit(seg));
             stopped = v == Visit::kStop;
             return v;
