@@ -59,6 +59,19 @@ Out Render(Volume* vol, const Camera& cam, const Scene& scene, bool beam, int n1
   return out;
 }
 
+// Every channel of every pixel of `a` and `b`, bit for bit.
+void ExpectSamePixels(const Image& a, const Image& b, int width, const std::string& what) {
+  ASSERT_EQ(a.ch.size(), b.ch.size()) << what;
+  for (const auto& [name, px] : a.ch) {
+    const std::vector<float>& q = b.ch.at(name);
+    ASSERT_EQ(px.size(), q.size()) << what;
+    for (size_t i = 0; i < px.size(); ++i)
+      ASSERT_EQ(std::memcmp(&px[i], &q[i], sizeof(float)), 0)
+          << what << " channel " << name << " pixel " << i % size_t(width) << ","
+          << i / size_t(width) << ": " << px[i] << " vs " << q[i];
+  }
+}
+
 TEST(BeamRender, SamePixelsWithAndWithoutTheBeam) {
   // 64^3 voxels of 0.5 world units: spheres, a thin slab and a lone voxel.
   const StoreMeta meta = TestMeta(6, GridClass::kLevelSet, 0.5);
@@ -86,15 +99,7 @@ TEST(BeamRender, SamePixelsWithAndWithoutTheBeam) {
         const Out on = Render(vol.get(), cam, *scene, true, n1, block);
         const std::string what = "camera " + std::to_string(k) + " n1 " + std::to_string(n1) +
                                  " block " + std::to_string(block);
-        ASSERT_EQ(off.img.ch.size(), on.img.ch.size());
-        for (const auto& [name, px] : off.img.ch) {
-          const std::vector<float>& q = on.img.ch.at(name);
-          ASSERT_EQ(px.size(), q.size());
-          for (size_t i = 0; i < px.size(); ++i)
-            ASSERT_EQ(std::memcmp(&px[i], &q[i], sizeof(float)), 0)
-                << what << " channel " << name << " pixel " << i % size_t(cam.width) << ","
-                << i / size_t(cam.width) << ": " << px[i] << " vs " << q[i];
-        }
+        ASSERT_NO_FATAL_FAILURE(ExpectSamePixels(off.img, on.img, cam.width, what));
         EXPECT_EQ(off.counters.hit_pixels, on.counters.hit_pixels) << what;
         EXPECT_GT(on.counters.hit_pixels, on.counters.pixels / 20) << what;
         EXPECT_EQ(off.counters.trace.hits, on.counters.trace.hits) << what;
@@ -131,15 +136,8 @@ TEST(BeamRender, FogSamePixelsWithAndWithoutTheBeam) {
   for (size_t k = 0; k < cams.size(); ++k) {
     const Out off = Render(vol.get(), cams[k], *scene, false, 3, 8);
     const Out on = Render(vol.get(), cams[k], *scene, true, 3, 8);
-    ASSERT_EQ(off.img.ch.size(), on.img.ch.size());
-    for (const auto& [name, px] : off.img.ch) {
-      const std::vector<float>& q = on.img.ch.at(name);
-      ASSERT_EQ(px.size(), q.size());
-      for (size_t i = 0; i < px.size(); ++i)
-        ASSERT_EQ(std::memcmp(&px[i], &q[i], sizeof(float)), 0)
-            << "camera " << k << " channel " << name << " pixel " << i << ": " << px[i] << " vs "
-            << q[i];
-    }
+    ASSERT_NO_FATAL_FAILURE(
+        ExpectSamePixels(off.img, on.img, cams[k].width, "camera " + std::to_string(k)));
     EXPECT_GT(on.counters.hit_pixels, on.counters.pixels / 20) << "camera " << k;
     cells_on += on.counters.trace.cells_visited;
     cells_off += off.counters.trace.cells_visited;
