@@ -67,10 +67,6 @@ double BlockExitT(const Ray& gr, const Hit& h, int level, int levels, double t_e
   return std::min(t_end, VoxelExitT(Ray{gr.origin * s, gr.dir * s}, box));
 }
 
-}  // namespace
-
-namespace {
-
 // e^(-tau) per channel; one exponential for grey fog's three equal channels.
 glm::dvec3 TransmittanceOf(const glm::dvec3& tau) {
   if (tau.x == tau.y && tau.x == tau.z) return glm::dvec3(std::exp(-tau.x));
@@ -434,8 +430,10 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
   // along the ray (the inside of a fog: its uniform blocks and full bricks)
   // are integrated as one cell: the integral over the run is the same, and
   // each cell's set-up (its exponentials, the light's integral) is paid
-  // once per run. The run is closed where it would pass the optical depth
-  // at which the ray stops, so the walk stops where it did cell by cell.
+  // once per run. A cell continues the run when it starts where the run
+  // ends (a voxel's entry is its neighbour's exit, up to rounding). The run
+  // is closed where it would pass the optical depth at which the ray stops,
+  // so the walk stops where it did cell by cell.
   double run_t0 = 0.0, run_t1 = -kInf, run_rho = 0.0, run_temp = 0.0, run_st = 0.0;
   auto flush = [&] {
     if (!(run_t1 > -kInf)) return true;
@@ -495,8 +493,11 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
         },
         &cx.c->trace, start);
   }
-  if (s.ok()) flush();
-  if (!s.ok()) cx.Fail(s);
+  if (s.ok()) {
+    flush();
+  } else {
+    cx.Fail(s);
+  }
   *transmittance = TransmittanceOf(tau);
   return scattered;
 }
