@@ -389,22 +389,13 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     return l;
   });
   *first_t = kInf;
-  // One occupied cell [t0, t1] of density rho and temperature temp (Cone:
-  // `level` > 0 for coarse cells): its medium per channel (FogModel), the
-  // light it scatters and the light it emits, each seen through the cell
-  // up to where it arises.
-  // (the medium of the last cell's density and temperature, kept: the
-  // inside of a fog repeats them)
-  double last_rho = std::numeric_limits<double>::quiet_NaN(), last_temp = 0.0;
+  // One occupied cell [t0, t1] of medium m (per channel, FogModel::At of
+  // its density and temperature): the light it scatters and the light it
+  // emits, each seen through the cell up to where it arises.
   FogSample m;
-  auto cell = [&](double t0, double t1, double rho, double temp) {
+  auto cell = [&](double t0, double t1) {
     if (*first_t == kInf) *first_t = t0;
     const double len = std::max(0.0, t1 - t0);
-    if (!(rho == last_rho && temp == last_temp)) {
-      m = model.At(rho, temp);
-      last_rho = rho;
-      last_temp = temp;
-    }
     const glm::dvec3& st = m.extinction;
     const double st_max = std::max({st.x, st.y, st.z});
     if (st_max <= 0 && !model.emits()) return true;
@@ -433,13 +424,15 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
   // once per run. A cell continues the run when it starts where the run
   // ends (a voxel's entry is its neighbour's exit, up to rounding). The run
   // is closed where it would pass the optical depth at which the ray stops,
-  // so the walk stops where it did cell by cell.
-  double run_t0 = 0.0, run_t1 = -kInf, run_rho = 0.0, run_temp = 0.0, run_st = 0.0;
+  // so the walk stops where it did cell by cell. m is the run's medium,
+  // kept for the next run of the same density and temperature.
+  double run_t0 = 0.0, run_t1 = -kInf, run_st = 0.0;
+  double run_rho = std::numeric_limits<double>::quiet_NaN(), run_temp = 0.0;
   auto flush = [&] {
     if (!(run_t1 > -kInf)) return true;
     const double t0 = run_t0, t1 = run_t1;
     run_t1 = -kInf;
-    return cell(t0, t1, run_rho, run_temp);
+    return cell(t0, t1);
   };
   auto add = [&](double t0, double t1, double rho, double temp) {
     if (run_t1 > -kInf && rho == run_rho && temp == run_temp &&
@@ -449,16 +442,14 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
       return true;
     }
     if (!flush()) return false;
-    if (rho != last_rho || temp != last_temp) {
+    if (!(rho == run_rho && temp == run_temp)) {
       m = model.At(rho, temp);
-      last_rho = rho;
-      last_temp = temp;
+      run_rho = rho;
+      run_temp = temp;
+      run_st = std::max({m.extinction.x, m.extinction.y, m.extinction.z});
     }
     run_t0 = t0;
     run_t1 = t1;
-    run_rho = rho;
-    run_temp = temp;
-    run_st = std::max({m.extinction.x, m.extinction.y, m.extinction.z});
     return true;
   };
   Status s;
