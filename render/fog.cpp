@@ -2,6 +2,8 @@
 // primary ray, and the transmittance of the rays towards the lights.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 
 #include "render/internal/fog_math.h"
@@ -65,6 +67,20 @@ double BlockExitT(const Ray& gr, const Hit& h, int level, int levels, double t_e
   const glm::i64vec3 box(h.voxel.x >> levels, h.voxel.y >> levels, h.voxel.z >> levels);
   const double s = Pow2(-(level + levels));
   return std::min(t_end, VoxelExitT(Ray{gr.origin * s, gr.dir * s}, box));
+}
+
+// floor(log2(x)) and whether x is a power of two, for a positive x: from
+// its bits when normal and finite (libm's ilogb's value, without a call).
+int FloorLog2(double x, bool* power_of_two) {
+  uint64_t bits;
+  std::memcpy(&bits, &x, sizeof bits);
+  const int biased = int(bits >> 52) & 0x7ff;
+  if (biased == 0 || biased == 0x7ff) {
+    *power_of_two = x == std::ldexp(1.0, std::ilogb(x));
+    return std::ilogb(x);
+  }
+  *power_of_two = (bits & ((uint64_t(1) << 52) - 1)) == 0;
+  return biased - 1023;
 }
 
 // e^(-tau) per channel; one exponential for grey fog's three equal channels.
@@ -145,13 +161,6 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
   return light_in;
 }
 
-// The largest log-ratio of the light at a lattice block's corners that is
-// interpolated (a factor of e). At the light's terminator (the fog's
-// silhouette seen from the light) the light falls as the square root of
-// the depth, so blocks there differ most; interpolating up to a factor of e
-// keeps the default frames' error (docs/performance.md) and leaves far
-// fewer samples to trace their own rays.
-constexpr double kMaxLatticeLogRatio = 1.0;
 // The lattice's least spacing in pixel footprints.
 constexpr double kMinLatticeFootprints = 4.0;
 // The width, in lattice spacings, at which a lattice point's transmittance
@@ -171,8 +180,10 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
   if (!scene_.volume.light_lattice || cone == nullptr) return LightAtPoint(p_g, cx, cone);
   const double min_spacing = kMinLatticeFootprints * std::max(1.0, cone->Width(t));
   if (!(0.5 * h_vox >= min_spacing)) return LightAtPoint(p_g, cx, cone);
-  const int top = std::min(kMaxLightLatticeLevel, std::ilogb(0.5 * h_vox));
-  const int finest = std::min(top, std::max(0, int(std::ceil(std::log2(min_spacing)))));
+  bool exact;
+  const int top = std::min(kMaxLightLatticeLevel, FloorLog2(0.5 * h_vox, &exact));
+  const int finest_log2 = FloorLog2(min_spacing, &exact) + (exact ? 0 : 1);  // ceil(log2)
+  const int finest = std::min(top, std::max(0, finest_log2));
   for (int level = top; level >= finest; --level) {
     glm::dvec3 out;
     bool ok = true;
@@ -190,46 +201,39 @@ bool Renderer::LatticeLight(const glm::dvec3& p_g, int level, TraceContext& cx, 
   const glm::dvec3 f0 = glm::floor(u);
   const glm::i64vec3 i0(f0);
   const glm::dvec3 f = u - f0;
-  glm::dvec3 corner[8];
   // A lattice point's rays start a quarter of its spacing wide: the point
   // stands for the block around it, whose finer detail the interpolation
   // does not keep either.
   const double start_width = kLatticeStartWidth * s;
-  *ok = cache->Block(level, i0,
-                     [&](const glm::dvec3& q, glm::dvec3* log_light) {
-                       const glm::dvec3 l = LightAtPoint(q, cx, cone, nullptr, start_width);
-                       if (cx.failed()) return false;
-                       *log_light = glm::log(l);  // -inf where no light arrives
-                       return true;
-                     },
-                     corner);
+  const render_internal::LatticeBlock* b =
+      cache->Block(level, i0, [&](const glm::dvec3& q, glm::dvec3* log_light) {
+        const glm::dvec3 l = LightAtPoint(q, cx, cone, nullptr, start_width);
+        if (cx.failed()) return false;
+        *log_light = glm::log(l);  // -inf where no light arrives
+        return true;
+      });
+  *ok = b != nullptr;
   if (!*ok) return true;
   // Trilinear in the logarithm: exact where the light decays exponentially
   // across the block, as in fog of even density. Where the corners' light
   // differs by more than e^kMaxLatticeLogRatio (the block straddles a
   // shadow's edge or the rim of thick fog), or a corner has none where
-  // others have some, a finer block is tried.
+  // others have some, a finer block is tried (LatticeBlock::kSteep).
+  if (b->shape == render_internal::LatticeBlock::kSteep) return false;
   // A white light through grey fog: the three channels are one.
-  bool grey = true;
-  for (int c = 0; c < 8 && grey; ++c) grey = corner[c].x == corner[c].y && corner[c].x == corner[c].z;
-  for (int k = 0; k < (grey ? 1 : 3); ++k) {
-    double v[8], lo = kInf, hi = -kInf;
-    for (int c = 0; c < 8; ++c) {
-      v[c] = corner[c][k];
-      lo = std::min(lo, v[c]);
-      hi = std::max(hi, v[c]);
-    }
-    if (hi == -kInf) {  // no light in this channel anywhere
+  const int channels = b->shape == render_internal::LatticeBlock::kGrey ? 1 : 3;
+  for (int k = 0; k < channels; ++k) {
+    if (b->dark[k]) {  // no light in this channel anywhere
       (*out)[k] = 0.0;
       continue;
     }
-    if (!(hi - lo <= kMaxLatticeLogRatio)) return false;
+    const double* v = b->log_light[k];
     const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
     const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
     const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
     (*out)[k] = std::exp(y0 + f.z * (y1 - y0));
   }
-  if (grey) out->y = out->z = out->x;
+  if (channels == 1) out->y = out->z = out->x;
   return true;
 }
 

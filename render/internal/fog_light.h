@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <glm/vec3.hpp>
+#include <limits>
 #include <vector>
 
 #include "core/ray.h"
@@ -29,6 +30,48 @@ struct LatticePoint {
   int32_t x, y, z, level;
   bool operator==(const LatticePoint& o) const {
     return x == o.x && y == o.y && z == o.z && level == o.level;
+  }
+};
+
+// The largest log-ratio of the light at a block's corners that is
+// interpolated (a factor of e). At the light's terminator (the fog's
+// silhouette seen from the light) the light falls as the square root of
+// the depth, so blocks there differ most; interpolating up to a factor of e
+// keeps the default frames' error (docs/performance.md) and leaves far
+// fewer samples to trace their own rays.
+inline constexpr double kMaxLatticeLogRatio = 1.0;
+
+// A block's eight log-lights (per channel, corner c at offset (c & 1,
+// c >> 1 & 1, c >> 2 & 1)) and how they may be interpolated.
+struct LatticeBlock {
+  enum Shape : uint8_t {
+    kGrey,   // the three channels equal at every corner: channel 0 stands for all
+    kRgb,    // each channel on its own
+    kSteep,  // some channel's corners differ by more than kMaxLatticeLogRatio,
+             // or have light at some corners only: not interpolated
+  };
+  double log_light[3][8];
+  Shape shape = kSteep;
+  bool dark[3] = {false, false, false};  // no light at any corner (shape != kSteep)
+
+  // Sets log_light from the corners' values and classifies them.
+  void Set(const glm::dvec3 corner[8]) {
+    bool grey = true;
+    for (int c = 0; c < 8; ++c) {
+      for (int k = 0; k < 3; ++k) log_light[k][c] = corner[c][k];
+      grey = grey && corner[c].x == corner[c].y && corner[c].x == corner[c].z;
+    }
+    shape = grey ? kGrey : kRgb;
+    for (int k = 0; k < (grey ? 1 : 3); ++k) {
+      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+      for (int c = 0; c < 8; ++c) {
+        lo = std::min(lo, log_light[k][c]);
+        hi = std::max(hi, log_light[k][c]);
+      }
+      dark[k] = hi == -std::numeric_limits<double>::infinity();
+      if (!dark[k] && !(hi - lo <= kMaxLatticeLogRatio)) shape = kSteep;
+    }
+    if (grey) dark[1] = dark[2] = dark[0];
   }
 };
 
@@ -51,60 +94,56 @@ class FogLightCache {
   static constexpr size_t kMaxBlocks = size_t(1) << 12;
   // Bytes it holds at most (the points' open-addressed slots, at most half
   // of them used, and the blocks'), for the memory budget.
-  static constexpr size_t kMaxBytes = 2 * kMaxPoints * 48 + kMaxBlocks * 208;
+  static constexpr size_t kMaxBytes = 2 * kMaxPoints * 48 + kMaxBlocks * 224;
 
   void Clear() {
     slots_.assign(slots_.size(), Slot{});
     used_ = 0;
   }
 
-  // The log-light (per channel; -inf where no light arrives) at the eight
-  // lattice points of the block whose lowest corner is `i0`, computing
-  // missing ones with `light(const glm::dvec3& p_grid, glm::dvec3* log_light)
-  // -> bool` (false: the frame failed; nothing is kept). Returns false on
-  // failure.
+  // The block of level `level` whose lowest corner is lattice point `i0`:
+  // the log-light (per channel; -inf where no light arrives) at its eight
+  // points, computing missing ones with `light(const glm::dvec3& p_grid,
+  // glm::dvec3* log_light) -> bool` (false: the frame failed; nothing is
+  // kept). Null on failure; else valid until the next call.
   template <class Light>
-  bool Block(int level, const glm::i64vec3& i0, Light&& light, glm::dvec3 out[8]) {
+  const LatticeBlock* Block(int level, const glm::i64vec3& i0, Light&& light) {
     constexpr int64_t kFar = int64_t(1) << 30;  // (lattice indices of any grid fit)
     const bool keep = std::abs(i0.x) < kFar && std::abs(i0.y) < kFar && std::abs(i0.z) < kFar;
     const LatticePoint b{int32_t(i0.x), int32_t(i0.y), int32_t(i0.z), level};
-    BlockSlot* block = nullptr;
+    BlockSlot* block = &far_;
     if (keep) {
       // (the table grows with the points kept, so a cache that serves one
       // ray stays small)
       const size_t want = std::clamp<size_t>(std::bit_ceil(used_ / 4 + 1), 16, kMaxBlocks);
       if (blocks_.size() < want) blocks_.assign(want, BlockSlot{});
       block = &blocks_[LatticePointHash(b) & (blocks_.size() - 1)];
-      if (block->key == b) {
-        for (int c = 0; c < 8; ++c) out[c] = block->value[c];
-        return true;
-      }
+      if (block->key == b) return &block->block;
     }
     if (used_ + 8 > kMaxPoints) Clear();
     const double s = vox::Pow2(level);
+    glm::dvec3 out[8];
     for (int c = 0; c < 8; ++c) {
       const glm::i64vec3 i(i0.x + (c & 1), i0.y + ((c >> 1) & 1), i0.z + ((c >> 2) & 1));
       const glm::dvec3 q((double(i.x) + 0.5) * s, (double(i.y) + 0.5) * s, (double(i.z) + 0.5) * s);
       if (!keep) {
-        if (!light(q, &out[c])) return false;
+        if (!light(q, &out[c])) return nullptr;
         continue;
       }
       if (2 * (used_ + 1) > slots_.size()) Grow();
       const LatticePoint p{int32_t(i.x), int32_t(i.y), int32_t(i.z), level};
       Slot* slot = Find(p);
       if (!slot->used) {
-        if (!light(q, &slot->value)) return false;
+        if (!light(q, &slot->value)) return nullptr;
         slot->key = p;
         slot->used = true;
         ++used_;
       }
       out[c] = slot->value;
     }
-    if (block != nullptr) {
-      for (int c = 0; c < 8; ++c) block->value[c] = out[c];
-      block->key = b;
-    }
-    return true;
+    block->block.Set(out);
+    block->key = b;
+    return &block->block;
   }
 
  private:
@@ -129,13 +168,14 @@ class FogLightCache {
 
   struct BlockSlot {
     LatticePoint key{0, 0, 0, -1};  // the block's lowest corner (level -1: empty)
-    glm::dvec3 value[8];
+    LatticeBlock block;
   };
-  static_assert(sizeof(BlockSlot) <= 208);
+  static_assert(sizeof(BlockSlot) <= 224);
 
   std::vector<Slot> slots_;  // a power of two of them (or none yet)
   size_t used_ = 0;
   std::vector<BlockSlot> blocks_;  // a power of two of them (or none yet)
+  BlockSlot far_;                  // a block too far to keep: its last answer
 };
 
 }  // namespace vox::render_internal

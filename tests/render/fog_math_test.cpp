@@ -1,6 +1,6 @@
 // Fog's exponentials (render/internal/fog_math.h) against libm's exp and
 // expm1 across the polynomials' range, its edges and beyond; the light
-// lattice's cache (render/internal/fog_light.h).
+// lattice's cache and its blocks (render/internal/fog_light.h).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -61,13 +61,14 @@ TEST(FogLightCacheTest, AnswersDoNotDependOnWhatWasAskedBefore) {
       const glm::i64vec3 i0 = blocks[rng() % blocks.size()];
       far_asks += pass == 1 && i0.x > 1000;
       const int level = int(rng() % 3);
-      glm::dvec3 out[8];
-      ASSERT_TRUE(cache.Block(level, i0, light, out));
+      const LatticeBlock* b = cache.Block(level, i0, light);
+      ASSERT_NE(b, nullptr);
       const double s = std::ldexp(1.0, level);
       for (int c = 0; c < 8; ++c) {
         const glm::dvec3 q((double(i0.x + (c & 1)) + 0.5) * s, (double(i0.y + ((c >> 1) & 1)) + 0.5) * s,
                            (double(i0.z + ((c >> 2) & 1)) + 0.5) * s);
-        ASSERT_EQ(out[c], value(q)) << "trial " << trial << ", corner " << c;
+        for (int k = 0; k < 3; ++k)
+          ASSERT_EQ(b->log_light[k][c], value(q)[k]) << "trial " << trial << ", corner " << c;
       }
     }
     // Kept points are not computed again (these few never fill the cache):
@@ -79,11 +80,44 @@ TEST(FogLightCacheTest, AnswersDoNotDependOnWhatWasAskedBefore) {
   // A failing light keeps nothing: the block is computed again next time.
   FogLightCache failing;
   int n = 0;
-  glm::dvec3 out[8];
-  EXPECT_FALSE(failing.Block(0, glm::i64vec3(0), [&](const glm::dvec3&, glm::dvec3*) { return ++n < 4; }, out));
+  EXPECT_EQ(failing.Block(0, glm::i64vec3(0), [&](const glm::dvec3&, glm::dvec3*) { return ++n < 4; }),
+            nullptr);
   n = 0;
-  EXPECT_TRUE(failing.Block(0, glm::i64vec3(0), light, out));
-  EXPECT_EQ(out[7], value(glm::dvec3(1.5)));
+  const LatticeBlock* b = failing.Block(0, glm::i64vec3(0), light);
+  ASSERT_NE(b, nullptr);
+  EXPECT_EQ(b->log_light[2][7], value(glm::dvec3(1.5)).z);
+}
+
+// A block's shape: grey when its three channels agree everywhere, steep when
+// a channel's corners span more than kMaxLatticeLogRatio or only some have
+// light, and channels without light anywhere marked dark.
+TEST(LatticeBlockTest, ClassifiesItsCorners) {
+  const double inf = std::numeric_limits<double>::infinity();
+  glm::dvec3 c[8];
+  for (int i = 0; i < 8; ++i) c[i] = glm::dvec3(-0.1 * i);
+  LatticeBlock b;
+  b.Set(c);
+  EXPECT_EQ(b.shape, LatticeBlock::kGrey);
+  EXPECT_FALSE(b.dark[0] || b.dark[1] || b.dark[2]);
+  EXPECT_EQ(b.log_light[1][3], -0.1 * 3);
+  c[7] = glm::dvec3(-0.1 * 7 - 0.4);  // a span of 1.1
+  b.Set(c);
+  EXPECT_EQ(b.shape, LatticeBlock::kSteep);
+  c[7] = glm::dvec3(-kMaxLatticeLogRatio);  // a span of exactly the ratio
+  b.Set(c);
+  EXPECT_EQ(b.shape, LatticeBlock::kGrey);
+  for (int i = 0; i < 8; ++i) c[i] = glm::dvec3(-0.1 * i, -inf, -0.2);  // green dark everywhere
+  b.Set(c);
+  EXPECT_EQ(b.shape, LatticeBlock::kRgb);
+  EXPECT_TRUE(b.dark[1]);
+  EXPECT_FALSE(b.dark[0] || b.dark[2]);
+  c[4].z = -inf;  // blue dark at one corner only
+  b.Set(c);
+  EXPECT_EQ(b.shape, LatticeBlock::kSteep);
+  for (int i = 0; i < 8; ++i) c[i] = glm::dvec3(-inf);  // no light anywhere
+  b.Set(c);
+  EXPECT_EQ(b.shape, LatticeBlock::kGrey);
+  EXPECT_TRUE(b.dark[0] && b.dark[1] && b.dark[2]);
 }
 
 }  // namespace
