@@ -83,6 +83,31 @@ int FloorLog2(double x, bool* power_of_two) {
   return biased - 1023;
 }
 
+// The light inside lattice block b at offsets f (0..1 per axis), trilinear
+// in the logarithm: exact where the light decays exponentially across the
+// block, as in fog of even density. False where the corners' light differs
+// by more than e^kMaxLatticeLogRatio (the block straddles a shadow's edge
+// or the rim of thick fog) or a corner has none where others have some
+// (LatticeBlock::kSteep): the caller tries a finer block.
+bool InterpolateLight(const render_internal::LatticeBlock& b, const glm::dvec3& f, glm::dvec3* out) {
+  if (b.shape == render_internal::LatticeBlock::kSteep) return false;
+  // A white light through grey fog: the three channels are one.
+  const int channels = b.shape == render_internal::LatticeBlock::kGrey ? 1 : 3;
+  for (int k = 0; k < channels; ++k) {
+    if (b.dark[k]) {  // no light in this channel anywhere
+      (*out)[k] = 0.0;
+      continue;
+    }
+    const double* v = b.log_light[k];
+    const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
+    const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
+    const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
+    (*out)[k] = std::exp(y0 + f.z * (y1 - y0));
+  }
+  if (channels == 1) out->y = out->z = out->x;
+  return true;
+}
+
 // e^(-tau) per channel; one exponential for grey fog's three equal channels.
 glm::dvec3 TransmittanceOf(const glm::dvec3& tau) {
   if (tau.x == tau.y && tau.x == tau.z) return glm::dvec3(std::exp(-tau.x));
@@ -91,49 +116,74 @@ glm::dvec3 TransmittanceOf(const glm::dvec3& tau) {
 
 }  // namespace
 
+template <class Seg>
+void Renderer::WalkFog(const Ray& gr, double t_max, const Cone* cone, TraceContext& cx,
+                       Seg&& seg) const {
+  const bool has_density = volume_->meta().has_density;
+  Status s;
+  if (cone != nullptr && !lod_->Exact(gr, *cone)) {
+    // Level of detail: each coarse cell's mean density over its segment.
+    s = lod_->Traverse(
+        *cx.tracer, cx.lod, gr, *cone,
+        [&](const LodSegment& sg) {
+          if (sg.t0 >= t_max) return Visit::kStop;
+          double rho = 1.0;
+          int levels = -1;
+          if ((sg.level > 0 || has_density) && !Density(sg.hit, cx, &rho, sg.volume, nullptr, &levels))
+            return Visit::kStop;
+          const double t1 = levels > 0 ? BlockExitT(gr, sg.hit, sg.level, levels, sg.t_end) : sg.ExitT();
+          return seg(sg.t0, t1, rho) ? SkipBlock(levels) : Visit::kStop;
+        },
+        &cx.c->trace);
+  } else {
+    s = cx.tracer->Traverse(
+        gr,
+        [&](const Hit& h) {
+          if (h.t >= t_max) return Visit::kStop;
+          double rho = 1.0;
+          int levels = -1;
+          if (has_density && !Density(h, cx, &rho, nullptr, nullptr, &levels)) return Visit::kStop;
+          const double t1 = levels > 0 ? BlockExitT(gr, h, 0, levels, kInf) : VoxelExitT(gr, h.voxel);
+          return seg(h.t, t1, rho) ? SkipBlock(levels) : Visit::kStop;
+        },
+        &cx.c->trace);
+  }
+  if (!s.ok()) cx.Fail(s);
+}
+
 glm::dvec3 Renderer::Transmittance(const Ray& gr, double t_max, TraceContext& cx,
                                    const Cone* cone) const {
   ++cx.c->rays[kRayVolume];
   const FogModel& model = fog_model_;  // per channel: opacity(rho) times each extinction
-  const bool has_density = volume_->meta().has_density;
   glm::dvec3 tau(0.0);
-  auto opaque = [&] { return std::min({tau.x, tau.y, tau.z}) > kMaxShadowOpticalDepth; };
-  if (cone != nullptr && !lod_->Exact(gr, *cone)) {
-    // Level of detail: each coarse cell's mean density over its segment.
-    Status s = lod_->Traverse(
-        *cx.tracer, cx.lod, gr, *cone,
-        [&](const LodSegment& seg) {
-          if (seg.t0 >= t_max) return Visit::kStop;
-          double rho = 1.0;
-          int levels = -1;
-          if ((seg.level > 0 || has_density) &&
-              !Density(seg.hit, cx, &rho, seg.volume, nullptr, &levels))
-            return Visit::kStop;
-          const double t1 =
-              levels > 0 ? BlockExitT(gr, seg.hit, seg.level, levels, seg.t_end) : seg.ExitT();
-          tau += model.Extinction(rho) * std::max(0.0, std::min(t1, t_max) - seg.t0);
-          if (opaque()) return Visit::kStop;
-          return SkipBlock(levels);
-        },
-        &cx.c->trace);
-    if (!s.ok()) cx.Fail(s);
-    return TransmittanceOf(tau);
-  }
-  Status s = cx.tracer->Traverse(
-      gr,
-      [&](const Hit& h) {
-        if (h.t >= t_max) return Visit::kStop;
-        double rho = 1.0;
-        int levels = -1;
-        if (has_density && !Density(h, cx, &rho, nullptr, nullptr, &levels)) return Visit::kStop;
-        const double t1 = levels > 0 ? BlockExitT(gr, h, 0, levels, kInf) : VoxelExitT(gr, h.voxel);
-        tau += model.Extinction(rho) * std::max(0.0, std::min(t1, t_max) - h.t);
-        if (opaque()) return Visit::kStop;
-        return SkipBlock(levels);
-      },
-      &cx.c->trace);
-  if (!s.ok()) cx.Fail(s);
+  WalkFog(gr, t_max, cone, cx, [&](double t0, double t1, double rho) {
+    tau += model.Extinction(rho) * std::max(0.0, std::min(t1, t_max) - t0);
+    return std::min({tau.x, tau.y, tau.z}) <= kMaxShadowOpticalDepth;
+  });
   return TransmittanceOf(tau);
+}
+
+bool Renderer::DepthsAlong(const Ray& gr, double dt, int count, const glm::dvec3& depth0,
+                           const Cone& cone, TraceContext& cx, glm::dvec3* out) const {
+  ++cx.c->rays[kRayVolume];
+  const FogModel& model = fog_model_;
+  const double t_end = count * dt;
+  glm::dvec3 tau = depth0;
+  int q = 0;  // the next sample, at t = (q + 1) dt
+  // Beyond the optical depth at which a transmittance ray stops, the
+  // samples keep the depth reached (as that ray's light would).
+  if (std::min({tau.x, tau.y, tau.z}) <= kMaxShadowOpticalDepth) {
+    WalkFog(gr, t_end, &cone, cx, [&](double t0, double t1, double rho) {
+      for (; q < count && (q + 1) * dt <= t0; ++q) out[q] = tau;  // a gap before the cell
+      const glm::dvec3 ext = model.Extinction(rho);
+      const double te = std::min(t1, t_end);
+      for (; q < count && (q + 1) * dt <= te; ++q) out[q] = tau + ext * ((q + 1) * dt - t0);
+      tau += ext * std::max(0.0, te - t0);
+      return q < count && std::min({tau.x, tau.y, tau.z}) <= kMaxShadowOpticalDepth;
+    });
+  }
+  for (; q < count; ++q) out[q] = tau;
+  return !cx.failed();
 }
 
 glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const Cone* cone,
@@ -187,7 +237,9 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
   for (int level = top; level >= finest; --level) {
     glm::dvec3 out;
     bool ok = true;
-    if (!LatticeLight(p_g, level, cx, cone, cache, &out, &ok)) continue;
+    if (!(columns_.on ? ColumnLight(p_g, level, cx, cache, &out, &ok)
+                      : LatticeLight(p_g, level, cx, cone, cache, &out, &ok)))
+      continue;
     return ok ? out : glm::dvec3(0.0);
   }
   return LightAtPoint(p_g, cx, cone);
@@ -214,26 +266,38 @@ bool Renderer::LatticeLight(const glm::dvec3& p_g, int level, TraceContext& cx, 
       });
   *ok = b != nullptr;
   if (!*ok) return true;
-  // Trilinear in the logarithm: exact where the light decays exponentially
-  // across the block, as in fog of even density. Where the corners' light
-  // differs by more than e^kMaxLatticeLogRatio (the block straddles a
-  // shadow's edge or the rim of thick fog), or a corner has none where
-  // others have some, a finer block is tried (LatticeBlock::kSteep).
-  if (b->shape == render_internal::LatticeBlock::kSteep) return false;
-  // A white light through grey fog: the three channels are one.
-  const int channels = b->shape == render_internal::LatticeBlock::kGrey ? 1 : 3;
-  for (int k = 0; k < channels; ++k) {
-    if (b->dark[k]) {  // no light in this channel anywhere
-      (*out)[k] = 0.0;
-      continue;
-    }
-    const double* v = b->log_light[k];
-    const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
-    const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
-    const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
-    (*out)[k] = std::exp(y0 + f.z * (y1 - y0));
-  }
-  if (channels == 1) out->y = out->z = out->x;
+  return InterpolateLight(*b, f, out);
+}
+
+bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
+                           render_internal::FogLightCache* cache, glm::dvec3* out, bool* ok) const {
+  using render_internal::FogColumnCache;
+  const LightColumns& lc = columns_;
+  const double s = Pow2(level);
+  // Column coordinates: across the light in column spacings, and the sample
+  // index down from the columns' top (whole spacings above the grid).
+  const double top = std::floor(lc.top / s) + 1.0;
+  const glm::dvec3 u(glm::dot(p_g, lc.u) / s, glm::dot(p_g, lc.v) / s, top - glm::dot(p_g, lc.n) / s);
+  const double lim = double(FogColumnCache::kMaxIndex - 2);
+  if (!(std::abs(u.x) < lim && std::abs(u.y) < lim && u.z >= 0 &&
+        u.z < double(FogColumnCache::kMaxSample - 2)))
+    return false;
+  const glm::dvec3 f0 = glm::floor(u);
+  // A column's ray: from its sample `first` along the light's travel, in
+  // world units (samples s voxels apart), a quarter of a spacing wide, as a
+  // lattice point's rays start.
+  const double dt = s / lc.voxels_per_unit;
+  const Cone cone{kLatticeStartWidth * s, 0.0};
+  const render_internal::LatticeBlock* b = cache->columns.Block(
+      level, int64_t(f0.x), int64_t(f0.y), int(f0.z),
+      [&](int64_t i, int64_t j, int first, int count, const glm::dvec3& depth, glm::dvec3* samples) {
+        const glm::dvec3 o = (double(i) * s) * lc.u + (double(j) * s) * lc.v + ((top - first) * s) * lc.n;
+        return DepthsAlong(Ray{o, lc.travel}, dt, count, depth, cone, cx, samples);
+      });
+  *ok = b != nullptr;
+  if (!*ok) return true;
+  if (!InterpolateLight(*b, u - f0, out)) return false;
+  *out *= lc.light;
   return true;
 }
 

@@ -161,6 +161,35 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
     r->lod_ = std::move(lt);
     r->primary_cone_ = PrimaryConeOf(cam, meta.voxel_size);
   }
+  // One directional light with shadows lights the fog: its light is kept on
+  // a lattice in light space, whose columns each take one ray.
+  const Light* sun = nullptr;
+  int lights = 0;
+  for (const Light& l : s.lights)
+    if (l.intensity > 0) ++lights, sun = &l;
+  if (r->fog_ && p.scattering && r->lod_ && s.volume.light_lattice && lights == 1 &&
+      sun->type == Light::Type::kDirectional && sun->shadows) {
+    LightColumns& c = r->columns_;
+    const glm::dvec3 to_light = xf.world_to_grid_linear * -sun->direction;
+    c.voxels_per_unit = glm::length(to_light);
+    if (c.voxels_per_unit > 0 && std::isfinite(c.voxels_per_unit)) {
+      c.on = true;
+      c.n = to_light / c.voxels_per_unit;
+      c.travel = -to_light;
+      // u: across n, from the axis n is least along; v = n x u.
+      const glm::dvec3 a = std::abs(c.n.x) <= std::abs(c.n.y) && std::abs(c.n.x) <= std::abs(c.n.z)
+                               ? glm::dvec3(1, 0, 0)
+                           : std::abs(c.n.y) <= std::abs(c.n.z) ? glm::dvec3(0, 1, 0)
+                                                                : glm::dvec3(0, 0, 1);
+      c.u = glm::normalize(glm::cross(c.n, a));
+      c.v = glm::cross(c.n, c.u);
+      const double g = std::ldexp(1.0, view.levels);
+      c.top = 0.0;
+      for (int k = 0; k < 8; ++k)
+        c.top = std::max(c.top, glm::dot(glm::dvec3(k & 1, (k >> 1) & 1, (k >> 2) & 1) * g, c.n));
+      c.light = sun->color * sun->intensity;
+    }
+  }
   return r;
 }
 

@@ -335,6 +335,11 @@ class Renderer {
                double* temperature = nullptr, int* uniform_levels = nullptr) const;
   glm::dvec3 Transmittance(const Ray& gr, double t_max, TraceContext& cx,
                            const Cone* cone = nullptr) const;
+  // Walks the fog along gr from t = 0 to t_max (cone: with LOD), calling
+  // seg(t0, t1, rho) -> bool (false: stop) for each occupied cell, or block
+  // of cells of one density, in order; t1 may pass t_max.
+  template <class Seg>
+  void WalkFog(const Ray& gr, double t_max, const Cone* cone, TraceContext& cx, Seg&& seg) const;
   // The light reaching fog at grid point p_g (cone: with LOD), through
   // transmittance rays to the shadowing lights; with `view_w` (the world
   // direction towards the camera) each light weighted by the phase function.
@@ -350,6 +355,13 @@ class Renderer {
   // false when the frame failed.
   bool LatticeLight(const glm::dvec3& p_g, int level, TraceContext& cx, const Cone* cone,
                     render_internal::FogLightCache* cache, glm::dvec3* out, bool* ok) const;
+  // The same on the light-space lattice of columns_ (one directional light).
+  bool ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
+                   render_internal::FogLightCache* cache, glm::dvec3* out, bool* ok) const;
+  // Optical depths along gr (cone: with LOD) from depth `depth0` at t = 0:
+  // out[q] at t = (q + 1) dt, q < count. False when the frame failed.
+  bool DepthsAlong(const Ray& gr, double dt, int count, const glm::dvec3& depth0, const Cone& cone,
+                   TraceContext& cx, glm::dvec3* out) const;
 
   // tracer_'s occupied box (options_.clip_to_occupied), on `t` too.
   void ApplyOccupiedBox(RenderTracer* t) const;
@@ -372,6 +384,17 @@ class Renderer {
   double eps_t_ = 1e-9;           // t tolerance for "touching" voxels, in world units
   std::optional<LodTracer> lod_;  // --lod
   Cone primary_cone_;             // the primary rays' cone (pixel width), when lod_
+  // Fog lit by one directional light with shadows: the frame of the
+  // light-space lattice (render/internal/fog_light.h, FogColumnCache).
+  struct LightColumns {
+    bool on = false;
+    glm::dvec3 n{0.0}, u{0.0}, v{0.0};  // grid space: towards the light, and across it
+    glm::dvec3 travel{0.0};  // the light's direction of travel, grid units per world unit
+    double voxels_per_unit = 1.0;  // |travel|
+    double top = 0.0;        // the largest dot(p, n) over the grid's corners
+    glm::dvec3 light{0.0};   // colour times intensity
+  };
+  LightColumns columns_;
 };
 
 }  // namespace vox

@@ -1,10 +1,13 @@
 // The light reaching points in fog, kept on a lattice: fog.cpp evaluates the
 // light (the transmittance rays to the lights) at the lattice points around
 // a sample and interpolates their logarithms trilinearly, so neighbouring
-// pixels and samples share transmittance rays. A lattice point's value
-// depends on the point alone, never on which pixel asked first, so tiles,
-// threads and Slurm parts give the same image bit for bit. Private to
-// render/.
+// pixels and samples share transmittance rays. Under one directional light
+// the lattice lies in light space instead (FogColumnCache): columns along
+// the light, each traced once from the light's side and sampled along its
+// length, so that the points of a column share one ray. A lattice point's
+// or a column sample's value depends on the point alone, never on which
+// pixel asked first, so tiles, threads and Slurm parts give the same image
+// bit for bit. Private to render/.
 //
 // Thread safety: a FogLightCache belongs to one thread (Renderer::ThreadState).
 #ifndef VOX_RENDER_INTERNAL_FOG_LIGHT_H_
@@ -18,6 +21,7 @@
 #include <cstdlib>
 #include <glm/vec3.hpp>
 #include <limits>
+#include <unordered_map>
 #include <vector>
 
 #include "core/ray.h"
@@ -83,6 +87,100 @@ inline size_t LatticePointHash(const LatticePoint& p) {
   return size_t(h ^ (h >> 29));
 }
 
+// The light-space lattice: optical depths along columns. Column (i, j) of
+// level L samples the line through i 2^L u + j 2^L v along the light's
+// direction (fog.cpp sets the frame u, v, n) every 2^L voxels, from sample
+// 0 at its top, above the volume, downwards. Samples are traced kChunk at
+// a time, in order from the top, each chunk from the optical depth of the
+// sample before it: a sample's value depends on its column alone.
+class FogColumnCache {
+ public:
+  static constexpr int kChunk = 16;
+  // Samples kept at most; the columns start again when full.
+  static constexpr size_t kMaxSamples = size_t(1) << 18;
+  // Blocks kept together, at most (as FogLightCache's).
+  static constexpr size_t kMaxBlocks = size_t(1) << 12;
+  // Column indices kept (larger ones are not: the caller traces its own rays).
+  static constexpr int64_t kMaxIndex = int64_t(1) << 29;
+  // Sample indices kept.
+  static constexpr int kMaxSample = 1 << 24;
+
+  // The block of level `level` between columns i0..i0 + 1 and j0..j0 + 1
+  // and samples m0..m0 + 1 (|i0|, |j0| < kMaxIndex - 1, 0 <= m0 <
+  // kMaxSample, level 0..15): LatticeBlock's corner c is column (i0 + (c &
+  // 1), j0 + (c >> 1 & 1)) at sample m0 + (c >> 2), its value minus the
+  // optical depth there (the log of the light, up to the light's own).
+  // Missing samples are traced with `trace(int64_t i, int64_t j, int first,
+  // int count, const glm::dvec3& depth_first, glm::dvec3* out) -> bool`:
+  // out[q] the optical depth at sample first + 1 + q of column (i, j)
+  // (false: the frame failed; nothing is kept). Null on failure; else valid
+  // until the next call.
+  template <class Trace>
+  const LatticeBlock* Block(int level, int64_t i0, int64_t j0, int m0, Trace&& trace) {
+    const LatticePoint key{int32_t(i0), int32_t(j0), int32_t(m0), level};
+    const size_t want = std::clamp<size_t>(std::bit_ceil(samples_ / 16 + 1), 16, kMaxBlocks);
+    if (blocks_.size() < want) blocks_.assign(want, BlockSlot{});
+    BlockSlot& slot = blocks_[LatticePointHash(key) & (blocks_.size() - 1)];
+    if (slot.key == key) return &slot.block;
+    glm::dvec3 corner[8];
+    for (int c = 0; c < 4; ++c) {
+      const int64_t i = i0 + (c & 1), j = j0 + (c >> 1);
+      const glm::dvec3* d = Samples(level, i, j, m0 + 1, [&](int first, int count, const glm::dvec3& depth,
+                                                             glm::dvec3* out) {
+        return trace(i, j, first, count, depth, out);
+      });
+      if (d == nullptr) return nullptr;
+      corner[c] = -d[m0];
+      corner[c + 4] = -d[m0 + 1];
+    }
+    slot.block.Set(corner);
+    slot.key = key;
+    return &slot.block;
+  }
+
+  // Samples 0..last of column (level, i, j), tracing missing chunks with
+  // `trace(int first, int count, const glm::dvec3& depth_first, glm::dvec3*
+  // out) -> bool` (as Block's, for this column). Null on failure; else
+  // valid until the next call.
+  template <class Trace>
+  const glm::dvec3* Samples(int level, int64_t i, int64_t j, int last, Trace&& trace) {
+    const uint64_t key = uint64_t(level) << 60 | (uint64_t(i) & kIndexMask) << 30 |
+                         (uint64_t(j) & kIndexMask);
+    auto it = columns_.find(key);
+    if (it != columns_.end() && int(it->second.size()) > last) return it->second.data();
+    const size_t chunks = size_t(last + kChunk - 1) / kChunk;  // samples 1..last
+    const size_t want = chunks * kChunk + 1;
+    if (samples_ + want > kMaxSamples) {
+      columns_.clear();
+      samples_ = 0;
+      it = columns_.end();
+    }
+    if (it == columns_.end())
+      it = columns_.emplace(key, std::vector<glm::dvec3>(1, glm::dvec3(0.0))).first;
+    std::vector<glm::dvec3>& col = it->second;
+    const size_t had = col.size();
+    col.resize(want);
+    for (size_t first = had - 1; first + 1 < want; first += kChunk) {
+      if (!trace(int(first), kChunk, col[first], &col[first + 1])) {
+        col.resize(had);
+        return nullptr;
+      }
+    }
+    samples_ += want - had;
+    return col.data();
+  }
+
+ private:
+  static constexpr uint64_t kIndexMask = (uint64_t(1) << 30) - 1;
+  struct BlockSlot {
+    LatticePoint key{0, 0, 0, -1};  // (level -1: empty)
+    LatticeBlock block;
+  };
+  std::unordered_map<uint64_t, std::vector<glm::dvec3>> columns_;
+  size_t samples_ = 0;
+  std::vector<BlockSlot> blocks_;  // a power of two of them (or none yet)
+};
+
 class FogLightCache {
  public:
   // Points kept at most; the cache starts again when full (its values do not
@@ -93,13 +191,19 @@ class FogLightCache {
   // one lookup instead of eight).
   static constexpr size_t kMaxBlocks = size_t(1) << 12;
   // Bytes it holds at most (the points' open-addressed slots, at most half
-  // of them used, and the blocks'), for the memory budget.
-  static constexpr size_t kMaxBytes = 2 * kMaxPoints * 48 + kMaxBlocks * 224;
+  // of them used, the blocks', and the columns': 24 bytes a sample, at
+  // least a chunk's worth of samples per column and its map node).
+  static constexpr size_t kMaxBytes = 2 * kMaxPoints * 48 + kMaxBlocks * 224 +
+                                      FogColumnCache::kMaxSamples * 32 +
+                                      FogColumnCache::kMaxBlocks * 224;
 
   void Clear() {
     slots_.assign(slots_.size(), Slot{});
     used_ = 0;
   }
+
+  // The light-space lattice, under one directional light.
+  FogColumnCache columns;
 
   // The block of level `level` whose lowest corner is lattice point `i0`:
   // the log-light (per channel; -inf where no light arrives) at its eight

@@ -88,6 +88,65 @@ TEST(FogLightCacheTest, AnswersDoNotDependOnWhatWasAskedBefore) {
   EXPECT_EQ(b->log_light[2][7], value(glm::dvec3(1.5)).z);
 }
 
+// The light-space lattice's columns (FogColumnCache): every sample it
+// answers is its column's depth whatever was asked before, through restarts
+// when full; samples are traced in chunks from the top, each from the depth
+// before it, once while kept; a failing trace keeps nothing. Blocks hold
+// their corners' depths, negated.
+TEST(FogColumnCacheTest, AnswersDoNotDependOnWhatWasAskedBefore) {
+  // Column (i, j)'s depth grows by step(i, j, k) from sample k - 1 to k.
+  auto step = [](int64_t i, int64_t j, int k) { return 1e-3 * double((i * 7 + j * 13 + k) % 11); };
+  auto depth = [&](int64_t i, int64_t j, int k) {
+    double d = 0;
+    for (int q = 1; q <= k; ++q) d += step(i, j, q);
+    return d;
+  };
+  int traced = 0;
+  auto trace = [&](int64_t i, int64_t j, int first, int count, const glm::dvec3& d0, glm::dvec3* out) {
+    EXPECT_EQ(first % FogColumnCache::kChunk, 0);
+    EXPECT_EQ(count, FogColumnCache::kChunk);
+    traced += count;
+    glm::dvec3 d = d0;
+    for (int q = 0; q < count; ++q) out[q] = d += glm::dvec3(step(i, j, first + 1 + q));
+    return true;
+  };
+  FogColumnCache cache;
+  std::mt19937_64 rng(11);
+  for (int trial = 0; trial < 3000; ++trial) {
+    const int64_t i = int64_t(rng() % 40) - 20, j = int64_t(rng() % 40) - 20;
+    const int last = int(rng() % 900), level = int(rng() % 2);
+    const glm::dvec3* d = cache.Samples(level, i, j, last, [&](int f, int n, const glm::dvec3& d0, glm::dvec3* o) {
+      return trace(i, j, f, n, d0, o);
+    });
+    ASSERT_NE(d, nullptr);
+    for (int k : {0, last / 2, last}) ASSERT_NEAR(d[k].x, depth(i, j, k), 1e-12) << i << " " << j << " " << k;
+  }
+  // (3000 columns of up to 900 samples fill the cache several times over.)
+  EXPECT_GT(traced, int(FogColumnCache::kMaxSamples));
+  // A kept column is not traced again.
+  traced = 0;
+  auto again = [&](int f, int n, const glm::dvec3& d0, glm::dvec3* o) { return trace(3, 4, f, n, d0, o); };
+  cache.Samples(0, 3, 4, 40, again);
+  const int first = traced;
+  cache.Samples(0, 3, 4, 40, again);
+  EXPECT_EQ(traced, first);
+  // A block's corners: columns (i0, j0)..(i0 + 1, j0 + 1), samples m0, m0 + 1.
+  const LatticeBlock* b = cache.Block(1, -2, 5, 30, trace);
+  ASSERT_NE(b, nullptr);
+  for (int c = 0; c < 8; ++c)
+    EXPECT_NEAR(b->log_light[0][c], -depth(-2 + (c & 1), 5 + ((c >> 1) & 1), 30 + (c >> 2)), 1e-12) << c;
+  // A failing trace keeps nothing: the column is traced again next time.
+  FogColumnCache failing;
+  int calls = 0;
+  EXPECT_EQ(failing.Samples(0, 0, 0, 50, [&](int, int, const glm::dvec3&, glm::dvec3*) { return ++calls < 3; }),
+            nullptr);
+  const glm::dvec3* d = failing.Samples(0, 0, 0, 50, [&](int f, int n, const glm::dvec3& d0, glm::dvec3* o) {
+    return trace(0, 0, f, n, d0, o);
+  });
+  ASSERT_NE(d, nullptr);
+  EXPECT_NEAR(d[50].x, depth(0, 0, 50), 1e-12);
+}
+
 // A block's shape: grey when its three channels agree everywhere, steep when
 // a channel's corners span more than kMaxLatticeLogRatio or only some have
 // light, and channels without light anywhere marked dark.

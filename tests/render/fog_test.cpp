@@ -107,7 +107,7 @@ class FogTest : public ::testing::Test {
   // extra "volume" fields.
   testing::Image Render(double lod, const std::string& volume, RenderCounters* counters,
                         int tile = 16, double thickness = 1.0) {
-    const std::string json = std::string("{") + kLight + R"(, "volume":{"absorption":)" +
+    const std::string json = std::string("{") + light_ + R"(, "volume":{"absorption":)" +
                              std::to_string(kAbsorption * thickness) + R"(, "scattering":)" +
                              std::to_string(kScattering * thickness) + volume + "}}";
     auto scene = ParseScene(json, "fog scene");
@@ -127,6 +127,7 @@ class FogTest : public ::testing::Test {
   }
 
   static fs::path* dir_;
+  std::string light_ = kLight;  // the scene's "lights"
   std::unique_ptr<Store> base_;
   std::unique_ptr<LodPyramid> pyramid_;
   std::vector<Volume*> levels_;
@@ -230,6 +231,29 @@ TEST_F(FogTest, ThinFogSharesTransmittanceRaysOnALattice) {
   EXPECT_GT(lattice_c.rays[kRayVolume], 0u);
   EXPECT_LT(lattice_c.rays[kRayVolume] * 2, samples_c.rays[kRayVolume])
       << lattice_c.rays[kRayVolume] << " against " << samples_c.rays[kRayVolume];
+}
+
+// One directional light: its light is kept on a lattice in light space,
+// columns along the light each traced by one ray and sampled along their
+// length, instead of on a lattice of points each tracing its own ray. The
+// same light given as two lights of half its intensity takes the lattice
+// of points: against the integral, the columns err as little, with a
+// fraction of its rays per light.
+TEST_F(FogTest, OneDirectionalLightIsKeptOnColumns) {
+  constexpr double kThin = 0.2;
+  RenderCounters columns_c, points_c;
+  const Error e = Compare(Render(1.0, "", &columns_c, 16, kThin), kThin);
+  const std::string half = R"({"type":"directional","direction":[-0.3,-1.0,-0.5],"intensity":0.5,"shadows":true})";
+  light_ = R"("lights":[)" + half + "," + half + "]";
+  const Error e_points = Compare(Render(1.0, "", &points_c, 16, kThin), kThin);
+  EXPECT_GT(e.covered, 1000);
+  EXPECT_LT(e.rmse_over_mean, e_points.rmse_over_mean + 0.001)
+      << "max " << e.max_abs << " mean " << e.mean;
+  EXPECT_LT(e.rmse_over_mean, 0.025);
+  EXPECT_GT(columns_c.rays[kRayVolume], 0u);
+  // (The lattice of points traces a ray per light from each point.)
+  EXPECT_LT(columns_c.rays[kRayVolume] * 3, points_c.rays[kRayVolume] / 2)
+      << columns_c.rays[kRayVolume] << " against " << points_c.rays[kRayVolume] << " for two lights";
 }
 
 // Thick fog (about one optical depth per voxel): the light changes within a
