@@ -285,9 +285,9 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
   const glm::dvec3 f0 = glm::floor(u);
   // A column's ray: from its sample `first` along the light's travel, in
   // world units (samples s voxels apart), a quarter of a spacing wide, as a
-  // lattice point's rays start.
+  // lattice point's rays start (exact voxels with volume.shadow_lod 0).
   const double dt = s / lc.voxels_per_unit;
-  const Cone cone{kLatticeStartWidth * s, 0.0};
+  const Cone cone{scene_.volume.shadow_lod > 0 ? kLatticeStartWidth * s : 0.0, 0.0};
   const render_internal::LatticeBlock* b = cache->columns.Block(
       level, int64_t(f0.x), int64_t(f0.y), int(f0.z),
       [&](int64_t i, int64_t j, int first, int count, const glm::dvec3& depth, glm::dvec3* samples) {

@@ -101,7 +101,9 @@ struct VolumeMedium : FogControls {
   // by the square root of the transmittance from the camera.
   double light_optical_depth = 0.15;
   // Voxels along a transmittance ray per voxel of cell width (LOD
-  // pyramid); 0: exact voxels.
+  // pyramid); 0: exact voxels. (The columns of the light-space lattice,
+  // under one directional light, are a quarter of their spacing wide
+  // throughout, or exact voxels at 0.)
   double shadow_lod = 12.0;
   // The light kept on a lattice and interpolated (render/internal/fog_light.h);
   // false: evaluated at every sample (the reference).
