@@ -97,7 +97,7 @@ class FogColumnCache {
  public:
   static constexpr int kChunk = 16;
   // Samples kept at most; the columns start again when full.
-  static constexpr size_t kMaxSamples = size_t(1) << 18;
+  static constexpr size_t kMaxSamples = size_t(1) << 17;
   // Blocks kept together, at most (as FogLightCache's).
   static constexpr size_t kMaxBlocks = size_t(1) << 12;
   // Column indices kept (larger ones are not: the caller traces its own rays).
