@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 #include "render/internal/fog_math.h"
 #include "render/internal/tracing.h"
@@ -314,6 +315,17 @@ namespace {
 // for thinner fog is cut short at the first cell of higher extinction (a ray
 // entering fog through its thin rim must not carry the rim's light deep into
 // the fog).
+// A channel value's largest channel, whether its channels are equal, and
+// channel k: for glm::dvec3, or for double standing for three equal ones.
+double MaxOf(double v) { return v; }
+double MaxOf(const glm::dvec3& v) { return std::max({v.x, v.y, v.z}); }
+bool IsGrey(double) { return true; }
+bool IsGrey(const glm::dvec3& v) { return v.x == v.y && v.x == v.z; }
+double& Ch(double& v, int) { return v; }
+double Ch(const double& v, int) { return v; }
+double& Ch(glm::dvec3& v, int k) { return v[k]; }
+double Ch(const glm::dvec3& v, int k) { return v[k]; }
+
 template <class LightAt>
 class LightAlongRay {
  public:
@@ -324,13 +336,19 @@ class LightAlongRay {
   // largest, which sets the sampling) seen through transmittance
   // entry_trans from the camera; step(t, T): the sample spacing from t,
   // where the transmittance from the camera is T (its largest channel).
-  template <class Step>
-  glm::dvec3 Integrate(double t0, double t1, const glm::dvec3& st_rgb,
-                       const glm::dvec3& entry_trans, Step&& step) {
-    const double st = std::max({st_rgb.x, st_rgb.y, st_rgb.z});
+  // V: glm::dvec3, or double for a grey frame (white lights in grey fog:
+  // channel 0 stands for the three, and is computed as with glm::dvec3).
+  // *one_piece: the cell's transmittance when it was integrated in one
+  // piece (then bit for bit e^(-st_rgb (t1 - t0))), else untouched;
+  // returns whether it was.
+  template <class V, class Step>
+  V Integrate(double t0, double t1, const V& st_rgb, const V& entry_trans, Step&& step,
+              V* one_piece, bool* was_one_piece) {
+    constexpr bool kGrey = std::is_same_v<V, double>;
+    const double st = MaxOf(st_rgb);
     if (t0 > tb_) {  // the fog's entry, or the first cell after a long gap
       ta_ = t0;
-      seen_a_ = std::max({entry_trans.x, entry_trans.y, entry_trans.z});
+      seen_a_ = MaxOf(entry_trans);
       const double h = step(t0, seen_a_);
       la_ = light_at_(t0, h);
       ext_ = st;
@@ -341,51 +359,59 @@ class LightAlongRay {
       const double tc = std::max(ta_ + h, t0);
       if (tc < tb_) SetB(tc, h);
     }
-    glm::dvec3 sum(0.0), trans(1.0);  // trans: the cell's transmittance from t0 to t
+    V sum(0.0), trans(1.0);  // trans: the cell's transmittance from t0 to t
     double t = t0;
-    const bool grey_cell = st_rgb.x == st_rgb.y && st_rgb.x == st_rgb.z;
+    int pieces = 0;
+    const bool grey_cell = IsGrey(st_rgb);
     while (t < t1) {
       if (t >= tb_) {
         ta_ = tb_;
         la_ = lb_;
         ext_ = st;
-        const glm::dvec3 seen = entry_trans * trans;
-        seen_a_ = std::max({seen.x, seen.y, seen.z});
+        seen_a_ = MaxOf(V(entry_trans * trans));
         const double h = step(ta_, seen_a_);
         SetB(ta_ + h, h);
       }
       // (a step lost below t's precision ends the cell with this interval)
       const double e = tb_ > t ? std::min(t1, tb_) : t1, len = e - t;
-      const glm::dvec3 piece_tau = st_rgb * len;
-      glm::dvec3 piece_trans;
-      piece_trans.x = ExpNeg(piece_tau.x);
-      piece_trans.y = grey_cell ? piece_trans.x : ExpNeg(piece_tau.y);
-      piece_trans.z = grey_cell ? piece_trans.x : ExpNeg(piece_tau.z);
+      const V piece_tau = st_rgb * len;
+      V piece_trans;
+      if constexpr (kGrey) {
+        piece_trans = ExpNeg(piece_tau);
+      } else {
+        piece_trans.x = ExpNeg(piece_tau.x);
+        piece_trans.y = grey_cell ? piece_trans.x : ExpNeg(piece_tau.y);
+        piece_trans.z = grey_cell ? piece_trans.x : ExpNeg(piece_tau.z);
+      }
       if (geometric_) {
         // The light at t, carried from where it was last known at its
         // decay rate (a cell's exit is the next one's entry, up to rounding).
         // A white light in grey fog: one channel computed for three.
-        const int channels = grey_ && grey_cell ? 1 : 3;
-        glm::dvec3 in;
+        const int channels = kGrey || (grey_ && grey_cell) ? 1 : 3;
+        V in;
         for (int k = 0; k < channels; ++k) {
           const double kappa = rate_[k];  // the light's decay rate along the ray
           if (!(lt_ == t)) l_[k] = lt_ == -kInf ? la_[k] * ExpNeg(kappa * (t - ta_))
                                                 : l_[k] * ExpNeg(kappa * (t - lt_));
-          in[k] = l_[k] * piece_tau[k] * ExpNegShare(piece_tau[k] + kappa * len);
+          Ch(in, k) = l_[k] * Ch(piece_tau, k) * ExpNegShare(Ch(piece_tau, k) + kappa * len);
           l_[k] *= ExpNeg(kappa * len);
         }
-        if (channels == 1) in[1] = in[2] = in[0], l_[1] = l_[2] = l_[0];
+        if constexpr (!kGrey)
+          if (channels == 1) in[1] = in[2] = in[0], l_[1] = l_[2] = l_[0];
         sum += trans * in;
         lt_ = e;
       } else {
-        for (int k = 0; k < 3; ++k) {
+        for (int k = 0; k < (kGrey ? 1 : 3); ++k) {
           const double w = tb_ > ta_ ? std::clamp((t + 0.5 * len - ta_) / (tb_ - ta_), 0.0, 1.0) : 0.0;
-          sum[k] += trans[k] * (1.0 - piece_trans[k]) * (la_[k] + w * (lb_[k] - la_[k]));
+          Ch(sum, k) += Ch(trans, k) * (1.0 - Ch(piece_trans, k)) * (la_[k] + w * (lb_[k] - la_[k]));
         }
       }
       trans *= piece_trans;
       t = e;
+      ++pieces;
     }
+    *was_one_piece = pieces == 1;
+    if (pieces == 1) *one_piece = trans;
     return sum;
   }
 
@@ -469,14 +495,18 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     if (st_max <= 0 && !model.emits()) return true;
     const glm::dvec3 seg_tau = st * len;
     glm::dvec3 seg_trans;
-    seg_trans.x = ExpNeg(seg_tau.x);
-    seg_trans.y = seg_tau.y == seg_tau.x ? seg_trans.x : ExpNeg(seg_tau.y);
-    seg_trans.z = seg_tau.z == seg_tau.x ? seg_trans.x : ExpNeg(seg_tau.z);
+    bool one_piece = false;  // seg_trans set by the light's integral
     if (passes_.scattering && st_max > 0) {
-      const glm::dvec3 in_cell =
-          light.Integrate(t0, t1, st, trans, [&](double t, double seen) { return step_from(t, st_max, seen); });
+      const glm::dvec3 in_cell = light.Integrate(
+          t0, t1, st, trans, [&](double t, double seen) { return step_from(t, st_max, seen); },
+          &seg_trans, &one_piece);
       for (int k = 0; k < 3; ++k)
         if (st[k] > 0) scattered[k] += trans[k] * m.scattering[k] / st[k] * in_cell[k];
+    }
+    if (!one_piece) {
+      seg_trans.x = ExpNeg(seg_tau.x);
+      seg_trans.y = seg_tau.y == seg_tau.x ? seg_trans.x : ExpNeg(seg_tau.y);
+      seg_trans.z = seg_tau.z == seg_tau.x ? seg_trans.x : ExpNeg(seg_tau.z);
     }
     if (model.emits())  // the integral of e^(-st s) over the cell
       for (int k = 0; k < 3; ++k)
@@ -485,6 +515,30 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     trans *= seg_trans;
     return !cx.failed() && std::min({tau.x, tau.y, tau.z}) <= kMaxOpticalDepth;
   };
+  // The same in a grey frame (white lights in grey fog that does not
+  // emit): channel 0 alone, the same operations on it; the others are set
+  // from it at the end.
+  const bool grey = grey_fog_;
+  auto cell_grey = [&](double t0, double t1) {
+    if (*first_t == kInf) *first_t = t0;
+    const double len = std::max(0.0, t1 - t0);
+    const double st = m.extinction.x;
+    if (st <= 0) return true;
+    const double seg_tau = st * len;
+    double seg_trans;
+    bool one_piece = false;
+    if (passes_.scattering) {
+      const double in_cell = light.Integrate(
+          t0, t1, st, trans.x, [&](double t, double seen) { return step_from(t, st, seen); },
+          &seg_trans, &one_piece);
+      scattered.x += trans.x * m.scattering.x / st * in_cell;
+    }
+    if (!one_piece) seg_trans = ExpNeg(seg_tau);
+    tau.x += seg_tau;
+    trans.x *= seg_trans;
+    return !cx.failed() && tau.x <= kMaxOpticalDepth;
+  };
+  auto least_depth = [&] { return grey ? tau.x : std::min({tau.x, tau.y, tau.z}); };
   // Runs of cells of one density and temperature that follow each other
   // along the ray (the inside of a fog: its uniform blocks and full bricks)
   // are integrated as one cell: the integral over the run is the same, and
@@ -500,12 +554,12 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     if (!(run_t1 > -kInf)) return true;
     const double t0 = run_t0, t1 = run_t1;
     run_t1 = -kInf;
-    return cell(t0, t1);
+    return grey ? cell_grey(t0, t1) : cell(t0, t1);
   };
   auto add = [&](double t0, double t1, double rho, double temp) {
     if (run_t1 > -kInf && rho == run_rho && temp == run_temp &&
         std::abs(t0 - run_t1) <= 1e-12 * (1.0 + std::abs(run_t1)) &&
-        (t1 - run_t0) * run_st + std::min({tau.x, tau.y, tau.z}) <= kMaxOpticalDepth) {
+        (t1 - run_t0) * run_st + least_depth() <= kMaxOpticalDepth) {
       run_t1 = std::max(run_t1, t1);
       return true;
     }
@@ -556,6 +610,10 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     flush();
   } else {
     cx.Fail(s);
+  }
+  if (grey) {
+    tau.y = tau.z = tau.x;
+    scattered.y = scattered.z = scattered.x;
   }
   *transmittance = TransmittanceOf(tau);
   return scattered;

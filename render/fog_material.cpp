@@ -92,6 +92,9 @@ FogModel::FogModel(const FogControls& c) : c_(c) {
   emits_ = blackbody_ > 0 ||
            (c.emission_intensity > 0 &&
             (c.emission_color.x > 0 || c.emission_color.y > 0 || c.emission_color.z > 0));
+  auto equal = [](const glm::dvec3& v) { return v.x == v.y && v.x == v.z; };
+  grey_ = !emits_ && equal(sigma_t_) && equal(albedo_);
+  for (const FogRampPoint& p : c.ramp) grey_ = grey_ && equal(p.color);
   if (blackbody_ > 0) {
     reference_y_ = BlackbodyXyz(c.reference_kelvin).y;
     const int n = int(kTableMax / kTableStep) + 1;

@@ -95,6 +95,8 @@ class FogModel {
   bool uses_temperature() const { return blackbody_ > 0; }
   bool emits() const { return emits_; }
   bool scatters() const { return scatters_; }
+  // Every density's medium has three equal channels and emits nothing.
+  bool grey() const { return grey_; }
   // Linear sRGB of the blackbody at `kelvin` as the controls scale it.
   glm::dvec3 Blackbody(double kelvin) const;
 
@@ -106,7 +108,7 @@ class FogModel {
   FogControls c_;
   glm::dvec3 sigma_t_{0.0}, albedo_{0.0};  // albedo_: scattering / extinction * colour
   double g_ = 0.0, blackbody_ = 0.0, reference_y_ = 1.0;
-  bool isotropic_ = true, emits_ = false, scatters_ = false;
+  bool isotropic_ = true, emits_ = false, scatters_ = false, grey_ = false;
   std::vector<glm::dvec3> table_;  // Blackbody at kTableStep K steps
   static constexpr double kTableStep = 10.0, kTableMax = 40000.0;
 };

@@ -134,6 +134,10 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
     return InvalidArgumentError(
         "scene: volume.blackbody needs a temperature per voxel, and the store of grid '" +
         meta.grid_name + "' has none (ingest with vox-ingest --temperature GRID)");
+  r->grey_fog_ = r->fog_model_.grey();
+  for (const Light& l : s.lights)
+    if (l.intensity > 0)
+      r->grey_fog_ = r->grey_fog_ && l.color.x == l.color.y && l.color.x == l.color.z;
   bool any_light = false, any_shadow = false;
   for (const Light& l : s.lights) {
     if (l.intensity <= 0) continue;

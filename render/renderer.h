@@ -375,6 +375,9 @@ class Renderer {
   RenderPasses passes_;
   bool fog_ = false;
   FogModel fog_model_{FogControls{}};  // fog: what a voxel absorbs, scatters, emits
+  // Fog whose three channels are one throughout: grey fog that does not
+  // emit, under white lights (Fog integrates channel 0 alone).
+  bool grey_fog_ = false;
   bool needs_attributes_ = true;  // surfaces: shading reads normals or colours
   // Surfaces: something reads the shading normal (a light, a reflection or
   // refraction, or the normal layer); without, hits are shaded without it.

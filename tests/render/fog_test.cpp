@@ -256,6 +256,39 @@ TEST_F(FogTest, OneDirectionalLightIsKeptOnColumns) {
       << columns_c.rays[kRayVolume] << " against " << points_c.rays[kRayVolume] << " for two lights";
 }
 
+// White lights in grey fog: the frame integrates one channel for three. A
+// light whose blue is one part in 10^4 stronger takes the per-channel
+// way, whose red and green are the same operations on the same values: the
+// two frames' red and green agree bit for bit (as the image's floats hold
+// them), for a light on the lattice in light space and for two on the
+// lattice of points.
+TEST_F(FogTest, GreyFramesIntegrateOneChannelForThree) {
+  const std::string dir = R"("direction":[-0.3,-1.0,-0.5],"shadows":true)";
+  for (int lights : {1, 2}) {
+    testing::Image img[2];
+    for (int tinted = 0; tinted < 2; ++tinted) {
+      const std::string color = tinted ? "[1,1,1.0001]" : "[1,1,1]";
+      std::string list = R"({"type":"directional",)" + dir + R"(,"color":)" + color + "}";
+      if (lights == 2) list += R"(,{"type":"directional","direction":[0.5,-1.0,0.2],"shadows":true,"color":[1,1,1]})";
+      light_ = R"("lights":[)" + list + "]";
+      RenderCounters c;
+      img[tinted] = Render(1.0, "", &c);
+    }
+    const Camera cam = Cam();
+    int lit = 0, blue_differs = 0;
+    for (int j = 0; j < cam.height; ++j)
+      for (int i = 0; i < cam.width; ++i) {
+        ASSERT_EQ(img[0].at("R", i, j), img[1].at("R", i, j)) << lights << " lights, pixel " << i << "," << j;
+        ASSERT_EQ(img[0].at("G", i, j), img[1].at("G", i, j)) << lights << " lights, pixel " << i << "," << j;
+        EXPECT_NEAR(img[0].at("B", i, j), img[1].at("B", i, j), 2e-4 * img[0].at("B", i, j) + 1e-12);
+        lit += img[0].at("R", i, j) > 0;
+        blue_differs += img[0].at("B", i, j) != img[1].at("B", i, j);
+      }
+    EXPECT_GT(lit, 1000);
+    EXPECT_GT(blue_differs, 0) << "the tinted light changed nothing: the test compares a frame with itself";
+  }
+}
+
 // Thick fog (about one optical depth per voxel): the light changes within a
 // voxel, and a ray entering through thin fog must not carry its light into
 // the thick fog behind it. The default stays within 1% of the integral.
