@@ -274,11 +274,12 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
                            render_internal::FogLightCache* cache, glm::dvec3* out, bool* ok) const {
   using render_internal::FogColumnCache;
   const LightColumns& lc = columns_;
-  const double s = Pow2(level);
+  const double s = Pow2(level), inv_s = Pow2(-level);  // (exact: powers of two)
   // Column coordinates: across the light in column spacings, and the sample
   // index down from the columns' top (whole spacings above the grid).
-  const double top = std::floor(lc.top / s) + 1.0;
-  const glm::dvec3 u(glm::dot(p_g, lc.u) / s, glm::dot(p_g, lc.v) / s, top - glm::dot(p_g, lc.n) / s);
+  const double top = std::floor(lc.top * inv_s) + 1.0;
+  const glm::dvec3 u(glm::dot(p_g, lc.u) * inv_s, glm::dot(p_g, lc.v) * inv_s,
+                     top - glm::dot(p_g, lc.n) * inv_s);
   const double lim = double(FogColumnCache::kMaxIndex - 2);
   if (!(std::abs(u.x) < lim && std::abs(u.y) < lim && u.z >= 0 &&
         u.z < double(FogColumnCache::kMaxSample - 2)))

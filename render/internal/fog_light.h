@@ -118,10 +118,11 @@ class FogColumnCache {
   template <class Trace>
   const LatticeBlock* Block(int level, int64_t i0, int64_t j0, int m0, Trace&& trace) {
     const LatticePoint key{int32_t(i0), int32_t(j0), int32_t(m0), level};
-    const size_t want = std::clamp<size_t>(std::bit_ceil(samples_ / 16 + 1), 16, kMaxBlocks);
-    if (blocks_.size() < want) blocks_.assign(want, BlockSlot{});
-    BlockSlot& slot = blocks_[LatticePointHash(key) & (blocks_.size() - 1)];
-    if (slot.key == key) return &slot.block;
+    const size_t hash = LatticePointHash(key);
+    if (!blocks_.empty()) {
+      const BlockSlot& slot = blocks_[hash & (blocks_.size() - 1)];
+      if (slot.key == key) return &slot.block;
+    }
     glm::dvec3 corner[8];
     for (int c = 0; c < 4; ++c) {
       const int64_t i = i0 + (c & 1), j = j0 + (c >> 1);
@@ -133,6 +134,11 @@ class FogColumnCache {
       corner[c] = -d[m0];
       corner[c + 4] = -d[m0 + 1];
     }
+    // (the table grows with the samples kept, so a cache that serves a few
+    // rays stays small)
+    const size_t want = std::clamp<size_t>(std::bit_ceil(samples_ / 16 + 1), 16, kMaxBlocks);
+    if (blocks_.size() < want) blocks_.assign(want, BlockSlot{});
+    BlockSlot& slot = blocks_[hash & (blocks_.size() - 1)];
     slot.block.Set(corner);
     slot.key = key;
     return &slot.block;
