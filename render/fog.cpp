@@ -305,17 +305,6 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
 
 namespace {
 
-// The light reaching a primary ray through fog, sampled at points ta < tb
-// along it and interpolated in between: geometrically where both samples
-// have light (exact where the light is attenuated along the ray at a
-// constant rate, as behind fog of even density), linearly otherwise.
-// light_at(t, h): the light at t, for samples h apart there. Integrate()
-// gives a cell's in-scattered light exactly for that model, one sample
-// interval at a time. Samples start where the ray enters the fog, and
-// again at the first cell after a gap longer than a step; an interval chosen
-// for thinner fog is cut short at the first cell of higher extinction (a ray
-// entering fog through its thin rim must not carry the rim's light deep into
-// the fog).
 // A channel value's largest channel, whether its channels are equal, and
 // channel k: for glm::dvec3, or for double standing for three equal ones.
 double MaxOf(double v) { return v; }
@@ -327,6 +316,17 @@ double Ch(const double& v, int) { return v; }
 double& Ch(glm::dvec3& v, int k) { return v[k]; }
 double Ch(const glm::dvec3& v, int k) { return v[k]; }
 
+// The light reaching a primary ray through fog, sampled at points ta < tb
+// along it and interpolated in between: geometrically where both samples
+// have light (exact where the light is attenuated along the ray at a
+// constant rate, as behind fog of even density), linearly otherwise.
+// light_at(t, h): the light at t, for samples h apart there. Integrate()
+// gives a cell's in-scattered light exactly for that model, one sample
+// interval at a time. Samples start where the ray enters the fog, and
+// again at the first cell after a gap longer than a step; an interval chosen
+// for thinner fog is cut short at the first cell of higher extinction (a ray
+// entering fog through its thin rim must not carry the rim's light deep into
+// the fog).
 template <class LightAt>
 class LightAlongRay {
  public:

@@ -1,6 +1,7 @@
 // Fog's exponentials (render/internal/fog_math.h) against libm's exp and
 // expm1 across the polynomials' range, its edges and beyond; the light
-// lattice's cache and its blocks (render/internal/fog_light.h).
+// lattice's caches, of points and of light-space columns, and their blocks
+// (render/internal/fog_light.h).
 #include <gtest/gtest.h>
 
 #include <cmath>
