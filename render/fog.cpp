@@ -566,10 +566,15 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
     }
     if (!flush()) return false;
     if (!(rho == run_rho && temp == run_temp)) {
-      m = model.At(rho, temp);
+      if (grey) {
+        model.AtGrey(rho, &m.extinction.x, &m.scattering.x);
+        run_st = m.extinction.x;
+      } else {
+        m = model.At(rho, temp);
+        run_st = std::max({m.extinction.x, m.extinction.y, m.extinction.z});
+      }
       run_rho = rho;
       run_temp = temp;
-      run_st = std::max({m.extinction.x, m.extinction.y, m.extinction.z});
     }
     run_t0 = t0;
     run_t1 = t1;

@@ -143,6 +143,13 @@ glm::dvec3 FogModel::RampColor(double rho) const {
   return a.color + f * (b.color - a.color);
 }
 
+void FogModel::AtGrey(double rho, double* extinction, double* scattering) const {
+  const double o = Opacity(rho);
+  const double rc = c_.ramp.empty() ? 1.0 : RampColor(rho).x;
+  *extinction = sigma_t_.x * o;
+  *scattering = *extinction * albedo_.x * rc;
+}
+
 FogSample FogModel::At(double rho, double temperature) const {
   FogSample s;
   const double o = Opacity(rho);

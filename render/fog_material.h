@@ -81,6 +81,9 @@ class FogModel {
   explicit FogModel(const FogControls& c);
 
   FogSample At(double rho, double temperature) const;
+  // At's channel 0, extinction and scattering (all three channels when
+  // grey()): the same operations, without the others.
+  void AtGrey(double rho, double* extinction, double* scattering) const;
   // The extinction alone (transmittance rays).
   glm::dvec3 Extinction(double rho) const { return sigma_t_ * Opacity(rho); }
   // opacity(rho): rho without a ramp.
