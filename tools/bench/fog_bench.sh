@@ -23,7 +23,9 @@
 #     at most 0.01 optical depth apart, float EXR), as a percentage of the
 #     converged image's mean over all pixels;
 #   - the time-against-RMSE curve: vox at other settings of the scene's
-#     "volume" quality fields (render/scene.h), one run each.
+#     "volume" quality fields (render/scene.h), one run each;
+#   - the sphere lit along x and from above, vox's default and at
+#     light_optical_depth 0.05 against its converged image of that light.
 # Needs vdb_tool, vdb_render and BUILD_DIR's vox-ingest, vox-render and
 # vox-lod-compare. The converged images take minutes.
 set -eu
@@ -147,3 +149,25 @@ frame dodec "-platonic f=12 s=1.0 v=0.006 w=3" 320x240
 echo
 echo "time against RMSE (one run each): frame | volume fields | vox CPU s | RMSE % of mean"
 cat curve.txt
+
+# The sphere lit from other directions (the light along x, and from above):
+# vox's default and at light_optical_depth 0.05, each against its converged
+# image of that light.
+echo
+echo "other lights (sphere, one run each): light direction | volume fields | vox CPU s | RMSE % of mean"
+name=sphere
+for light_dir in '1,0,0' '0,-1,0'; do
+  ref="ref_light_$(echo "$light_dir" | tr ',-' '_m').exr"
+  if [ ! -f "$ref" ]; then
+    scene '"light_step":0.5, "light_optical_depth":0.01, "shadow_lod":0' >ref_scene.json
+    $render sphere.vox --cam cam_sphere.json --scene ref_scene.json --threads 1 --quiet --lod 0 \
+      --float -o "$ref"
+  fi
+  for q in '' '"light_optical_depth":0.05'; do
+    scene "$q" >curve_scene.json
+    rm -f curve.exr
+    t=$(cpu_wall $render sphere.vox --cam cam_sphere.json --scene curve_scene.json --threads 1 \
+      --quiet --float -o curve.exr | cut -d' ' -f1)
+    echo "$light_dir | ${q:-default} | $t | $(rmse_pct "$ref" curve.exr black_sphere.exr)"
+  done
+done
