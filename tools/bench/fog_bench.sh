@@ -155,7 +155,6 @@ cat curve.txt
 # image of that light.
 echo
 echo "other lights (sphere, one run each): light direction | volume fields | vox CPU s | RMSE % of mean"
-name=sphere
 for light_dir in '1,0,0' '0,-1,0'; do
   ref="ref_light_$(echo "$light_dir" | tr ',-' '_m').exr"
   if [ ! -f "$ref" ]; then
