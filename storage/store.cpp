@@ -238,7 +238,7 @@ Status StoreImpl::LoadTop(const std::vector<uint8_t>& top_b, std::vector<uint8_t
     if (attr_b.size() != meta_.voxel_count * AttrBytesPerVoxel(flags_))
       return bad("top attribute block is " + std::to_string(attr_b.size()) + " bytes for " +
                  std::to_string(meta_.voxel_count) + " voxels");
-    top_attr_ = std::move(attr_b);
+    top_attr_ = PlanesToValues(attr_b, uint32_t(meta_.voxel_count), flags_);
   } else if (!attr_b.empty()) {
     return bad("a store with bricks has top attributes");
   }

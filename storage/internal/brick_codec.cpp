@@ -73,11 +73,6 @@ glm::vec3 DecodeOctNormal(uint32_t code) {
 // value is one plane of `count` bytes (byte 0 of every voxel, then byte 1 ...).
 // Shuffled bytes compress far better than interleaved ones.
 namespace {
-inline uint64_t GatherPlanes(const uint8_t* planes, uint32_t count, uint32_t index, int nbytes) {
-  uint64_t v = 0;
-  for (int b = 0; b < nbytes; ++b) v |= uint64_t(planes[size_t(b) * count + index]) << (8 * b);
-  return v;
-}
 inline void ScatterPlanes(uint8_t* planes, uint32_t count, uint32_t index, int nbytes,
                           uint64_t v) {
   for (int b = 0; b < nbytes; ++b) planes[size_t(b) * count + index] = uint8_t(v >> (8 * b));
@@ -114,21 +109,20 @@ void DeltaComponent(uint8_t* planes, uint32_t count) {
   }
 }
 
-// Undoes DeltaComponent, reading the differences from `src` and writing the
-// values to `dst` (the same bytes or others: each byte is read before its
-// own is written), so a decoder copies its planes out of the decompressed
-// record in the same pass.
+// Undoes DeltaComponent, reading the differences from `src`'s planes and
+// writing the values to `dst` as one array of `count` W-byte little-endian
+// values, so a decoder regroups its planes out of the decompressed record
+// in the same pass.
 template <int W>
 void UndeltaComponent(const uint8_t* src, uint8_t* dst, uint32_t count) {
   using T = std::conditional_t<W == 2, uint16_t, uint32_t>;
   const uint8_t* p[W];
-  uint8_t* q[W];
-  for (int b = 0; b < W; ++b) p[b] = src + size_t(b) * count, q[b] = dst + size_t(b) * count;
+  for (int b = 0; b < W; ++b) p[b] = src + size_t(b) * count;
   T prev = 0;
-  // Decoding runs on every brick a reader loads. Two-byte components (normals,
-  // colours, coverage: nearly all of it) go 8 at a time with SSE2 (x86-64's
-  // baseline): join the byte planes, add each lane's predecessors in three
-  // shifted adds, add the running total, split the planes again.
+  // Decoding runs on every brick a reader loads. With SSE2 (x86-64's
+  // baseline) the byte planes are joined into lanes, each lane gets its
+  // predecessors' sum in shifted adds plus the running total, and the lanes
+  // are stored as they are: 8 two-byte values or 16 four-byte ones a step.
   uint32_t i = 0;
 #if defined(__SSE2__)
   if constexpr (W == 2) {
@@ -142,74 +136,36 @@ void UndeltaComponent(const uint8_t* src, uint8_t* dst, uint32_t count) {
       v = _mm_add_epi16(v, _mm_slli_si128(v, 8));
       v = _mm_add_epi16(v, carry);
       carry = _mm_shuffle_epi32(_mm_shufflehi_epi16(v, 0xff), 0xff);  // lane 7 everywhere
-      const __m128i mask = _mm_set1_epi16(0xff);
-      const __m128i out_lo = _mm_packus_epi16(_mm_and_si128(v, mask), _mm_setzero_si128());
-      const __m128i out_hi = _mm_packus_epi16(_mm_srli_epi16(v, 8), _mm_setzero_si128());
-      _mm_storel_epi64(reinterpret_cast<__m128i*>(q[0] + i), out_lo);
-      _mm_storel_epi64(reinterpret_cast<__m128i*>(q[1] + i), out_hi);
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(dst + size_t(2) * i), v);
     }
     prev = T(_mm_extract_epi16(carry, 0));
   }
-#endif
-#if defined(__SSE2__)
   if constexpr (W == 4) {
-    // Densities 16 at a time: four 4-lane sums, the planes joined and split
-    // by unpacks and saturating packs (each byte isolated first, so the
-    // packs never saturate).
     __m128i carry = _mm_setzero_si128();
-    const __m128i byte = _mm_set1_epi32(0xff);
-    auto plane = [&](const __m128i* v, int shift) {
-      const __m128i a = _mm_packs_epi32(_mm_and_si128(_mm_srli_epi32(v[0], shift), byte),
-                                        _mm_and_si128(_mm_srli_epi32(v[1], shift), byte));
-      const __m128i b = _mm_packs_epi32(_mm_and_si128(_mm_srli_epi32(v[2], shift), byte),
-                                        _mm_and_si128(_mm_srli_epi32(v[3], shift), byte));
-      return _mm_packus_epi16(a, b);
-    };
     for (; i + 16 <= count; i += 16) {
       __m128i b[4];
       for (int k = 0; k < 4; ++k) b[k] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(p[k] + i));
       const __m128i lo01 = _mm_unpacklo_epi8(b[0], b[1]), hi01 = _mm_unpackhi_epi8(b[0], b[1]);
       const __m128i lo23 = _mm_unpacklo_epi8(b[2], b[3]), hi23 = _mm_unpackhi_epi8(b[2], b[3]);
-      __m128i v[4] = {_mm_unpacklo_epi16(lo01, lo23), _mm_unpackhi_epi16(lo01, lo23),
-                      _mm_unpacklo_epi16(hi01, hi23), _mm_unpackhi_epi16(hi01, hi23)};
-      for (int k = 0; k < 4; ++k) {
+      const __m128i v[4] = {_mm_unpacklo_epi16(lo01, lo23), _mm_unpackhi_epi16(lo01, lo23),
+                            _mm_unpacklo_epi16(hi01, hi23), _mm_unpackhi_epi16(hi01, hi23)};
+      for (int k = 0; k < 4; ++k) {  // voxels i + 4k .. i + 4k + 3
         __m128i x = v[k];
         x = _mm_add_epi32(x, _mm_slli_si128(x, 4));
         x = _mm_add_epi32(x, _mm_slli_si128(x, 8));
         x = _mm_add_epi32(x, carry);
         carry = _mm_shuffle_epi32(x, 0xff);  // lane 3 everywhere
-        v[k] = x;
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst + size_t(4) * (i + 4 * k)), x);
       }
-      for (int k = 0; k < 4; ++k)
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(q[k] + i), plane(v, 8 * k));
     }
     prev = T(_mm_cvtsi128_si32(carry));
   }
 #endif
-  if constexpr (W == 4) {
-    // Densities: the planes through restrict pointers held in registers
-    // (through the arrays above, every byte store would reload them).
-    const uint8_t* __restrict p0 = p[0];
-    const uint8_t* __restrict p1 = p[1];
-    const uint8_t* __restrict p2 = p[2];
-    const uint8_t* __restrict p3 = p[3];
-    uint8_t* __restrict q0 = q[0];
-    uint8_t* __restrict q1 = q[1];
-    uint8_t* __restrict q2 = q[2];
-    uint8_t* __restrict q3 = q[3];
-    for (; i < count; ++i) {
-      prev += uint32_t(p0[i]) | uint32_t(p1[i]) << 8 | uint32_t(p2[i]) << 16 | uint32_t(p3[i]) << 24;
-      q0[i] = uint8_t(prev);
-      q1[i] = uint8_t(prev >> 8);
-      q2[i] = uint8_t(prev >> 16);
-      q3[i] = uint8_t(prev >> 24);
-    }
-  }
   for (; i < count; ++i) {
     T d = 0;
     for (int b = 0; b < W; ++b) d = T(d | (T(p[b][i]) << (8 * b)));
     prev = T(prev + d);
-    for (int b = 0; b < W; ++b) q[b][i] = uint8_t(prev >> (8 * b));
+    for (int b = 0; b < W; ++b) dst[size_t(W) * i + b] = uint8_t(prev >> (8 * b));
   }
 }
 
@@ -223,8 +179,8 @@ void DeltaPlanes(uint8_t* planes, uint32_t count, uint8_t flags) {
   }
 }
 
-// DeltaPlanes undone from `src` into `dst` (all AttrBytesPerVoxel(flags) *
-// count bytes of it are written).
+// DeltaPlanes undone from `src`'s planes into `dst`'s value arrays (all
+// AttrBytesPerVoxel(flags) * count bytes of it are written).
 void UndeltaPlanes(const uint8_t* src, uint8_t* dst, uint32_t count, uint8_t flags) {
   int widths[kMaxComponents];
   int n = Components(flags, widths);
@@ -237,29 +193,53 @@ void UndeltaPlanes(const uint8_t* src, uint8_t* dst, uint32_t count, uint8_t fla
 }
 }  // namespace
 
-VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
+namespace {
+// Component value `index` of the array at `values` (little-endian, W bytes).
+template <int W>
+uint32_t ValueAt(const uint8_t* values, uint32_t index) {
+  const uint8_t* p = values + size_t(W) * index;
+  uint32_t v = 0;
+  for (int b = 0; b < W; ++b) v |= uint32_t(p[b]) << (8 * b);
+  return v;
+}
+}  // namespace
+
+VoxelAttributes ReadAttributes(const uint8_t* values, uint32_t count, uint8_t flags,
                                uint32_t index) {
   VoxelAttributes a;
   if (flags & kAttrNormal) {
-    a.normal = DecodeOctNormal(uint32_t(GatherPlanes(planes, count, index, 4)));
-    planes += size_t(4) * count;
+    a.normal = DecodeOctNormal(ValueAt<2>(values, index) | ValueAt<2>(values + size_t(2) * count, index) << 16);
+    values += size_t(4) * count;
   }
   if (flags & kAttrDensity) {
-    a.density = std::bit_cast<float>(uint32_t(GatherPlanes(planes, count, index, 4)));
-    planes += size_t(4) * count;
+    a.density = std::bit_cast<float>(ValueAt<4>(values, index));
+    values += size_t(4) * count;
   }
   if (flags & kAttrColor) {
-    uint64_t c = GatherPlanes(planes, count, index, 6);
-    for (int k = 0; k < 3; ++k) a.color[k] = glm::unpackHalf1x16(uint16_t(c >> (16 * k)));
-    planes += size_t(6) * count;
+    for (int k = 0; k < 3; ++k)
+      a.color[k] = glm::unpackHalf1x16(uint16_t(ValueAt<2>(values + size_t(2 * k) * count, index)));
+    values += size_t(6) * count;
   }
   if (flags & kAttrCoverage) {
-    a.coverage = DecodeCoverage(uint16_t(GatherPlanes(planes, count, index, 2)));
-    planes += size_t(2) * count;
+    a.coverage = DecodeCoverage(uint16_t(ValueAt<2>(values, index)));
+    values += size_t(2) * count;
   }
-  if (flags & kAttrTemperature)
-    a.temperature = std::bit_cast<float>(uint32_t(GatherPlanes(planes, count, index, 4)));
+  if (flags & kAttrTemperature) a.temperature = std::bit_cast<float>(ValueAt<4>(values, index));
   return a;
+}
+
+std::vector<uint8_t> PlanesToValues(std::span<const uint8_t> planes, uint32_t count, uint8_t flags) {
+  std::vector<uint8_t> out(planes.size());
+  int widths[kMaxComponents];
+  const int n = Components(flags, widths);
+  size_t at = 0;
+  for (int c = 0; c < n; ++c) {
+    const int w = widths[c];
+    for (uint32_t i = 0; i < count && at + size_t(w) * count <= planes.size(); ++i)
+      for (int b = 0; b < w; ++b) out[at + size_t(w) * i + b] = planes[at + size_t(b) * count + i];
+    at += size_t(w) * count;
+  }
+  return out;
 }
 
 void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
@@ -422,8 +402,8 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
     b->cells[start[l] + count[l]++] = MakeCompactCell(first, masks[i]);
   }
   const uint8_t* planes = raw + kBrickHeaderSize + num_cells;
-  b->attr_planes.resize(n - kBrickHeaderSize - num_cells);  // left uninitialised
-  UndeltaPlanes(planes, b->attr_planes.data(), voxel_count, flags);
+  b->attr_values.resize(n - kBrickHeaderSize - num_cells);  // left uninitialised
+  UndeltaPlanes(planes, b->attr_values.data(), voxel_count, flags);
   b->voxel_count = voxel_count;
   b->flags = flags;
   if (flags & kAttrDensity) FindUniformBlocks(b.get(), depth, start);

@@ -44,18 +44,26 @@ inline uint16_t EncodeCoverage(float c) {
 }
 inline float DecodeCoverage(uint16_t q) { return float(q) / 65535.0f; }
 
-// A voxel's attributes from planar attribute bytes (`count` voxels).
-VoxelAttributes ReadAttributes(const uint8_t* planes, uint32_t count, uint8_t flags,
+// The attributes as a decoded brick and a store's resident top hold them
+// ("value arrays"): for each attribute component in plane order (normal u
+// and v, density, colour r g b, coverage, temperature: 2 or 4 bytes each),
+// an array of `count` little-endian values. The same bytes as the planar
+// form of the file, regrouped so that one voxel's value lies in one place:
+// fog reads a density per cell it crosses, one cache line instead of four.
+//
+// A voxel's attributes from value arrays of `count` voxels.
+VoxelAttributes ReadAttributes(const uint8_t* values, uint32_t count, uint8_t flags,
                                uint32_t index);
-// The same voxel's density alone (0 without kAttrDensity): fog reads one per
-// cell it crosses, so this skips the other attributes.
-inline float ReadDensity(const uint8_t* planes, uint32_t count, uint8_t flags, uint32_t index) {
+// The same voxel's density alone (0 without kAttrDensity).
+inline float ReadDensity(const uint8_t* values, uint32_t count, uint8_t flags, uint32_t index) {
   if (!(flags & kAttrDensity)) return 0.0f;
-  const uint8_t* p = planes + ((flags & kAttrNormal) ? size_t(4) * count : 0) + index;
-  const uint32_t bits = uint32_t(p[0]) | uint32_t(p[count]) << 8 | uint32_t(p[size_t(2) * count]) << 16 |
-                        uint32_t(p[size_t(3) * count]) << 24;
+  const uint8_t* p = values + ((flags & kAttrNormal) ? size_t(4) * count : 0) + size_t(4) * index;
+  const uint32_t bits = uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
   return std::bit_cast<float>(bits);
 }
+// The value arrays of planar attribute bytes (`count` voxels, as the file
+// holds them without delta coding: a top-only store's attributes).
+std::vector<uint8_t> PlanesToValues(std::span<const uint8_t> planes, uint32_t count, uint8_t flags);
 // Appends the planar attribute bytes of `attrs` (in payload order).
 void WriteAttributes(std::span<const VoxelAttributes> attrs, uint8_t flags, std::string* dst,
                      int normal_bits = 16);
@@ -70,9 +78,10 @@ struct DecodedBrick {
   // Both arrays live in the process's brick pool (storage/buffer_pool.h)
   // when one is reserved, else on the heap.
   std::vector<CompactCell, BrickAllocator<CompactCell>> cells;
-  // Written whole by DecodeBrickRaw straight from the decompressed record
-  // (delta decoding and copying in one pass), so never zeroed first.
-  std::vector<uint8_t, BrickAllocator<uint8_t>> attr_planes;
+  // The attributes as value arrays (ReadAttributes). Written whole by
+  // DecodeBrickRaw straight from the decompressed record's planes (delta
+  // decoding and regrouping in one pass), so never zeroed first.
+  std::vector<uint8_t, BrickAllocator<uint8_t>> attr_values;
   uint32_t voxel_count = 0;
   uint8_t flags = 0;
   // Every voxel of the brick's grid occupied, all of one density (the
@@ -81,14 +90,14 @@ struct DecodedBrick {
   float uniform_density = -1.0f;
   // Every voxel of the brick's grid occupied, all with voxel 0's attributes
   // (the inside of a fog volume, made from a level set or of one
-  // temperature): attr_planes holds that one voxel, and `cells` is empty,
+  // temperature): attr_values holds that one voxel, and `cells` is empty,
   // the pool being FullPool(depth), shared by all such bricks.
   bool full_of_one = false;
   const CompactCell* shared_cells = nullptr;
   uint32_t shared_cell_count = 0;
 
-  // The cell pool in traversal form, and the attributes' planes: ReadDensity
-  // and ReadAttributes of payload p read attr_planes with AttrCount() and
+  // The cell pool in traversal form, and the attributes: ReadDensity and
+  // ReadAttributes of payload p read attr_values with AttrCount() and
   // AttrIndex(p).
   const CompactCell* CellData() const { return full_of_one ? shared_cells : cells.data(); }
   uint32_t CellCount() const { return full_of_one ? shared_cell_count : uint32_t(cells.size()); }
@@ -107,7 +116,7 @@ struct DecodedBrick {
   size_t charge() const {
     return sizeof(DecodedBrick) +
            (cells.empty() ? 0 : BrickBlockBytes(cells.data(), cells.capacity() * sizeof(CompactCell))) +
-           BrickBlockBytes(attr_planes.data(), attr_planes.capacity()) +
+           BrickBlockBytes(attr_values.data(), attr_values.capacity()) +
            (uniform_levels.empty() ? 0 : BrickBlockBytes(uniform_levels.data(), uniform_levels.capacity())) +
            kOverheadBytes;
   }

@@ -46,20 +46,17 @@ bool AllBytesAre(const uint8_t* p, size_t n, uint8_t byte) {
 
 void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) {
   const uint32_t n = uint32_t(b->cells.size());
-  const uint8_t* planes = b->attr_planes.data();
-  const uint8_t* density_planes = planes + ((b->flags & kAttrNormal) ? size_t(4) * b->voxel_count : 0);
+  const size_t count = b->voxel_count;
+  // The densities: `count` 4-byte values (the value arrays, brick_codec.h).
+  const uint8_t* d = b->attr_values.data() + ((b->flags & kAttrNormal) ? size_t(4) * count : 0);
   // (A brick deeper than 10 levels cannot be full: its voxel count is 32-bit.)
-  if (depth <= 10 && uint64_t(b->voxel_count) == uint64_t(1) << (3 * depth)) {
-    // A full brick (the inside of a fog): of one density when each byte
-    // plane holds one byte throughout.
-    bool same = true;
-    for (size_t k = 0; k < 4 && same; ++k) {
-      const uint8_t* q = density_planes + k * b->voxel_count;
-      same = AllBytesAre(q, b->voxel_count, q[0]);
-    }
-    const float d = same ? ReadDensity(planes, b->voxel_count, b->flags, 0) : -1.0f;
-    if (d >= 0 && std::isfinite(d)) {
-      b->uniform_density = d;
+  if (depth <= 10 && uint64_t(count) == uint64_t(1) << (3 * depth)) {
+    // A full brick (the inside of a fog): of one density when the array
+    // equals itself shifted by one value.
+    const bool same = std::memcmp(d, d + 4, 4 * (count - 1)) == 0;
+    const float f = same ? ReadDensity(b->attr_values.data(), b->voxel_count, b->flags, 0) : -1.0f;
+    if (f >= 0 && std::isfinite(f)) {
+      b->uniform_density = f;
       return;
     }
   }
@@ -68,28 +65,22 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) 
   thread_local std::vector<uint32_t> one;
   thread_local std::vector<int8_t> levels;  // per cell: its block's levels, or -1
   one.assign(n, kMixed);
-  const size_t count = b->voxel_count;
-  const uint8_t* d0 = density_planes;
-  const uint8_t* d1 = d0 + count;
-  const uint8_t* d2 = d1 + count;
-  const uint8_t* d3 = d2 + count;
-  auto same8 = [](const uint8_t* p) {  // the 8 bytes at p are one
-    uint64_t v;
-    std::memcpy(&v, p, 8);
-    return v == uint64_t(p[0]) * 0x0101010101010101ull;
+  auto same8 = [](const uint8_t* p) {  // the 8 values at p are one
+    uint64_t v[4];
+    std::memcpy(v, p, sizeof v);
+    return v[0] == v[1] && v[0] == v[2] && v[0] == v[3] && uint32_t(v[0]) == uint32_t(v[0] >> 32);
   };
   bool any = false;
   for (uint32_t i = level_start[depth - 1]; i < level_start[depth]; ++i) {
-    // A last-level cell's 8 voxels are payloads first..first+7: of one
-    // density when each byte plane holds 8 equal bytes there.
+    // A last-level cell's 8 voxels are payloads first..first+7.
     const CompactCell c = b->cells[i];
     if (ChildMask(c) != 0xffu) continue;
     const uint32_t first = c.bits >> 8;
-    if (!(same8(d0 + first) && same8(d1 + first) && same8(d2 + first) && same8(d3 + first))) continue;
-    const uint32_t bits = uint32_t(d0[first]) | uint32_t(d1[first]) << 8 |
-                          uint32_t(d2[first]) << 16 | uint32_t(d3[first]) << 24;
-    const float d = std::bit_cast<float>(bits);
-    if (!(d >= 0 && std::isfinite(d))) continue;
+    const uint8_t* p = d + size_t(4) * first;
+    if (!same8(p)) continue;
+    const uint32_t bits = uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+    const float f = std::bit_cast<float>(bits);
+    if (!(f >= 0 && std::isfinite(f))) continue;
     one[i] = bits;
     any = true;
   }
@@ -154,12 +145,12 @@ std::shared_ptr<DecodedBrick> DecodeFullOfOne(const uint8_t* masks, uint32_t num
   b->full_of_one = true;
   b->shared_cells = pool.data();
   b->shared_cell_count = uint32_t(pool.size());
-  b->attr_planes.resize(bytes);
-  for (size_t k = 0; k < bytes; ++k) b->attr_planes[k] = planes[k * voxel_count];
+  b->attr_values.resize(bytes);  // (one voxel's planes are its value arrays)
+  for (size_t k = 0; k < bytes; ++k) b->attr_values[k] = planes[k * voxel_count];
   b->voxel_count = voxel_count;
   b->flags = flags;
   if (flags & kAttrDensity) {
-    const float d = ReadDensity(b->attr_planes.data(), 1, flags, 0);
+    const float d = ReadDensity(b->attr_values.data(), 1, flags, 0);
     if (d >= 0 && std::isfinite(d)) b->uniform_density = d;
   }
   return b;

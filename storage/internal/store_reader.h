@@ -97,7 +97,7 @@ class StoreImpl : public Store {
       *uniform_levels = depth_;
     } else {
       *density =
-          ReadDensity(b->attr_planes.data(), b->AttrCount(), b->flags, b->AttrIndex(hit.payload));
+          ReadDensity(b->attr_values.data(), b->AttrCount(), b->flags, b->AttrIndex(hit.payload));
       const uint8_t l =
           b->uniform_levels.empty() ? DecodedBrick::kNotUniform : b->uniform_levels[hit.payload];
       *uniform_levels = l == DecodedBrick::kNotUniform ? -1 : int(l);
@@ -262,7 +262,7 @@ class StoreImpl : public Store {
       return InvalidArgumentError("payload " + std::to_string(payload) + " outside brick " +
                                   std::to_string(brick) + " (" + std::to_string(b.voxel_count) +
                                   " voxels) of store '" + dir_ + "'");
-    return ReadAttributes(b.attr_planes.data(), b.AttrCount(), b.flags, b.AttrIndex(payload));
+    return ReadAttributes(b.attr_values.data(), b.AttrCount(), b.flags, b.AttrIndex(payload));
   }
 
   const std::string dir_;
@@ -272,7 +272,7 @@ class StoreImpl : public Store {
   uint64_t store_id_ = 0;
   uint8_t flags_ = 0;
   std::vector<CompactCell> top_;  // traversal form (the file holds the build form)
-  std::vector<uint8_t> top_attr_;
+  std::vector<uint8_t> top_attr_;  // value arrays (brick_codec.h)
   std::unique_ptr<RandomAccessFile> index_;  // the table's pages are read from it
   std::unique_ptr<TablePages> table_;        // set by Load
   std::unique_ptr<RandomAccessFile> bricks_;

@@ -190,10 +190,11 @@ TEST(TopValidation, NonConsecutiveBrickRefsAreRefusedAtOpen) {
   EXPECT_NE(r.status().message().find("Morton"), std::string::npos) << r.status().message();
 }
 
-// Decoding undoes the delta coding while copying the planes out of the raw
-// record (UndeltaPlanes): every attribute combination and voxel count
-// (SSE2 blocks of 8 and their tails) gives back WriteAttributes' bytes.
-TEST(BrickDecoder, DecodedPlanesAreTheWrittenAttributes) {
+// Decoding undoes the delta coding while regrouping the raw record's planes
+// into value arrays (UndeltaPlanes): every attribute combination and voxel
+// count (SSE2 blocks of 8 and 16 and their tails) gives back WriteAttributes'
+// bytes as PlanesToValues regroups them, and each voxel's attributes.
+TEST(BrickDecoder, DecodedValuesAreTheWrittenAttributes) {
   auto vol = GenerateShape("noise:32");
   ASSERT_TRUE(vol.ok());
   const int depth = vol->levels;
@@ -205,7 +206,7 @@ TEST(BrickDecoder, DecodedPlanesAreTheWrittenAttributes) {
   ASSERT_GT(all.size(), 40u);
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<float> u(-1.f, 1.f);
-  for (size_t n : {size_t(1), size_t(7), size_t(8), size_t(9), size_t(23), all.size()}) {
+  for (size_t n : {size_t(1), size_t(7), size_t(8), size_t(9), size_t(23), size_t(33), all.size()}) {
     std::vector<LeafPoint> pts(all.begin(), all.begin() + n);
     for (size_t i = 0; i < n; ++i) pts[i].ref = MakeLeafRef(uint32_t(i));
     auto cells = BuildCells(pts, depth);
@@ -215,20 +216,42 @@ TEST(BrickDecoder, DecodedPlanesAreTheWrittenAttributes) {
       a.density = u(rng) * 100;
       a.color = glm::vec3(u(rng), u(rng), u(rng)) * 4.f;
       a.coverage = std::fabs(u(rng));
+      a.temperature = 1000.f + 500.f * u(rng);
     }
-    for (uint8_t flags = 1; flags < 16; ++flags) {
+    for (uint8_t flags = 1; flags <= kAttrAll; ++flags) {
       std::string raw = EncodeBrickRaw(cells, attrs, depth, flags);
-      std::string expect;
-      WriteAttributes(attrs, flags, &expect);
+      std::string planes;
+      WriteAttributes(attrs, flags, &planes);
+      const std::vector<uint8_t> expect = PlanesToValues(
+          {reinterpret_cast<const uint8_t*>(planes.data()), planes.size()}, uint32_t(n), flags);
       BrickEntry e;
       e.num_cells = uint32_t(cells.size());
       e.voxel_count = uint32_t(n);
       auto d = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e,
                               depth, flags);
       ASSERT_TRUE(d.ok()) << d.status().ToString();
-      ASSERT_EQ((*d)->attr_planes.size(), expect.size()) << n << " voxels, flags " << int(flags);
-      EXPECT_EQ(0, std::memcmp((*d)->attr_planes.data(), expect.data(), expect.size()))
+      ASSERT_EQ((*d)->attr_values.size(), expect.size()) << n << " voxels, flags " << int(flags);
+      EXPECT_EQ(0, std::memcmp((*d)->attr_values.data(), expect.data(), expect.size()))
           << n << " voxels, flags " << int(flags);
+      for (size_t i = 0; i < n; ++i) {
+        const VoxelAttributes a = ReadAttributes((*d)->attr_values.data(), uint32_t(n), flags, uint32_t(i));
+        if (flags & kAttrNormal) {
+          EXPECT_LT(glm::length(a.normal - glm::normalize(attrs[i].normal)), 1e-3f) << i;
+        }
+        if (flags & kAttrDensity) {
+          EXPECT_EQ(a.density, attrs[i].density) << i;
+          EXPECT_EQ(ReadDensity((*d)->attr_values.data(), uint32_t(n), flags, uint32_t(i)), attrs[i].density);
+        }
+        if (flags & kAttrColor) {
+          EXPECT_LT(glm::length(a.color - attrs[i].color), 4e-3f) << i;
+        }
+        if (flags & kAttrCoverage) {
+          EXPECT_NEAR(a.coverage, attrs[i].coverage, 1e-4f) << i;
+        }
+        if (flags & kAttrTemperature) {
+          EXPECT_EQ(a.temperature, attrs[i].temperature) << i;
+        }
+      }
     }
   }
 }
@@ -310,9 +333,11 @@ TEST(BrickDecoder, FullBrickOfOneValueSharesThePool) {
       ASSERT_EQ(b.CellCount(), expect_pool->size());
       EXPECT_EQ(0, std::memcmp(b.CellData(), expect_pool->data(), expect_pool->size() * sizeof(CompactCell)));
       EXPECT_TRUE(ValidateLevelOrderPool(b.CellData(), b.CellCount(), depth, pts.size()).ok());
-      if (odd < 0) EXPECT_EQ(b.attr_planes.size(), AttrBytesPerVoxel(flags));
+      if (odd < 0) {
+        EXPECT_EQ(b.attr_values.size(), AttrBytesPerVoxel(flags));
+      }
       for (uint32_t i = 0; i < pts.size(); ++i) {
-        const VoxelAttributes a = ReadAttributes(b.attr_planes.data(), b.AttrCount(), flags, b.AttrIndex(i));
+        const VoxelAttributes a = ReadAttributes(b.attr_values.data(), b.AttrCount(), flags, b.AttrIndex(i));
         EXPECT_EQ(a.density, attrs[i].density);
         EXPECT_EQ(a.temperature, attrs[i].temperature) << "voxel " << i;
         EXPECT_EQ(a.color, glm::vec3(0.25f, 0.5f, 1.0f));
@@ -390,7 +415,7 @@ TEST(BrickDecoder, MutatedBricksNeverYieldABadPool) {
     ++accepted;
     ASSERT_TRUE(ValidateLevelOrderPool((*d)->cells.data(), (*d)->cells.size(), 4,
                                        (*d)->voxel_count).ok());
-    ASSERT_EQ((*d)->attr_planes.size(), size_t((*d)->voxel_count) * AttrBytesPerVoxel(flags));
+    ASSERT_EQ((*d)->attr_values.size(), size_t((*d)->voxel_count) * AttrBytesPerVoxel(flags));
   }
   SUCCEED() << accepted << " mutated bricks decoded to valid pools";
 }

@@ -77,11 +77,11 @@ inline StoreMeta MetaFor(int levels, int brick_level, GridClass gc, bool color) 
   return m;
 }
 
-// The decoded contents of a brick as bytes: cells, attribute planes, voxel count.
+// The decoded contents of a brick as bytes: cells, attribute values, voxel count.
 inline std::string BrickBytes(const BrickView& v) {
   const auto* b = static_cast<const storage_internal::DecodedBrick*>(v.data);
   std::string out(reinterpret_cast<const char*>(v.cells), v.num_cells * sizeof(CompactCell));
-  out.append(reinterpret_cast<const char*>(b->attr_planes.data()), b->attr_planes.size());
+  out.append(reinterpret_cast<const char*>(b->attr_values.data()), b->attr_values.size());
   out.append(reinterpret_cast<const char*>(&b->voxel_count), sizeof(b->voxel_count));
   return out;
 }
