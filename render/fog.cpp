@@ -15,11 +15,16 @@ namespace vox {
 
 using render_internal::ExpNeg;
 using render_internal::ExpNegShare;
+using render_internal::ExpNegShareOf;
 using render_internal::ForEachLight;
 using render_internal::kInf;
 using render_internal::kMaxLightLatticeLevel;
 using render_internal::kMaxOpticalDepth;
 using render_internal::kMaxShadowOpticalDepth;
+
+// The largest optical depth of a run of thin cells of different densities
+// integrated as one (Renderer::Fog).
+constexpr double kMaxThinRunDepth = 0.03;
 
 namespace {
 
@@ -394,8 +399,12 @@ class LightAlongRay {
           const double kappa = rate_[k];  // the light's decay rate along the ray
           if (!(lt_ == t)) l_[k] = lt_ == -kInf ? la_[k] * ExpNeg(kappa * (t - ta_))
                                                 : l_[k] * ExpNeg(kappa * (t - lt_));
-          Ch(in, k) = l_[k] * Ch(piece_tau, k) * ExpNegShare(Ch(piece_tau, k) + kappa * len);
-          l_[k] *= ExpNeg(kappa * len);
+          // (e^(-(tau + kappa len)) as the product of the piece's
+          // transmittance and the light's decay: one exponential fewer)
+          const double decay = ExpNeg(kappa * len);
+          Ch(in, k) = l_[k] * Ch(piece_tau, k) *
+                      ExpNegShareOf(Ch(piece_tau, k) + kappa * len, Ch(piece_trans, k) * decay);
+          l_[k] *= decay;
         }
         if constexpr (!kGrey)
           if (channels == 1) in[1] = in[2] = in[0], l_[1] = l_[2] = l_[0];
@@ -549,20 +558,46 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
   // is closed where it would pass the optical depth at which the ray stops,
   // so the walk stops where it did cell by cell. m is the run's medium,
   // kept for the next run of the same density and temperature.
+  //
+  // With the level of detail on (the default frame; not the exact one), a
+  // grey frame whose medium is proportional to the density (no ramp) also
+  // joins thin cells of different densities, while the run's optical depth
+  // stays within kMaxThinRunDepth: the run is integrated with its mean
+  // density, which keeps its optical depth exact and moves where its light
+  // is scattered within it by at most half of that depth (the rim of a fog
+  // made from a level set is a few voxels of rising density, each its own
+  // cell otherwise).
+  const bool join_thin = grey && cone != nullptr && model.proportional();
+  const double ext_per_rho = join_thin ? model.Extinction(1.0).x : 0.0;
   double run_t0 = 0.0, run_t1 = -kInf, run_st = 0.0;
   double run_rho = std::numeric_limits<double>::quiet_NaN(), run_temp = 0.0;
+  double run_mass = 0.0;  // a joined run's sum of density times length (else 0)
   auto flush = [&] {
     if (!(run_t1 > -kInf)) return true;
     const double t0 = run_t0, t1 = run_t1;
     run_t1 = -kInf;
+    if (run_mass > 0) {  // joined: its mean density (m is kept for no later run)
+      const double rho = run_mass / (t1 - t0);
+      model.AtGrey(rho, &m.extinction.x, &m.scattering.x);
+      run_rho = std::numeric_limits<double>::quiet_NaN();
+      run_mass = 0.0;
+    }
     return grey ? cell_grey(t0, t1) : cell(t0, t1);
   };
   auto add = [&](double t0, double t1, double rho, double temp) {
-    if (run_t1 > -kInf && rho == run_rho && temp == run_temp &&
-        std::abs(t0 - run_t1) <= 1e-12 * (1.0 + std::abs(run_t1)) &&
+    const bool follows = run_t1 > -kInf && std::abs(t0 - run_t1) <= 1e-12 * (1.0 + std::abs(run_t1));
+    if (follows && run_mass == 0 && rho == run_rho && temp == run_temp &&
         (t1 - run_t0) * run_st + least_depth() <= kMaxOpticalDepth) {
       run_t1 = std::max(run_t1, t1);
       return true;
+    }
+    if (join_thin && follows && t1 > run_t1) {
+      const double mass = (run_mass > 0 ? run_mass : run_rho * (run_t1 - run_t0)) + rho * (t1 - run_t1);
+      if (ext_per_rho * mass <= kMaxThinRunDepth) {
+        run_mass = mass;
+        run_t1 = t1;
+        return true;
+      }
     }
     if (!flush()) return false;
     if (!(rho == run_rho && temp == run_temp)) {

@@ -100,6 +100,8 @@ class FogModel {
   bool scatters() const { return scatters_; }
   // Every density's medium has three equal channels and emits nothing.
   bool grey() const { return grey_; }
+  // The medium is the density times a fixed medium (no ramp).
+  bool proportional() const { return c_.ramp.empty(); }
   // Linear sRGB of the blackbody at `kelvin` as the controls scale it.
   glm::dvec3 Blackbody(double kelvin) const;
 

@@ -33,6 +33,13 @@ inline double ExpNegShare(double x) {
              x * (1.0 / 5040 - x * (1.0 / 40320 - x * (1.0 / 362880 - x * (1.0 / 3628800)))))))));
 }
 
+// ExpNegShare(x) given e = e^(-x) (as ExpNeg gives it): (1 - e) / x where
+// that keeps at least 12 digits, the series where x is too small for it.
+inline double ExpNegShareOf(double x, double e) {
+  if (!(std::abs(x) < 1e-3)) return (1.0 - e) / x;
+  return 1.0 - x * (1.0 / 2 - x * (1.0 / 6 - x * (1.0 / 24 - x * (1.0 / 120))));
+}
+
 }  // namespace vox::render_internal
 
 #endif  // VOX_RENDER_INTERNAL_FOG_MATH_H_

@@ -341,7 +341,6 @@ TEST_F(FogTest, TilesGiveTheWholeFrameBitForBit) {
           << name << " with tiles of " << tile;
   }
   // vox-render's parts (--tiles I/N, as Slurm array tasks) merged by vox-merge.
-  const Camera cam = Cam();
   const std::string cam_json = Write(
       "cam.json", R"({"position":[100,80,120], "look_at":[30,29,32], "fov_deg":40, "width":64, "height":56})");
   const std::string scene = Write("scene.json", std::string("{") + kLight + "}");
