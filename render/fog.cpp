@@ -26,6 +26,13 @@ using render_internal::kMaxShadowOpticalDepth;
 // integrated as one (Renderer::Fog).
 constexpr double kMaxThinRunDepth = 0.03;
 
+// The light's sampling along a primary ray (LightAlongRay::Place): how far
+// the light's logarithm may bend away from the geometric interpolation over
+// an interval, and how much an interval is shortened for it at most.
+constexpr double kLightLogTolerance = 0.02;
+constexpr double kMinLightRefinement = 0.125;
+constexpr int kMaxLightHalvings = 3;
+
 namespace {
 
 // Renderer::Density's way for volumes without PinnedDensity (a memory
@@ -224,8 +231,9 @@ constexpr double kMinLatticeFootprints = 4.0;
 constexpr double kLatticeStartWidth = 0.25;
 
 glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext& cx, const Cone* cone,
-                                render_internal::FogLightCache* cache) const {
+                                render_internal::FogLightCache* cache, bool* own_rays) const {
   const glm::dvec3 p_g = gr.origin + t * gr.dir;
+  *own_rays = true;
   // The lattice's spacing: the largest power of two voxels within half the
   // sample spacing h (world units), or finer where the light varies too much
   // across that block, down to kMinLatticeFootprints pixel footprints (the
@@ -246,6 +254,7 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
     if (!(columns_.on ? ColumnLight(p_g, level, cx, cache, &out, &ok)
                       : LatticeLight(p_g, level, cx, cone, cache, &out, &ok)))
       continue;
+    *own_rays = false;
     return ok ? out : glm::dvec3(0.0);
   }
   return LightAtPoint(p_g, cx, cone);
@@ -291,10 +300,12 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
     return false;
   const glm::dvec3 f0 = glm::floor(u);
   // A column's ray: from its sample `first` along the light's travel, in
-  // world units (samples s voxels apart), a quarter of a spacing wide, as a
-  // lattice point's rays start (exact voxels with volume.shadow_lod 0).
+  // world units (samples s voxels apart), on exact voxels: one ray serves
+  // the whole column, and coarser cells would blur the fog's rim on top of
+  // the interpolation across columns (under a light from the side, cells a
+  // quarter of a spacing wide made the frame's error half as large again).
   const double dt = s / lc.voxels_per_unit;
-  const Cone cone{scene_.volume.shadow_lod > 0 ? kLatticeStartWidth * s : 0.0, 0.0};
+  const Cone cone{0.0, 0.0};
   const render_internal::LatticeBlock* b = cache->columns.Block(
       level, int64_t(f0.x), int64_t(f0.y), int(f0.z),
       [&](int64_t i, int64_t j, int first, int count, const glm::dvec3& depth, glm::dvec3* samples) {
@@ -335,6 +346,9 @@ double Ch(const glm::dvec3& v, int k) { return v[k]; }
 template <class LightAt>
 class LightAlongRay {
  public:
+  // light_at(t, h, bool* own_rays): the light at t, for samples h apart
+  // there; *own_rays whether it traced its own transmittance rays (not
+  // interpolated on a lattice).
   explicit LightAlongRay(LightAt light_at) : light_at_(std::move(light_at)) {}
 
   // The integral over t in [t0, t1] of st e^(-st (t - t0)) L(t), per
@@ -356,9 +370,10 @@ class LightAlongRay {
       ta_ = t0;
       seen_a_ = MaxOf(entry_trans);
       const double h = step(t0, seen_a_);
-      la_ = light_at_(t0, h);
+      la_ = light_at_(t0, h, &own_);
       ext_ = st;
-      SetB(t0 + h, h);
+      has_prev_ = false;
+      Place(h);
     } else if (st > ext_) {
       ext_ = st;
       const double h = step(ta_, seen_a_);
@@ -371,12 +386,15 @@ class LightAlongRay {
     const bool grey_cell = IsGrey(st_rgb);
     while (t < t1) {
       if (t >= tb_) {
+        has_prev_ = geometric_;
+        prev_rate_ = rate_;
+        prev_len_ = tb_ - ta_;
         ta_ = tb_;
         la_ = lb_;
         ext_ = st;
         seen_a_ = MaxOf(V(entry_trans * trans));
         const double h = step(ta_, seen_a_);
-        SetB(ta_ + h, h);
+        Place(h);
       }
       // (a step lost below t's precision ends the cell with this interval)
       const double e = tb_ > t ? std::min(t1, tb_) : t1, len = e - t;
@@ -394,7 +412,7 @@ class LightAlongRay {
         // decay rate (a cell's exit is the next one's entry, up to rounding).
         // A white light in grey fog: one channel computed for three.
         const int channels = kGrey || (grey_ && grey_cell) ? 1 : 3;
-        V in;
+        V in(0.0);
         for (int k = 0; k < channels; ++k) {
           const double kappa = rate_[k];  // the light's decay rate along the ray
           if (!(lt_ == t)) l_[k] = lt_ == -kInf ? la_[k] * ExpNeg(kappa * (t - ta_))
@@ -426,9 +444,40 @@ class LightAlongRay {
   }
 
  private:
-  void SetB(double t, double h) {
+  // Places the next sample h after ta_, or closer where the light's
+  // logarithm bends along the ray: the geometric interpolation is exact
+  // where it is straight, and errs by about its curvature times len^2 / 8
+  // over an interval len. The curvature is the change of the light's rate
+  // from the interval before, or, on the first interval of a stretch of
+  // fog, the midpoint's distance from the interpolation (halved while it
+  // errs: at the light's terminator the light's depth grows as the square
+  // root of the distance). The tolerance grows as the transmittance from
+  // the camera falls, as the spacing does (what errs is seen through it).
+  void Place(double h) {
+    SetB(ta_ + h, h);
+    if (!own_ || !geometric_) return;
+    // (Channel 0 decides: the channels' light crosses the same fog, and a
+    // grey frame places the same samples as its per-channel twin.)
+    const double tol = kLightLogTolerance / seen_a_;
+    if (has_prev_) {
+      const double len = tb_ - ta_;
+      const double bend = std::abs(rate_[0] - prev_rate_[0]) / (0.5 * (len + prev_len_));
+      if (bend * len * len > 8.0 * tol)
+        SetB(ta_ + std::max(kMinLightRefinement * len, std::sqrt(8.0 * tol / bend)), h);
+      return;
+    }
+    for (int i = 0; i < kMaxLightHalvings && geometric_ && own_; ++i) {
+      const double tm = 0.5 * (ta_ + tb_);
+      const glm::dvec3 lm = light_at_(tm, h, &own_);
+      if (lm[0] > 0 && std::abs(std::log(lm[0] / la_[0]) + rate_[0] * (tm - ta_)) <= tol) return;
+      SetBTo(tm, lm);
+    }
+  }
+
+  void SetB(double t, double h) { SetBTo(t, light_at_(t, h, &own_)); }
+  void SetBTo(double t, const glm::dvec3& l) {
     tb_ = t;
-    lb_ = light_at_(t, h);
+    lb_ = l;
     geometric_ = tb_ > ta_;
     // A white light in grey fog: one rate for the three channels.
     const bool grey = la_[0] == la_[1] && la_[0] == la_[2] && lb_[0] == lb_[1] && lb_[0] == lb_[2];
@@ -442,6 +491,7 @@ class LightAlongRay {
   }
 
   LightAt light_at_;
+  bool own_ = false;  // the last sample traced its own rays
   double ta_ = -kInf, tb_ = -kInf, ext_ = 0.0;  // ext_: the extinction [ta, tb] was chosen for
   double seen_a_ = 1.0;  // the transmittance from the camera at ta_
   glm::dvec3 la_{0.0}, lb_{0.0}, rate_{0.0};
@@ -449,6 +499,10 @@ class LightAlongRay {
   glm::dvec3 l_{0.0};
   double lt_ = -kInf;
   bool geometric_ = false, grey_ = false;
+  // The interval before [ta, tb], when it was interpolated geometrically.
+  bool has_prev_ = false;
+  glm::dvec3 prev_rate_{0.0};
+  double prev_len_ = 0.0;
 };
 
 }  // namespace
@@ -482,10 +536,13 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
   // keeps the light unweighted); with several lights each is weighted
   // before they are summed, so every sample traces its own rays.
   const glm::dvec3 view_w = -glm::normalize(xf_.grid_to_world_linear * gr.dir);  // towards the camera
-  LightAlongRay light([&](double t, double h) {
-    if (model.isotropic()) return LightInFog(gr, t, h, cx, cone, cache);
-    if (scene_.lights.size() > 1) return LightAtPoint(gr.origin + t * gr.dir, cx, cone, &view_w);
-    glm::dvec3 l = LightInFog(gr, t, h, cx, cone, cache);
+  LightAlongRay light([&](double t, double h, bool* own_rays) {
+    if (model.isotropic()) return LightInFog(gr, t, h, cx, cone, cache, own_rays);
+    if (scene_.lights.size() > 1) {
+      *own_rays = true;
+      return LightAtPoint(gr.origin + t * gr.dir, cx, cone, &view_w);
+    }
+    glm::dvec3 l = LightInFog(gr, t, h, cx, cone, cache, own_rays);
     ForEachLight(scene_.lights, xf_.GridToWorld(gr.origin + t * gr.dir),
                  [&](const Light&, const glm::dvec3& to_light, double) {
                    l *= model.Phase(-glm::dot(to_light, view_w));

@@ -347,9 +347,10 @@ class Renderer {
                           const glm::dvec3* view_w = nullptr, double start_width = 0.0) const;
   // The light reaching fog at ray parameter t of primary ray gr, for light
   // samples h apart there: interpolated on `cache`'s lattice
-  // (render/internal/fog_light.h) unless volume.light_lattice is off.
+  // (render/internal/fog_light.h) unless volume.light_lattice is off;
+  // *own_rays: whether it traced its own transmittance rays instead.
   glm::dvec3 LightInFog(const Ray& gr, double t, double h, TraceContext& cx, const Cone* cone,
-                        render_internal::FogLightCache* cache) const;
+                        render_internal::FogLightCache* cache, bool* own_rays) const;
   // The light at p_g interpolated on the lattice of spacing 2^level voxels:
   // false when the block's corners differ too much to interpolate; *ok
   // false when the frame failed.

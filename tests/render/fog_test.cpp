@@ -216,8 +216,10 @@ TEST_F(FogTest, DefaultTransmittanceMatchesTheExactIntegral) {
 
 // Thin fog, whose light is sampled far apart along each ray: the light is
 // kept on a lattice shared by neighbouring pixels, which traces a fraction of
-// the transmittance rays of evaluating it at every sample, for the same
-// error against the integral.
+// the transmittance rays of evaluating it at every sample, for at most three
+// quarters of a percent of the mean more error against the integral (1.6%
+// against 1.1% here: samples that trace their own rays are also placed
+// closer where the light bends, which the lattice's are not).
 TEST_F(FogTest, ThinFogSharesTransmittanceRaysOnALattice) {
   constexpr double kThin = 0.2;
   RenderCounters lattice_c, samples_c;
@@ -225,12 +227,29 @@ TEST_F(FogTest, ThinFogSharesTransmittanceRaysOnALattice) {
   const Error e_samples =
       Compare(Render(1.0, R"(, "light_lattice":false)", &samples_c, 16, kThin), kThin);
   EXPECT_GT(e.covered, 1000);
-  EXPECT_LT(e.rmse_over_mean, e_samples.rmse_over_mean + 0.001)
-      << "max " << e.max_abs << " mean " << e.mean;
+  EXPECT_LT(e.rmse_over_mean, e_samples.rmse_over_mean + 0.0075)
+      << "max " << e.max_abs << " mean " << e.mean << " against " << e_samples.rmse_over_mean;
   EXPECT_LT(e.rmse_over_mean, 0.025);
   EXPECT_GT(lattice_c.rays[kRayVolume], 0u);
   EXPECT_LT(lattice_c.rays[kRayVolume] * 2, samples_c.rays[kRayVolume])
       << lattice_c.rays[kRayVolume] << " against " << samples_c.rays[kRayVolume];
+}
+
+// Samples that trace their own rays are placed closer where the light's
+// logarithm bends along the ray (where a ray crosses from the light's
+// shadow of the box's edge into its open light): in thin fog, whose samples
+// lie far apart, the exact frame and the default one without the lattice
+// stay within 1.25% of the integral (1.8% with samples light_step apart).
+TEST_F(FogTest, SamplesAreCloserWhereTheLightBends) {
+  constexpr double kThin = 0.2;
+  RenderCounters exact_c, samples_c;
+  const Error e_exact = Compare(Render(0.0, "", &exact_c, 16, kThin), kThin);
+  const Error e_samples =
+      Compare(Render(1.0, R"(, "light_lattice":false)", &samples_c, 16, kThin), kThin);
+  EXPECT_GT(e_exact.covered, 1000);
+  EXPECT_LT(e_exact.rmse_over_mean, 0.0125) << "max " << e_exact.max_abs << " mean " << e_exact.mean;
+  EXPECT_LT(e_samples.rmse_over_mean, 0.0125)
+      << "max " << e_samples.max_abs << " mean " << e_samples.mean;
 }
 
 // One directional light: its light is kept on a lattice in light space,
