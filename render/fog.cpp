@@ -18,6 +18,7 @@ using render_internal::ExpNegShare;
 using render_internal::ExpNegShareOf;
 using render_internal::ForEachLight;
 using render_internal::kInf;
+using render_internal::kLatticeOffset;
 using render_internal::kMaxLightLatticeLevel;
 using render_internal::kMaxOpticalDepth;
 using render_internal::kMaxShadowOpticalDepth;
@@ -264,7 +265,7 @@ bool Renderer::LatticeLight(const glm::dvec3& p_g, int level, TraceContext& cx, 
                             render_internal::FogLightCache* cache, glm::dvec3* out,
                             bool* ok) const {
   const double s = Pow2(level);
-  const glm::dvec3 u = p_g / s - 0.5;
+  const glm::dvec3 u = (p_g - kLatticeOffset) / s - 0.5;
   const glm::dvec3 f0 = glm::floor(u);
   const glm::i64vec3 i0(f0);
   const glm::dvec3 f = u - f0;
@@ -292,8 +293,8 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
   // Column coordinates: across the light in column spacings, and the sample
   // index down from the columns' top (whole spacings above the grid).
   const double top = std::floor(lc.top * inv_s) + 1.0;
-  const glm::dvec3 u(glm::dot(p_g, lc.u) * inv_s, glm::dot(p_g, lc.v) * inv_s,
-                     top - glm::dot(p_g, lc.n) * inv_s);
+  const glm::dvec3 u((glm::dot(p_g, lc.u) - kLatticeOffset) * inv_s,
+                     (glm::dot(p_g, lc.v) - kLatticeOffset) * inv_s, top - glm::dot(p_g, lc.n) * inv_s);
   const double lim = double(FogColumnCache::kMaxIndex - 2);
   if (!(std::abs(u.x) < lim && std::abs(u.y) < lim && u.z >= 0 &&
         u.z < double(FogColumnCache::kMaxSample - 2)))
@@ -309,7 +310,8 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
   const render_internal::LatticeBlock* b = cache->columns.Block(
       level, int64_t(f0.x), int64_t(f0.y), int(f0.z),
       [&](int64_t i, int64_t j, int first, int count, const glm::dvec3& depth, glm::dvec3* samples) {
-        const glm::dvec3 o = (double(i) * s) * lc.u + (double(j) * s) * lc.v + ((top - first) * s) * lc.n;
+        const glm::dvec3 o = (double(i) * s + kLatticeOffset) * lc.u + (double(j) * s + kLatticeOffset) * lc.v +
+                             ((top - first) * s) * lc.n;
         return DepthsAlong(Ray{o, lc.travel}, dt, count, depth, cone, cx, samples);
       });
   *ok = b != nullptr;

@@ -95,15 +95,16 @@ struct MaterialRegion {
 // The fog's shading controls (absorption, scattering, colour, ramp,
 // emission, blackbody, phase: render/fog_material.h) and its sampling.
 struct VolumeMedium : FogControls {
-  // Voxels between evaluations of the light reaching a primary ray.
+  // Voxels between evaluations of the light reaching a primary ray (an
+  // evaluation that traces its own rays is placed closer where the light
+  // bends along the ray).
   double light_step = 24.0;
   // At most this optical depth between evaluations of the light, divided
   // by the square root of the transmittance from the camera.
   double light_optical_depth = 0.15;
   // Voxels along a transmittance ray per voxel of cell width (LOD
   // pyramid); 0: exact voxels. (The columns of the light-space lattice,
-  // under one directional light, are a quarter of their spacing wide
-  // throughout, or exact voxels at 0.)
+  // under one directional light, walk exact voxels.)
   double shadow_lod = 12.0;
   // The light kept on a lattice and interpolated (render/internal/fog_light.h);
   // false: evaluated at every sample (the reference).

@@ -66,8 +66,9 @@ TEST(FogLightCacheTest, AnswersDoNotDependOnWhatWasAskedBefore) {
       ASSERT_NE(b, nullptr);
       const double s = std::ldexp(1.0, level);
       for (int c = 0; c < 8; ++c) {
-        const glm::dvec3 q((double(i0.x + (c & 1)) + 0.5) * s, (double(i0.y + ((c >> 1) & 1)) + 0.5) * s,
-                           (double(i0.z + ((c >> 2) & 1)) + 0.5) * s);
+        const glm::dvec3 q((double(i0.x + (c & 1)) + 0.5) * s + kLatticeOffset,
+                           (double(i0.y + ((c >> 1) & 1)) + 0.5) * s + kLatticeOffset,
+                           (double(i0.z + ((c >> 2) & 1)) + 0.5) * s + kLatticeOffset);
         for (int k = 0; k < 3; ++k)
           ASSERT_EQ(b->log_light[k][c], value(q)[k]) << "trial " << trial << ", corner " << c;
       }
@@ -86,7 +87,7 @@ TEST(FogLightCacheTest, AnswersDoNotDependOnWhatWasAskedBefore) {
   n = 0;
   const LatticeBlock* b = failing.Block(0, glm::i64vec3(0), light);
   ASSERT_NE(b, nullptr);
-  EXPECT_EQ(b->log_light[2][7], value(glm::dvec3(1.5)).z);
+  EXPECT_EQ(b->log_light[2][7], value(glm::dvec3(1.5 + kLatticeOffset)).z);
 }
 
 // The light-space lattice's columns (FogColumnCache): every sample it
