@@ -24,8 +24,9 @@
 #     converged image's mean over all pixels;
 #   - the time-against-RMSE curve: vox at other settings of the scene's
 #     "volume" quality fields (render/scene.h), one run each;
-#   - the sphere lit along x and from above, vox's default and at
-#     light_optical_depth 0.05 against its converged image of that light.
+#   - the sphere lit along x and from above, vox's default, without the
+#     light's lattice, at light_optical_depth 0.05 and exact (--lod 0),
+#     against its converged image of that light.
 # Needs vdb_tool, vdb_render and BUILD_DIR's vox-ingest, vox-render and
 # vox-lod-compare. The converged images take minutes.
 set -eu
@@ -151,8 +152,8 @@ echo "time against RMSE (one run each): frame | volume fields | vox CPU s | RMSE
 cat curve.txt
 
 # The sphere lit from other directions (the light along x, and from above):
-# vox's default and at light_optical_depth 0.05, each against its converged
-# image of that light.
+# vox's default, without the lattice, at light_optical_depth 0.05 and the
+# exact frame, each against its converged image of that light.
 echo
 echo "other lights (sphere, one run each): light direction | volume fields | vox CPU s | RMSE % of mean"
 for light_dir in '1,0,0' '0,-1,0'; do
@@ -162,11 +163,12 @@ for light_dir in '1,0,0' '0,-1,0'; do
     $render sphere.vox --cam cam_sphere.json --scene ref_scene.json --threads 1 --quiet --lod 0 \
       --float -o "$ref"
   fi
-  for q in '' '"light_optical_depth":0.05'; do
-    scene "$q" >curve_scene.json
+  for q in '' '"light_lattice":false' '"light_optical_depth":0.05' 'exact'; do
+    lod=
+    if [ "$q" = exact ]; then scene '' >curve_scene.json && lod='--lod 0'; else scene "$q" >curve_scene.json; fi
     rm -f curve.exr
     t=$(cpu_wall $render sphere.vox --cam cam_sphere.json --scene curve_scene.json --threads 1 \
-      --quiet --float -o curve.exr | cut -d' ' -f1)
-    echo "$light_dir | ${q:-default} | $t | $(rmse_pct "$ref" curve.exr black_sphere.exr)"
+      --quiet --float $lod -o curve.exr | cut -d' ' -f1)
+    echo "$light_dir | ${q:-default}${lod:+ (--lod 0)} | $t | $(rmse_pct "$ref" curve.exr black_sphere.exr)"
   done
 done
