@@ -304,7 +304,7 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
   // world units (samples s voxels apart), on exact voxels: one ray serves
   // the whole column, and coarser cells would blur the fog's rim on top of
   // the interpolation across columns (under a light from the side, cells a
-  // quarter of a spacing wide made the frame's error half as large again).
+  // quarter of a spacing wide made the frame's error a third larger).
   const double dt = s / lc.voxels_per_unit;
   const Cone cone{0.0, 0.0};
   const render_internal::LatticeBlock* b = cache->columns.Block(

@@ -24,9 +24,10 @@
 #     converged image's mean over all pixels;
 #   - the time-against-RMSE curve: vox at other settings of the scene's
 #     "volume" quality fields (render/scene.h), one run each;
-#   - the sphere lit along x and from above, vox's default, without the
-#     light's lattice, at light_optical_depth 0.05 and exact (--lod 0),
-#     against its converged image of that light.
+#   - the sphere lit along x, from above and as vdb_render's default light
+#     is (towards 0.3,0.3,0): vox's default, without the light's lattice,
+#     at light_optical_depth 0.05 and exact (--lod 0), against its
+#     converged image of that light.
 # Needs vdb_tool, vdb_render and BUILD_DIR's vox-ingest, vox-render and
 # vox-lod-compare. The converged images take minutes.
 set -eu
@@ -151,12 +152,13 @@ echo
 echo "time against RMSE (one run each): frame | volume fields | vox CPU s | RMSE % of mean"
 cat curve.txt
 
-# The sphere lit from other directions (the light along x, and from above):
-# vox's default, without the lattice, at light_optical_depth 0.05 and the
-# exact frame, each against its converged image of that light.
+# The sphere lit from other directions (the light along x, from above, and
+# vdb_render's default light, towards 0.3,0.3,0): vox's default, without
+# the lattice, at light_optical_depth 0.05 and the exact frame, each against
+# its converged image of that light.
 echo
 echo "other lights (sphere, one run each): light direction | volume fields | vox CPU s | RMSE % of mean"
-for light_dir in '1,0,0' '0,-1,0'; do
+for light_dir in '1,0,0' '0,-1,0' '-0.3,-0.3,0'; do
   ref="ref_light_$(echo "$light_dir" | tr ',-' '_m').exr"
   if [ ! -f "$ref" ]; then
     scene '"light_step":0.5, "light_optical_depth":0.01, "shadow_lod":0' >ref_scene.json
