@@ -33,8 +33,8 @@ namespace vox::render_internal {
 // rays of lattice points and columns then run through voxel centres, where
 // they would run along voxel edges and corners and see the voxels on one
 // side only (the fog's rim half a voxel off: the sphere of
-// tools/bench/fog_bench.sh lit along x erred 3.5% of the mean on columns
-// instead of 2.8%, 5.4% instead of 4.4% on points).
+// tools/bench/fog_bench.sh lit along x erred 3.5% of the mean instead of
+// 2.8%).
 inline constexpr double kLatticeOffset = 0.5;
 
 // A lattice of spacing 2^level voxels: point i lies at (i + 1/2) 2^level +
