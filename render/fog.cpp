@@ -220,20 +220,29 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
 
 // The lattice's least spacing in pixel footprints.
 constexpr double kMinLatticeFootprints = 4.0;
+// The lattice's level where the footprint and the sample spacing allow it
+// (spacing 8 voxels: the light's variation from voxel to voxel at the lit
+// side of a fog is left to the interpolation, finer levels cost rays).
+constexpr int kLatticeLevel = 3;
+// The largest spacing from a sample read from the lattice to the next
+// sample along the primary ray, in lattice spacings.
+constexpr double kLatticeSampleSpacings = 3.0;
 // The width, in lattice spacings, at which a lattice point's transmittance
 // rays start (LatticeLight).
 constexpr double kLatticeStartWidth = 0.25;
 
 glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext& cx, const Cone* cone,
-                                render_internal::FogLightCache* cache, bool* own_rays) const {
+                                render_internal::FogLightCache* cache, double* max_step) const {
   const glm::dvec3 p_g = gr.origin + t * gr.dir;
-  *own_rays = true;
-  // The lattice's spacing: the largest power of two voxels within half the
-  // sample spacing h (world units), or finer where the light varies too much
-  // across that block, down to kMinLatticeFootprints pixel footprints (the
-  // cone's width), so that neighbouring pixels share its points; below that
-  // (thick fog, whose light varies within a voxel; close views; the exact
-  // frame, without a cone) each sample has its own rays.
+  *max_step = kInf;
+  // The lattice's spacing: 2^kLatticeLevel voxels, or the power of two
+  // voxels at or above kMinLatticeFootprints pixel footprints (the cone's
+  // width) where that is coarser, so that neighbouring pixels share its
+  // points, and at most half the sample spacing h (world units); finer
+  // where the light varies too much across that block, down to
+  // kMinLatticeFootprints footprints. Below that (thick fog, whose light
+  // varies within a voxel; the exact frame, without a cone) each sample has
+  // its own rays.
   const double h_vox = h / volume_->meta().voxel_size;
   if (!scene_.volume.light_lattice || cone == nullptr) return LightAtPoint(p_g, cx, cone);
   const double min_spacing = kMinLatticeFootprints * std::max(1.0, cone->Width(t));
@@ -242,13 +251,13 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
   const int top = std::min(kMaxLightLatticeLevel, FloorLog2(0.5 * h_vox, &exact));
   const int finest_log2 = FloorLog2(min_spacing, &exact) + (exact ? 0 : 1);  // ceil(log2)
   const int finest = std::min(top, std::max(0, finest_log2));
-  for (int level = top; level >= finest; --level) {
+  for (int level = std::min(top, std::max(kLatticeLevel, finest)); level >= finest; --level) {
     glm::dvec3 out;
     bool ok = true;
     if (!(columns_.on ? ColumnLight(p_g, level, cx, cache, &out, &ok)
                       : LatticeLight(p_g, level, cx, cone, cache, &out, &ok)))
       continue;
-    *own_rays = false;
+    *max_step = kLatticeSampleSpacings * Pow2(level) * volume_->meta().voxel_size;
     return ok ? out : glm::dvec3(0.0);
   }
   return LightAtPoint(p_g, cx, cone);
@@ -345,19 +354,19 @@ glm::dvec3 Renderer::Fog(const Ray& gr, TraceContext& cx, glm::dvec3* transmitta
   // keeps the light unweighted); with several lights each is weighted
   // before they are summed, so every sample traces its own rays.
   const glm::dvec3 view_w = -glm::normalize(xf_.grid_to_world_linear * gr.dir);  // towards the camera
-  LightAlongRay light([&](double t, double h, bool* own_rays) {
-    if (model.isotropic()) return LightInFog(gr, t, h, cx, cone, cache, own_rays);
+  LightAlongRay light([&](double t, double h, double* max_step) {
+    if (model.isotropic()) return LightInFog(gr, t, h, cx, cone, cache, max_step);
     if (scene_.lights.size() > 1) {
-      *own_rays = true;
+      *max_step = kInf;
       return LightAtPoint(gr.origin + t * gr.dir, cx, cone, &view_w);
     }
-    glm::dvec3 l = LightInFog(gr, t, h, cx, cone, cache, own_rays);
+    glm::dvec3 l = LightInFog(gr, t, h, cx, cone, cache, max_step);
     ForEachLight(scene_.lights, xf_.GridToWorld(gr.origin + t * gr.dir),
                  [&](const Light&, const glm::dvec3& to_light, double) {
                    l *= model.Phase(-glm::dot(to_light, view_w));
                  });
     return l;
-  });
+  }, volume_->meta().voxel_size);
   *first_t = kInf;
   // One occupied cell [t0, t1] of medium m (per channel, FogModel::At of
   // its density and temperature): the light it scatters and the light it

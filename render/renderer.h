@@ -348,9 +348,10 @@ class Renderer {
   // The light reaching fog at ray parameter t of primary ray gr, for light
   // samples h apart there: interpolated on `cache`'s lattice
   // (render/internal/fog_light.h) unless volume.light_lattice is off;
-  // *own_rays: whether it traced its own transmittance rays instead.
+  // *max_step: the largest spacing to the next sample that it allows
+  // (world units; infinite where it traced its own transmittance rays).
   glm::dvec3 LightInFog(const Ray& gr, double t, double h, TraceContext& cx, const Cone* cone,
-                        render_internal::FogLightCache* cache, bool* own_rays) const;
+                        render_internal::FogLightCache* cache, double* max_step) const;
   // The light at p_g interpolated on the lattice of spacing 2^level voxels:
   // false when the block's corners differ too much to interpolate; *ok
   // false when the frame failed.

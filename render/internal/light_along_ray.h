@@ -23,6 +23,11 @@ namespace vox::render_internal {
 inline constexpr double kLightLogTolerance = 0.02;
 inline constexpr double kMinLightRefinement = 0.125;
 inline constexpr int kMaxLightHalvings = 3;
+// A sample placed at a cell's entry is evaluated this many voxels inside it
+// (at most half its length): the entry lies on the fog's face, where a
+// light running along the face is that of the empty voxels beside it (a
+// ray on a voxel face walks the voxels on its upper side), not the fog's.
+inline constexpr double kEntryInsetVoxels = 1e-3;
 
 // A channel value's largest channel, whether its channels are equal, and
 // channel k: for glm::dvec3, or for double standing for three equal ones.
@@ -48,10 +53,13 @@ inline double Channel(const glm::dvec3& v, int k) { return v[k]; }
 template <class LightAt>
 class LightAlongRay {
  public:
-  // light_at(t, h, bool* own_rays): the light at t, for samples h apart
-  // there; *own_rays whether it traced its own transmittance rays (not
-  // interpolated on a lattice).
-  explicit LightAlongRay(LightAt light_at) : light_at_(std::move(light_at)) {}
+  // light_at(t, h, double* max_step): the light at t, for samples h apart
+  // there; *max_step the largest spacing to the next sample that this
+  // sample allows (a sample read from a lattice allows a few of the
+  // lattice's spacings: its values are cheap, and it stands for the light
+  // no further). voxel: a voxel's length in t.
+  LightAlongRay(LightAt light_at, double voxel)
+      : light_at_(std::move(light_at)), inset_(kEntryInsetVoxels * voxel) {}
 
   // The integral over t in [t0, t1] of st e^(-st (t - t0)) L(t), per
   // channel, for a cell of extinction st_rgb (per channel; st: its
@@ -72,15 +80,16 @@ class LightAlongRay {
       ta_ = t0;
       seen_a_ = ChannelMax(entry_trans);
       const double h = step(t0, seen_a_);
-      la_ = light_at_(t0, h, &own_);
+      la_ = light_at_(Inside(t0, t1), h, &max_step_);
+      max_step_a_ = max_step_;
       ext_ = st;
       has_prev_ = false;
       Place(h);
     } else if (st > ext_) {
       ext_ = st;
-      const double h = step(ta_, seen_a_);
+      const double h = std::min(step(ta_, seen_a_), max_step_a_);
       const double tc = std::max(ta_ + h, t0);
-      if (tc < tb_) SetB(tc, h);
+      if (tc < tb_) SetBTo(tc, light_at_(tc > t0 ? tc : Inside(t0, t1), h, &max_step_));
     }
     V sum(0.0), trans(1.0);  // trans: the cell's transmittance from t0 to t
     double t = t0;
@@ -93,6 +102,7 @@ class LightAlongRay {
         prev_len_ = tb_ - ta_;
         ta_ = tb_;
         la_ = lb_;
+        max_step_a_ = max_step_b_;
         ext_ = st;
         seen_a_ = ChannelMax(V(entry_trans * trans));
         const double h = step(ta_, seen_a_);
@@ -146,18 +156,23 @@ class LightAlongRay {
   }
 
  private:
-  // Places the next sample h after ta_, or closer where the light's
-  // logarithm bends along the ray: the geometric interpolation is exact
-  // where it is straight, and errs by about its curvature times len^2 / 8
-  // over an interval len. The curvature is the change of the light's rate
-  // from the interval before, or, on the first interval of a stretch of
-  // fog, the midpoint's distance from the interpolation (halved while it
-  // errs: at the light's terminator the light's depth grows as the square
-  // root of the distance). The tolerance grows as the transmittance from
-  // the camera falls, as the spacing does (what errs is seen through it).
+  // Where the light at the entry t0 of cell [t0, t1] is read.
+  double Inside(double t0, double t1) const { return t0 + std::min(inset_, 0.5 * (t1 - t0)); }
+
+  // Places the next sample h after ta_ (or as far as ta_'s sample allows),
+  // or closer where the light's logarithm bends along the ray, whether the
+  // samples trace their own rays or are read from a lattice: the geometric
+  // interpolation is exact where it is straight, and errs by about its
+  // curvature times len^2 / 8 over an interval len. The curvature is the
+  // change of the light's rate from the interval before, or, on the first
+  // interval of a stretch of fog, the midpoint's distance from the
+  // interpolation (halved while it errs: at the light's terminator the
+  // light's depth grows as the square root of the distance). The tolerance
+  // grows as the transmittance from the camera falls, as the spacing does
+  // (what errs is seen through it).
   void Place(double h) {
-    SetB(ta_ + h, h);
-    if (!own_ || !geometric_) return;
+    SetB(ta_ + std::min(h, max_step_a_), h);
+    if (!geometric_) return;
     // (Channel 0 decides: the channels' light crosses the same fog, and a
     // grey frame places the same samples as its per-channel twin.)
     const double tol = kLightLogTolerance / seen_a_;
@@ -168,18 +183,20 @@ class LightAlongRay {
         SetB(ta_ + std::max(kMinLightRefinement * len, std::sqrt(8.0 * tol / bend)), h);
       return;
     }
-    for (int i = 0; i < kMaxLightHalvings && geometric_ && own_; ++i) {
+    for (int i = 0; i < kMaxLightHalvings && geometric_; ++i) {
       const double tm = 0.5 * (ta_ + tb_);
-      const glm::dvec3 lm = light_at_(tm, h, &own_);
+      const glm::dvec3 lm = light_at_(tm, h, &max_step_);
       if (lm[0] > 0 && std::abs(std::log(lm[0] / la_[0]) + rate_[0] * (tm - ta_)) <= tol) return;
       SetBTo(tm, lm);
     }
   }
 
-  void SetB(double t, double h) { SetBTo(t, light_at_(t, h, &own_)); }
+  void SetB(double t, double h) { SetBTo(t, light_at_(t, h, &max_step_)); }
+  // (max_step_: the sample's at t)
   void SetBTo(double t, const glm::dvec3& l) {
     tb_ = t;
     lb_ = l;
+    max_step_b_ = max_step_;
     geometric_ = tb_ > ta_;
     // A white light in grey fog: one rate for the three channels.
     const bool grey = la_[0] == la_[1] && la_[0] == la_[2] && lb_[0] == lb_[1] && lb_[0] == lb_[2];
@@ -193,7 +210,9 @@ class LightAlongRay {
   }
 
   LightAt light_at_;
-  bool own_ = false;  // the last sample traced its own rays
+  double inset_;            // kEntryInsetVoxels in t
+  double max_step_ = kInf;  // the last sample's
+  double max_step_a_ = kInf, max_step_b_ = kInf;  // the samples' at ta_ and tb_
   double ta_ = -kInf, tb_ = -kInf, ext_ = 0.0;  // ext_: the extinction [ta, tb] was chosen for
   double seen_a_ = 1.0;  // the transmittance from the camera at ta_
   glm::dvec3 la_{0.0}, lb_{0.0}, rate_{0.0};

@@ -147,8 +147,9 @@ void Slab(const glm::dvec3& o, const glm::dvec3& d, double* t0, double* t1) {
 
 // The single scattering the pixel's ray gathers: the integral over its chord
 // of T(entry, s) * sigma_s * rho * T(s, light), by the midpoint rule, for
-// the coefficients times `thickness`.
-double ExactScattering(const WorldRay& ray, double thickness) {
+// the coefficients times `thickness`, under a light travelling along
+// light_dir.
+double ExactScattering(const WorldRay& ray, double thickness, const glm::dvec3& light_dir) {
   double t0, t1;
   Slab(ray.origin, ray.dir, &t0, &t1);
   if (!(t1 > t0)) return 0.0;
@@ -159,7 +160,7 @@ double ExactScattering(const WorldRay& ray, double thickness) {
   for (int i = 0; i < n; ++i) {
     const double s = t0 + (i + 0.5) * h;
     double l0, l1;
-    Slab(ray.origin + s * ray.dir, -kLightDir, &l0, &l1);
+    Slab(ray.origin + s * ray.dir, -light_dir, &l0, &l1);
     sum += std::exp(-k * (s - t0)) * std::exp(-k * std::max(0.0, l1));
   }
   return sum * h * kScattering * kDensity * thickness;
@@ -170,13 +171,14 @@ struct Error {
   int covered = 0;
 };
 
-Error Compare(const testing::Image& img, double thickness = 1.0) {
+Error Compare(const testing::Image& img, double thickness = 1.0,
+              const glm::dvec3& light_dir = kLightDir) {
   const Camera cam = Cam();
   Error e;
   double sq = 0;
   for (int j = 0; j < cam.height; ++j)
     for (int i = 0; i < cam.width; ++i) {
-      const double want = ExactScattering(cam.PixelRay(i + 0.5, j + 0.5), thickness);
+      const double want = ExactScattering(cam.PixelRay(i + 0.5, j + 0.5), thickness, light_dir);
       const double got = img.at("R", i, j);
       if (want <= 0) continue;
       ++e.covered;
@@ -217,9 +219,8 @@ TEST_F(FogTest, DefaultTransmittanceMatchesTheExactIntegral) {
 // Thin fog, whose light is sampled far apart along each ray: the light is
 // kept on a lattice shared by neighbouring pixels, which traces a fraction of
 // the transmittance rays of evaluating it at every sample, for at most three
-// quarters of a percent of the mean more error against the integral (1.6%
-// against 1.1% here: samples that trace their own rays are also placed
-// closer where the light bends, which the lattice's are not).
+// quarters of a percent of the mean more error against the integral (1.5%
+// against 1.1% here).
 TEST_F(FogTest, ThinFogSharesTransmittanceRaysOnALattice) {
   constexpr double kThin = 0.2;
   RenderCounters lattice_c, samples_c;
@@ -237,6 +238,53 @@ TEST_F(FogTest, ThinFogSharesTransmittanceRaysOnALattice) {
   EXPECT_GT(lattice_c.rays[kRayVolume], 0u);
   EXPECT_LT(lattice_c.rays[kRayVolume] * 2, samples_c.rays[kRayVolume])
       << lattice_c.rays[kRayVolume] << " against " << samples_c.rays[kRayVolume];
+}
+
+// The light as a directional light's string for the scene's "lights".
+std::string DirectionalLight(const glm::dvec3& dir) {
+  return R"("lights":[{"type":"directional","direction":[)" + std::to_string(dir.x) + "," +
+         std::to_string(dir.y) + "," + std::to_string(dir.z) + R"(],"shadows":true}])";
+}
+
+// Lights from the side, one along an axis: the lattice's samples follow its
+// spacing along the primary rays and come closer where the light bends, as
+// samples that trace their own rays do (3.7% and 1.6% of the mean here;
+// 6.2% and 2.7% with samples spaced for their own rays and placed evenly).
+TEST_F(FogTest, ThinFogOnALatticeUnderSideLights) {
+  constexpr double kThin = 0.2;
+  const struct {
+    glm::dvec3 dir;
+    double bound;
+  } cases[] = {{glm::dvec3(1, 0, 0), 0.045}, {glm::dvec3(0.6, -0.6, 0.2), 0.02}};
+  for (const auto& c : cases) {
+    light_ = DirectionalLight(c.dir);
+    RenderCounters rc;
+    const Error e = Compare(Render(1.0, "", &rc, 16, kThin), kThin, glm::normalize(c.dir));
+    EXPECT_GT(e.covered, 1000);
+    EXPECT_LT(e.rmse_over_mean, c.bound)
+        << "light along " << c.dir.x << "," << c.dir.y << "," << c.dir.z << ": max " << e.max_abs
+        << " mean " << e.mean;
+  }
+}
+
+// A light along an axis runs along the box's faces: a primary ray enters
+// the fog on a face, where a transmittance ray walks the empty voxels
+// beside the fog (a ray on a voxel face belongs to the voxels on its upper
+// side). The light at a cell's entry is read just inside the cell, and the
+// exact frame stays within 1% of the integral in thick fog (with the
+// entry's own light: 4.1% along x, 0.9% along y).
+TEST_F(FogTest, LightsAlongAnAxisMatchTheExactIntegral) {
+  constexpr double kThick = 5.0;  // 0.16 optical depth per voxel
+  for (const glm::dvec3 dir : {glm::dvec3(1, 0, 0), glm::dvec3(0, -1, 0)}) {
+    light_ = DirectionalLight(dir);
+    RenderCounters c;
+    const Error e = Compare(
+        Render(0.0, R"(, "light_step":0.5, "shadow_lod":0, "light_lattice":false)", &c, 16, kThick),
+        kThick, dir);
+    EXPECT_GT(e.covered, 1000);
+    EXPECT_LT(e.rmse_over_mean, 0.01) << "light along " << dir.x << "," << dir.y << "," << dir.z
+                                      << ": max " << e.max_abs << " mean " << e.mean;
+  }
 }
 
 // Samples that trace their own rays are placed closer where the light's
