@@ -220,12 +220,9 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
 
 // The lattice's least spacing in pixel footprints.
 constexpr double kMinLatticeFootprints = 4.0;
-// The lattice's level where the footprint and the sample spacing allow it
-// (spacing 8 voxels: the light's variation from voxel to voxel at the lit
-// side of a fog is left to the interpolation, finer levels cost rays).
-constexpr int kLatticeLevel = 3;
 // The largest spacing from a sample read from the lattice to the next
-// sample along the primary ray, in lattice spacings.
+// sample along the primary ray, in lattice spacings; the lattice's spacing
+// is about light_step over this (8 voxels by default).
 constexpr double kLatticeSampleSpacings = 3.0;
 // The width, in lattice spacings, at which a lattice point's transmittance
 // rays start (LatticeLight).
@@ -235,14 +232,14 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
                                 render_internal::FogLightCache* cache, double* max_step) const {
   const glm::dvec3 p_g = gr.origin + t * gr.dir;
   *max_step = kInf;
-  // The lattice's spacing: 2^kLatticeLevel voxels, or the power of two
-  // voxels at or above kMinLatticeFootprints pixel footprints (the cone's
-  // width) where that is coarser, so that neighbouring pixels share its
-  // points, and at most half the sample spacing h (world units); finer
-  // where the light varies too much across that block, down to
-  // kMinLatticeFootprints footprints. Below that (thick fog, whose light
-  // varies within a voxel; the exact frame, without a cone) each sample has
-  // its own rays.
+  // The lattice's spacing: the largest power of two voxels within
+  // light_step / kLatticeSampleSpacings, or the power of two voxels at or
+  // above kMinLatticeFootprints pixel footprints (the cone's width) where
+  // that is coarser, so that neighbouring pixels share its points, and at
+  // most half the sample spacing h (world units); finer where the light
+  // varies too much across that block, down to kMinLatticeFootprints
+  // footprints. Below that (thick fog, whose light varies within a voxel;
+  // the exact frame, without a cone) each sample has its own rays.
   const double h_vox = h / volume_->meta().voxel_size;
   if (!scene_.volume.light_lattice || cone == nullptr) return LightAtPoint(p_g, cx, cone);
   const double min_spacing = kMinLatticeFootprints * std::max(1.0, cone->Width(t));
@@ -251,7 +248,8 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
   const int top = std::min(kMaxLightLatticeLevel, FloorLog2(0.5 * h_vox, &exact));
   const int finest_log2 = FloorLog2(min_spacing, &exact) + (exact ? 0 : 1);  // ceil(log2)
   const int finest = std::min(top, std::max(0, finest_log2));
-  for (int level = std::min(top, std::max(kLatticeLevel, finest)); level >= finest; --level) {
+  const int preferred = FloorLog2(scene_.volume.light_step / kLatticeSampleSpacings, &exact);
+  for (int level = std::min(top, std::max(preferred, finest)); level >= finest; --level) {
     glm::dvec3 out;
     bool ok = true;
     if (!(columns_.on ? ColumnLight(p_g, level, cx, cache, &out, &ok)

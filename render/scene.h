@@ -95,9 +95,9 @@ struct MaterialRegion {
 // The fog's shading controls (absorption, scattering, colour, ramp,
 // emission, blackbody, phase: render/fog_material.h) and its sampling.
 struct VolumeMedium : FogControls {
-  // Voxels between evaluations of the light reaching a primary ray (an
-  // evaluation that traces its own rays is placed closer where the light
-  // bends along the ray).
+  // Voxels between evaluations of the light reaching a primary ray (closer
+  // where the light bends along the ray, and, where the light is read
+  // from the lattice, at most three of its spacings apart).
   double light_step = 24.0;
   // At most this optical depth between evaluations of the light, divided
   // by the square root of the transmittance from the camera.
