@@ -18,6 +18,7 @@ using render_internal::ExpNegShare;
 using render_internal::ForEachLight;
 using render_internal::kInf;
 using render_internal::kLatticeOffset;
+using render_internal::kLatticeSampleSpacings;
 using render_internal::kMaxLightLatticeLevel;
 using render_internal::kMaxOpticalDepth;
 using render_internal::kMaxShadowOpticalDepth;
@@ -220,10 +221,6 @@ glm::dvec3 Renderer::LightAtPoint(const glm::dvec3& p_g, TraceContext& cx, const
 
 // The lattice's least spacing in pixel footprints.
 constexpr double kMinLatticeFootprints = 4.0;
-// The largest spacing from a sample read from the lattice to the next
-// sample along the primary ray, in lattice spacings; the lattice's spacing
-// is about light_step over this (8 voxels by default).
-constexpr double kLatticeSampleSpacings = 3.0;
 // The width, in lattice spacings, at which a lattice point's transmittance
 // rays start (LatticeLight).
 constexpr double kLatticeStartWidth = 0.25;
@@ -248,8 +245,7 @@ glm::dvec3 Renderer::LightInFog(const Ray& gr, double t, double h, TraceContext&
   const int top = std::min(kMaxLightLatticeLevel, FloorLog2(0.5 * h_vox, &exact));
   const int finest_log2 = FloorLog2(min_spacing, &exact) + (exact ? 0 : 1);  // ceil(log2)
   const int finest = std::min(top, std::max(0, finest_log2));
-  const int preferred = FloorLog2(scene_.volume.light_step / kLatticeSampleSpacings, &exact);
-  for (int level = std::min(top, std::max(preferred, finest)); level >= finest; --level) {
+  for (int level = std::min(top, std::max(lattice_level_, finest)); level >= finest; --level) {
     glm::dvec3 out;
     bool ok = true;
     if (!(columns_.on ? ColumnLight(p_g, level, cx, cache, &out, &ok)
@@ -303,9 +299,7 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
   // A column's ray: from its sample `first` along the light's travel, in
   // world units (samples s voxels apart), on exact voxels: one ray serves
   // the whole column, and coarser cells would blur the fog's rim on top of
-  // the interpolation across columns (with cells a quarter of a spacing
-  // wide, the sphere of tools/bench/fog_bench.sh lit along x erred 4.5% of
-  // the mean instead of 3.5%).
+  // the interpolation across columns.
   const double dt = s / lc.voxels_per_unit;
   const Cone cone{0.0, 0.0};
   const render_internal::LatticeBlock* b = cache->columns.Block(

@@ -8,6 +8,7 @@
 #include <glm/geometric.hpp>
 #include <limits>
 
+#include "render/internal/fog_light.h"
 #include "render/internal/tracing.h"
 #include "storage/brick_table.h"
 
@@ -135,6 +136,7 @@ StatusOr<std::unique_ptr<Renderer>> Renderer::Create(Volume* volume, const Camer
         "scene: volume.blackbody needs a temperature per voxel, and the store of grid '" +
         meta.grid_name + "' has none (ingest with vox-ingest --temperature GRID)");
   r->grey_fog_ = r->fog_model_.grey();
+  r->lattice_level_ = std::ilogb(s.volume.light_step / render_internal::kLatticeSampleSpacings);
   for (const Light& l : s.lights)
     if (l.intensity > 0)
       r->grey_fog_ = r->grey_fog_ && l.color.x == l.color.y && l.color.x == l.color.z;

@@ -380,6 +380,10 @@ class Renderer {
   // Fog whose three channels are one throughout: grey fog that does not
   // emit, under white lights (Fog integrates channel 0 alone).
   bool grey_fog_ = false;
+  // Fog: the light lattice's level where footprint and sample spacing allow
+  // it, floor(log2(volume.light_step / kLatticeSampleSpacings))
+  // (render/internal/fog_light.h).
+  int lattice_level_ = 0;
   bool needs_attributes_ = true;  // surfaces: shading reads normals or colours
   // Surfaces: something reads the shading normal (a light, a reflection or
   // refraction, or the normal layer); without, hits are shaded without it.

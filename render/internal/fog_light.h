@@ -32,10 +32,13 @@ namespace vox::render_internal {
 // edges along each axis: under a light along an axis, the transmittance
 // rays of lattice points and columns then run through voxel centres, where
 // they would run along voxel edges and corners and see the voxels on one
-// side only (the fog's rim half a voxel off: the sphere of
-// tools/bench/fog_bench.sh lit along x erred 3.5% of the mean instead of
-// 2.8%).
+// side only (the fog's rim half a voxel off).
 inline constexpr double kLatticeOffset = 0.5;
+
+// The largest spacing from a sample read from a lattice to the next sample
+// along the primary ray, in lattice spacings; the lattice's spacing is
+// about volume.light_step over this (8 voxels by default).
+inline constexpr double kLatticeSampleSpacings = 3.0;
 
 // A lattice of spacing 2^level voxels: point i lies at (i + 1/2) 2^level +
 // kLatticeOffset in grid coordinates (off the cell centres of the

@@ -208,7 +208,8 @@ VoxelAttributes ReadAttributes(const uint8_t* values, uint32_t count, uint8_t fl
                                uint32_t index) {
   VoxelAttributes a;
   if (flags & kAttrNormal) {
-    a.normal = DecodeOctNormal(ValueAt<2>(values, index) | ValueAt<2>(values + size_t(2) * count, index) << 16);
+    a.normal = DecodeOctNormal(ValueAt<2>(values, index) |
+                               ValueAt<2>(values + size_t(2) * count, index) << 16);
     values += size_t(4) * count;
   }
   if (flags & kAttrDensity) {
@@ -233,9 +234,9 @@ std::vector<uint8_t> PlanesToValues(std::span<const uint8_t> planes, uint32_t co
   int widths[kMaxComponents];
   const int n = Components(flags, widths);
   size_t at = 0;
-  for (int c = 0; c < n; ++c) {
+  for (int c = 0; c < n && at + size_t(widths[c]) * count <= planes.size(); ++c) {
     const int w = widths[c];
-    for (uint32_t i = 0; i < count && at + size_t(w) * count <= planes.size(); ++i)
+    for (uint32_t i = 0; i < count; ++i)
       for (int b = 0; b < w; ++b) out[at + size_t(w) * i + b] = planes[at + size_t(b) * count + i];
     at += size_t(w) * count;
   }
