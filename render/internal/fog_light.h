@@ -4,7 +4,8 @@
 // pixels and samples share transmittance rays. Under one directional light
 // the lattice lies in light space instead (FogColumnCache): columns along
 // the light, each traced once from the light's side and sampled along its
-// length, so that the points of a column share one ray. A lattice point's
+// length, so that the points of a column share one ray, and interpolated
+// with their curvature across the light (ColumnBlock). A lattice point's
 // or a column sample's value depends on the point alone, never on which
 // pixel asked first, so tiles, threads and Slurm parts give the same image
 // bit for bit. Private to render/.
@@ -21,7 +22,6 @@
 #include <cstdlib>
 #include <glm/vec3.hpp>
 #include <limits>
-#include <unordered_map>
 #include <vector>
 
 #include "core/ray.h"
@@ -100,6 +100,29 @@ inline size_t LatticePointHash(const LatticePoint& p) {
   return size_t(h ^ (h >> 29));
 }
 
+// A block of the light-space lattice (FogColumnCache::Block): its eight
+// corners as a LatticeBlock, and the curvature of the log-light across the
+// columns at its edges, from the columns beyond them. Across the light the
+// optical depth to the fog's lit side is curved (in a round fog it grows as
+// a square root towards the rim seen from the light), and the trilinear
+// interpolation of its logarithm, straight between columns, sees too little
+// depth, so too much light; the curvature corrects it (fog.cpp,
+// InterpolateAcrossColumns).
+struct ColumnBlock {
+  LatticeBlock inner;
+  // Whether the curvature applies: inner may be interpolated, its corners
+  // are not all alike, and every column of the block and beyond it is
+  // within kMaxLatticeLogRatio of every other (none dark, none across a
+  // shadow's edge).
+  bool curved = false;
+  // Per channel, the second difference of the log-light across the columns
+  // (per spacing squared): curve_u along the block's edge j0 + r at its
+  // sample m0 + m ([r + 2 m]), from columns i0 - 1..i0 + 2; curve_v along
+  // its edge i0 + r, from columns j0 - 1..j0 + 2.
+  double curve_u[3][4], curve_v[3][4];
+  double lo[3], hi[3];  // (per channel, the values' range)
+};
+
 // The light-space lattice: optical depths along columns. Column (i, j) of
 // level L samples the line through (i 2^L + kLatticeOffset) u + (j 2^L +
 // kLatticeOffset) v along the light's direction (fog.cpp sets the frame u,
@@ -118,42 +141,92 @@ class FogColumnCache {
   static constexpr int64_t kMaxIndex = int64_t(1) << 29;
   // Sample indices kept.
   static constexpr int kMaxSample = 1 << 24;
+  // Bytes a kept block takes at most.
+  static constexpr size_t kBlockSlotBytes = 480;
 
   // The block of level `level` between columns i0..i0 + 1 and j0..j0 + 1
-  // and samples m0..m0 + 1 (|i0|, |j0| < kMaxIndex - 1, 0 <= m0 <
-  // kMaxSample, level 0..15): LatticeBlock's corner c is column (i0 + (c &
-  // 1), j0 + (c >> 1 & 1)) at sample m0 + (c >> 2), its value minus the
-  // optical depth there (the log of the light, up to the light's own).
-  // Missing samples are traced with `trace(int64_t i, int64_t j, int first,
-  // int count, const glm::dvec3& depth_first, glm::dvec3* out) -> bool`:
-  // out[q] the optical depth at sample first + 1 + q of column (i, j)
-  // (false: the frame failed; nothing is kept). Null on failure; else valid
-  // until the next call.
+  // and samples m0..m0 + 1 (|i0|, |j0| < kMaxIndex - 2, 0 <= m0 <
+  // kMaxSample, level 0..15), with the ring of columns around it
+  // (ColumnBlock). Missing samples are traced with `trace(int64_t i,
+  // int64_t j, int first, int count, const glm::dvec3& depth_first,
+  // glm::dvec3* out) -> bool`: out[q] the optical depth at sample first +
+  // 1 + q of column (i, j) (false: the frame failed; nothing is kept).
+  // Null on failure; else valid until the next call.
   template <class Trace>
-  const LatticeBlock* Block(int level, int64_t i0, int64_t j0, int m0, Trace&& trace) {
+  const ColumnBlock* Block(int level, int64_t i0, int64_t j0, int m0, Trace&& trace) {
     const LatticePoint key{int32_t(i0), int32_t(j0), int32_t(m0), level};
     const size_t hash = LatticePointHash(key);
     if (!blocks_.empty()) {
       const BlockSlot& slot = blocks_[hash & (blocks_.size() - 1)];
       if (slot.key == key) return &slot.block;
     }
-    glm::dvec3 corner[8];
-    for (int c = 0; c < 4; ++c) {
-      const int64_t i = i0 + (c & 1), j = j0 + (c >> 1);
-      const glm::dvec3* d = Samples(level, i, j, m0 + 1, [&](int first, int count, const glm::dvec3& depth,
-                                                             glm::dvec3* out) {
-        return trace(i, j, first, count, depth, out);
-      });
-      if (d == nullptr) return nullptr;
-      corner[c] = -d[m0];
-      corner[c + 4] = -d[m0 + 1];
-    }
     // (the table grows with the samples kept, so a cache that serves a few
     // rays stays small)
     const size_t want = std::clamp<size_t>(std::bit_ceil(samples_ / 16 + 1), 16, kMaxBlocks);
     if (blocks_.size() < want) blocks_.assign(want, BlockSlot{});
     BlockSlot& slot = blocks_[hash & (blocks_.size() - 1)];
-    slot.block.Set(corner);
+    slot.key = LatticePoint{0, 0, 0, -1};
+    ColumnBlock& b = slot.block;
+    // The block's own four columns first, then, where they may be
+    // interpolated and are not all alike (above the fog, in its shadow),
+    // the eight beside them.
+    auto column = [&](int64_t i, int64_t j) -> const glm::dvec3* {  // (samples m0, m0 + 1)
+      const glm::dvec3* d = Samples(level, i, j, m0 + 1, [&](int first, int count, const glm::dvec3& depth,
+                                                             glm::dvec3* out) {
+        return trace(i, j, first, count, depth, out);
+      });
+      return d == nullptr ? nullptr : d + m0;
+    };
+    glm::dvec3 corner[8];
+    for (int c = 0; c < 4; ++c) {
+      const glm::dvec3* d = column(i0 + (c & 1), j0 + (c >> 1));
+      if (d == nullptr) return nullptr;
+      corner[c] = -d[0];
+      corner[c + 4] = -d[1];
+    }
+    b.inner.Set(corner);
+    bool alike = true;
+    for (int c = 1; c < 8; ++c) alike = alike && corner[c] == corner[0];
+    b.curved = b.inner.shape != LatticeBlock::kSteep && !alike;
+    // (one channel for three where the block is grey; the columns beside it
+    // must be too)
+    const bool grey = b.inner.shape == LatticeBlock::kGrey;
+    const int channels = grey ? 1 : 3;
+    for (int k = 0; k < channels; ++k) {
+      b.lo[k] = b.hi[k] = corner[0][k];
+      for (int c = 1; c < 8; ++c) {
+        b.lo[k] = std::min(b.lo[k], corner[c][k]);
+        b.hi[k] = std::max(b.hi[k], corner[c][k]);
+      }
+    }
+    // Column r of side 0 or 1 across axis a (0: u, 1: v): the one beside
+    // the block's corner column r (along the other axis) on that side.
+    for (int q = 0; q < 8 && b.curved; ++q) {
+      const int r = q & 1, side = (q >> 1) & 1, axis = q >> 2;
+      const int64_t i = axis == 0 ? (side == 0 ? i0 - 1 : i0 + 2) : i0 + r;
+      const int64_t j = axis == 0 ? j0 + r : (side == 0 ? j0 - 1 : j0 + 2);
+      const glm::dvec3* d = column(i, j);
+      if (d == nullptr) return nullptr;
+      if (grey && !(d[0].x == d[0].y && d[0].x == d[0].z && d[1].x == d[1].y && d[1].x == d[1].z)) {
+        b.curved = false;
+        break;
+      }
+      // The edge's curvature: the mean of its two second differences,
+      // (beside_0 - near_0 + beside_1 - near_1) / 2, near_s the block's
+      // corner column next to beside_s.
+      const int near = axis == 0 ? 2 * r + side : r + 2 * side;
+      for (int k = 0; k < channels; ++k) {
+        for (int m = 0; m < 2; ++m) {
+          const double beside = -d[m][k];
+          b.lo[k] = std::min(b.lo[k], beside);
+          b.hi[k] = std::max(b.hi[k], beside);
+          const double share = 0.5 * (beside - corner[near + 4 * m][k]);
+          double& curve = axis == 0 ? b.curve_u[k][r + 2 * m] : b.curve_v[k][r + 2 * m];
+          curve = side == 0 ? share : curve + share;
+        }
+        b.curved = b.curved && b.hi[k] - b.lo[k] <= kMaxLatticeLogRatio;
+      }
+    }
     slot.key = key;
     return &slot.block;
   }
@@ -166,18 +239,23 @@ class FogColumnCache {
   const glm::dvec3* Samples(int level, int64_t i, int64_t j, int last, Trace&& trace) {
     const uint64_t key = uint64_t(level) << 60 | (uint64_t(i) & kIndexMask) << 30 |
                          (uint64_t(j) & kIndexMask);
-    auto it = columns_.find(key);
-    if (it != columns_.end() && int(it->second.size()) > last) return it->second.data();
+    ColumnSlot* slot = columns_.empty() ? nullptr : FindColumn(key);
+    if (slot != nullptr && int(slot->samples.size()) > last) return slot->samples.data();
     const size_t chunks = size_t(last + kChunk - 1) / kChunk;  // samples 1..last
     const size_t want = chunks * kChunk + 1;
     if (samples_ + want > kMaxSamples) {
-      columns_.clear();
-      samples_ = 0;
-      it = columns_.end();
+      columns_.assign(columns_.size(), ColumnSlot{});
+      column_count_ = samples_ = 0;
+      slot = columns_.empty() ? nullptr : FindColumn(key);
     }
-    if (it == columns_.end())
-      it = columns_.emplace(key, std::vector<glm::dvec3>(1, glm::dvec3(0.0))).first;
-    std::vector<glm::dvec3>& col = it->second;
+    if (slot == nullptr || slot->samples.empty()) {
+      if (2 * (column_count_ + 1) > columns_.size()) GrowColumns();
+      slot = FindColumn(key);
+      slot->key = key;
+      slot->samples.assign(1, glm::dvec3(0.0));
+      ++column_count_;
+    }
+    std::vector<glm::dvec3>& col = slot->samples;
     const size_t had = col.size();
     col.resize(want);
     for (size_t first = had - 1; first + 1 < want; first += kChunk) {
@@ -194,10 +272,29 @@ class FogColumnCache {
   static constexpr uint64_t kIndexMask = (uint64_t(1) << 30) - 1;
   struct BlockSlot {
     LatticePoint key{0, 0, 0, -1};  // (level -1: empty)
-    LatticeBlock block;
+    ColumnBlock block;
   };
-  std::unordered_map<uint64_t, std::vector<glm::dvec3>> columns_;
-  size_t samples_ = 0;
+  static_assert(sizeof(BlockSlot) <= kBlockSlotBytes);
+  // A column's samples (none: the slot is free), in an open-addressed
+  // table at most half full (linear probing).
+  struct ColumnSlot {
+    uint64_t key = 0;
+    std::vector<glm::dvec3> samples;
+  };
+  ColumnSlot* FindColumn(uint64_t key) {
+    const size_t mask = columns_.size() - 1;
+    uint64_t h = key * 0x9E3779B97F4A7C15ull;
+    for (size_t k = size_t(h ^ (h >> 29)) & mask;; k = (k + 1) & mask)
+      if (columns_[k].samples.empty() || columns_[k].key == key) return &columns_[k];
+  }
+  void GrowColumns() {
+    std::vector<ColumnSlot> old(std::max<size_t>(64, 2 * columns_.size()));
+    old.swap(columns_);
+    for (ColumnSlot& o : old)
+      if (!o.samples.empty()) *FindColumn(o.key) = std::move(o);
+  }
+  std::vector<ColumnSlot> columns_;  // a power of two of them (or none yet)
+  size_t column_count_ = 0, samples_ = 0;
   std::vector<BlockSlot> blocks_;  // a power of two of them (or none yet)
 };
 
@@ -212,10 +309,10 @@ class FogLightCache {
   static constexpr size_t kMaxBlocks = size_t(1) << 12;
   // Bytes it holds at most (the points' open-addressed slots, at most half
   // of them used, the blocks', and the columns': 24 bytes a sample, at
-  // least a chunk's worth of samples per column and its map node).
+  // least a chunk's worth of samples per column and its table slot).
   static constexpr size_t kMaxBytes = 2 * kMaxPoints * 48 + kMaxBlocks * 224 +
                                       FogColumnCache::kMaxSamples * 32 +
-                                      FogColumnCache::kMaxBlocks * 224;
+                                      FogColumnCache::kMaxBlocks * FogColumnCache::kBlockSlotBytes;
 
   void Clear() {
     slots_.assign(slots_.size(), Slot{});

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <glm/common.hpp>
 #include <glm/vec3.hpp>
 #include <type_traits>
 #include <utility>
@@ -23,6 +24,9 @@ namespace vox::render_internal {
 inline constexpr double kLightLogTolerance = 0.02;
 inline constexpr double kMinLightRefinement = 0.125;
 inline constexpr int kMaxLightHalvings = 3;
+// The most the light's curvature bends its logarithm at an interval's
+// middle (Integrate takes the bend to first order).
+inline constexpr double kMaxLightCurve = 0.25;
 // A sample placed at a cell's entry is evaluated this many voxels inside it
 // (at most half its length): the entry lies on the fog's face, where a
 // light running along the face is that of the empty voxels beside it (a
@@ -89,7 +93,12 @@ class LightAlongRay {
       ext_ = st;
       const double h = std::min(step(ta_, seen_a_), max_step_a_);
       const double tc = std::max(ta_ + h, t0);
-      if (tc < tb_) SetBTo(tc, light_at_(tc > t0 ? tc : Inside(t0, t1), h, &max_step_));
+      if (tc < tb_) {
+        // (the bend measured for the interval holds for its first part)
+        const glm::dvec3 curve = curve_;
+        SetBTo(tc, light_at_(tc > t0 ? tc : Inside(t0, t1), h, &max_step_));
+        if (geometric_) curve_ = curve;
+      }
     }
     V sum(0.0), trans(1.0);  // trans: the cell's transmittance from t0 to t
     double t = t0;
@@ -126,14 +135,22 @@ class LightAlongRay {
         const int channels = kGrey || (grey_ && grey_cell) ? 1 : 3;
         V in(0.0);
         for (int k = 0; k < channels; ++k) {
-          const double kappa = rate_[k];  // the light's decay rate along the ray
-          if (!(lt_ == t)) l_[k] = lt_ == -kInf ? la_[k] * ExpNeg(kappa * (t - ta_))
-                                                : l_[k] * ExpNeg(kappa * (t - lt_));
+          // The light's log-rate of decay along the ray from s0 to s1: the
+          // chord's of the light's logarithm, -rate (s - ta) + curve/2 (s
+          // - ta) (s - tb) (a straight line where curve is 0).
+          const double rate = rate_[k], curve = curve_[k];
+          auto chord = [&](double s0, double s1) { return rate - 0.5 * curve * (s0 + s1 - ta_ - tb_); };
+          if (!(lt_ == t)) l_[k] = lt_ == -kInf ? la_[k] * ExpNeg(chord(ta_, t) * (t - ta_))
+                                                : l_[k] * ExpNeg(chord(lt_, t) * (t - lt_));
           // (e^(-(tau + kappa len)) as the product of the piece's
           // transmittance and the light's decay: one exponential fewer)
-          const double decay = ExpNeg(kappa * len);
-          Channel(in, k) = l_[k] * Channel(piece_tau, k) *
-                      ExpNegShareOf(Channel(piece_tau, k) + kappa * len, Channel(piece_trans, k) * decay);
+          const double kappa = chord(t, e), decay = ExpNeg(kappa * len);
+          const double x = Channel(piece_tau, k) + kappa * len, ex = Channel(piece_trans, k) * decay;
+          Channel(in, k) = l_[k] * Channel(piece_tau, k) * ExpNegShareOf(x, ex);
+          // The curve's share: curve/2 (s - t) (s - e) over the piece, to
+          // first order (it stays within a few hundredths: Place).
+          if (curve != 0)
+            Channel(in, k) += l_[k] * Channel(st_rgb, k) * (0.5 * curve) * (len * len * len) * CurveShareOf(x, ex);
           l_[k] *= decay;
         }
         if constexpr (!kGrey)
@@ -181,12 +198,33 @@ class LightAlongRay {
       const double bend = std::abs(rate_[0] - prev_rate_[0]) / (0.5 * (len + prev_len_));
       if (bend * len * len > 8.0 * tol)
         SetB(ta_ + std::max(kMinLightRefinement * len, std::sqrt(8.0 * tol / bend)), h);
+      // The light's curvature over the interval (Integrate): the change of
+      // its rate from the interval before, at most what bends the light by
+      // the tolerance at the interval's middle (where the shortest interval
+      // still bends more, the change measures the light's noise, not its
+      // curvature).
+      if (geometric_) {
+        const double now = tb_ - ta_, most = 8.0 * std::min(tol, kMaxLightCurve) / (now * now);
+        curve_ = glm::clamp((prev_rate_ - rate_) / (0.5 * (now + prev_len_)), -most, most);
+      }
       return;
     }
     for (int i = 0; i < kMaxLightHalvings && geometric_; ++i) {
       const double tm = 0.5 * (ta_ + tb_);
       const glm::dvec3 lm = light_at_(tm, h, &max_step_);
-      if (lm[0] > 0 && std::abs(std::log(lm[0] / la_[0]) + rate_[0] * (tm - ta_)) <= tol) return;
+      const double off = lm[0] > 0 ? std::log(lm[0] / la_[0]) + rate_[0] * (tm - ta_) : -kInf;
+      if (std::abs(off) <= tol) {
+        // The curvature of the quadratic through the three samples (at
+        // most kMaxLightCurve at the middle).
+        const double len = tb_ - ta_;
+        for (int k = 0; k < (grey_ ? 1 : 3); ++k) {
+          if (!(lm[k] > 0)) continue;
+          const double mid = k == 0 ? off : std::log(lm[k] / la_[k]) + rate_[k] * (tm - ta_);
+          curve_[k] = -8.0 * std::clamp(mid, -kMaxLightCurve, kMaxLightCurve) / (len * len);
+        }
+        if (grey_) curve_[1] = curve_[2] = curve_[0];
+        return;
+      }
       SetBTo(tm, lm);
     }
   }
@@ -206,6 +244,7 @@ class LightAlongRay {
     }
     if (grey) rate_[1] = rate_[2] = rate_[0];
     grey_ = geometric_ && grey;
+    curve_ = glm::dvec3(0.0);
     lt_ = -kInf;  // l_ is recomputed from la_ at the new rates
   }
 
@@ -216,6 +255,9 @@ class LightAlongRay {
   double ta_ = -kInf, tb_ = -kInf, ext_ = 0.0;  // ext_: the extinction [ta, tb] was chosen for
   double seen_a_ = 1.0;  // the transmittance from the camera at ta_
   glm::dvec3 la_{0.0}, lb_{0.0}, rate_{0.0};
+  // The second derivative of the light's logarithm over [ta, tb] (Place;
+  // 0: the geometric interpolation).
+  glm::dvec3 curve_{0.0};
   // The light at lt_ (-inf: not known since the rates changed).
   glm::dvec3 l_{0.0};
   double lt_ = -kInf;

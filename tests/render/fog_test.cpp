@@ -319,8 +319,9 @@ TEST_F(FogTest, OneDirectionalLightIsKeptOnColumns) {
       << "max " << e.max_abs << " mean " << e.mean;
   EXPECT_LT(e.rmse_over_mean, 0.025);
   EXPECT_GT(columns_c.rays[kRayVolume], 0u);
-  // (The lattice of points traces a ray per light from each point.)
-  EXPECT_LT(columns_c.rays[kRayVolume] * 3, points_c.rays[kRayVolume] / 2)
+  // (The lattice of points traces a ray per light from each point; the
+  // columns, with those beside the blocks asked for, less than half that.)
+  EXPECT_LT(columns_c.rays[kRayVolume] * 2, points_c.rays[kRayVolume] / 2)
       << columns_c.rays[kRayVolume] << " against " << points_c.rays[kRayVolume] << " for two lights";
 }
 
