@@ -116,30 +116,6 @@ bool InterpolateLight(const render_internal::LatticeBlock& b, const glm::dvec3& 
   return true;
 }
 
-// The light inside column block b at offsets f (across the columns, and
-// along them, 0..1): trilinear in the logarithm, as InterpolateLight, plus
-// the block's curvature across the columns (the quadratic through its
-// corners' values with the edges' second differences, bilinear between
-// the edges; kept within the values' range). b.curved must hold.
-void InterpolateAcrossColumns(const render_internal::ColumnBlock& b, const glm::dvec3& f,
-                              glm::dvec3* out) {
-  const double bend_u = 0.5 * f.x * (f.x - 1.0), bend_v = 0.5 * f.y * (f.y - 1.0);
-  const int channels = b.inner.shape == render_internal::LatticeBlock::kGrey ? 1 : 3;
-  for (int k = 0; k < channels; ++k) {
-    const double* v = b.inner.log_light[k];
-    const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
-    const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
-    const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
-    const double* cu = b.curve_u[k];
-    const double* cv = b.curve_v[k];
-    const double u0 = cu[0] + f.y * (cu[1] - cu[0]), u1 = cu[2] + f.y * (cu[3] - cu[2]);
-    const double v0 = cv[0] + f.x * (cv[1] - cv[0]), v1 = cv[2] + f.x * (cv[3] - cv[2]);
-    const double curve = bend_u * (u0 + f.z * (u1 - u0)) + bend_v * (v0 + f.z * (v1 - v0));
-    (*out)[k] = std::exp(std::clamp(y0 + f.z * (y1 - y0) + curve, b.lo[k], b.hi[k]));
-  }
-  if (channels == 1) out->y = out->z = out->x;
-}
-
 // e^(-tau) per channel; one exponential for grey fog's three equal channels.
 glm::dvec3 TransmittanceOf(const glm::dvec3& tau) {
   if (tau.x == tau.y && tau.x == tau.z) return glm::dvec3(std::exp(-tau.x));
@@ -335,11 +311,7 @@ bool Renderer::ColumnLight(const glm::dvec3& p_g, int level, TraceContext& cx,
       });
   *ok = b != nullptr;
   if (!*ok) return true;
-  if (b->curved) {
-    InterpolateAcrossColumns(*b, u - f0, out);
-  } else if (!InterpolateLight(b->inner, u - f0, out)) {
-    return false;
-  }
+  if (!b->Interpolate(u - f0, out)) return false;
   *out *= lc.light;
   return true;
 }

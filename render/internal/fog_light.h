@@ -101,26 +101,66 @@ inline size_t LatticePointHash(const LatticePoint& p) {
 }
 
 // A block of the light-space lattice (FogColumnCache::Block): its eight
-// corners as a LatticeBlock, and the curvature of the log-light across the
-// columns at its edges, from the columns beyond them. Across the light the
-// optical depth to the fog's lit side is curved (in a round fog it grows as
-// a square root towards the rim seen from the light), and the trilinear
-// interpolation of its logarithm, straight between columns, sees too little
-// depth, so too much light; the curvature corrects it (fog.cpp,
-// InterpolateAcrossColumns).
+// corners' log-lights, classified as a LatticeBlock's, and the curvature of
+// the log-light across the columns at its edges, from the columns beyond
+// them. Across the light the optical depth to the fog's lit side is curved
+// (in a round fog it grows as a square root towards the rim seen from the
+// light), and the trilinear interpolation of its logarithm, straight
+// between columns, sees too little depth, so too much light; the curvature
+// corrects it (Interpolate). A channel's values lie together, so that a
+// grey block's are read from a few cache lines.
 struct ColumnBlock {
-  LatticeBlock inner;
-  // Whether the curvature applies: inner may be interpolated, its corners
-  // are not all alike, and every column of the block and beyond it is
+  LatticeBlock::Shape shape = LatticeBlock::kSteep;
+  bool dark[3] = {false, false, false};  // (as LatticeBlock's)
+  // Whether the curvature applies: the corners may be interpolated, they
+  // are not all alike, and every column of the block and beside it is
   // within kMaxLatticeLogRatio of every other (none dark, none across a
   // shadow's edge).
   bool curved = false;
-  // Per channel, the second difference of the log-light across the columns
-  // (per spacing squared): curve_u along the block's edge j0 + r at its
-  // sample m0 + m ([r + 2 m]), from columns i0 - 1..i0 + 2; curve_v along
-  // its edge i0 + r, from columns j0 - 1..j0 + 2.
-  double curve_u[3][4], curve_v[3][4];
-  double lo[3], hi[3];  // (per channel, the values' range)
+  struct Channel {
+    double log_light[8];  // corner c: column (i0 + (c & 1), j0 + (c >> 1 & 1)), sample m0 + (c >> 2)
+    // The second difference of the log-light across the columns (per
+    // spacing squared): curve_u along the block's edge j0 + r at sample m0
+    // + m ([r + 2 m]), from columns i0 - 1..i0 + 2; curve_v along its edge
+    // i0 + r, from columns j0 - 1..j0 + 2 (0 where not curved).
+    double curve_u[4], curve_v[4];
+    double lo, hi;  // (the values' range)
+  } ch[3];
+
+  // The light inside the block at offsets f (across the columns, and along
+  // them, 0..1): trilinear in the logarithm, plus where curved the
+  // quadratic through the corners' values with the edges' second
+  // differences (bilinear between the edges; kept within the values'
+  // range). False where the corners differ too much (LatticeBlock::kSteep):
+  // the caller tries finer columns.
+  bool Interpolate(const glm::dvec3& f, glm::dvec3* out) const {
+    if (shape == LatticeBlock::kSteep) return false;
+    const int channels = shape == LatticeBlock::kGrey ? 1 : 3;
+    const double bend_u = 0.5 * f.x * (f.x - 1.0), bend_v = 0.5 * f.y * (f.y - 1.0);
+    for (int k = 0; k < channels; ++k) {
+      if (dark[k]) {  // no light in this channel anywhere
+        (*out)[k] = 0.0;
+        continue;
+      }
+      const Channel& c = ch[k];
+      const double* v = c.log_light;
+      const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
+      const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
+      const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
+      double log_light = y0 + f.z * (y1 - y0);
+      if (curved) {
+        const double* cu = c.curve_u;
+        const double* cv = c.curve_v;
+        const double u0 = cu[0] + f.y * (cu[1] - cu[0]), u1 = cu[2] + f.y * (cu[3] - cu[2]);
+        const double v0 = cv[0] + f.x * (cv[1] - cv[0]), v1 = cv[2] + f.x * (cv[3] - cv[2]);
+        log_light = std::clamp(log_light + bend_u * (u0 + f.z * (u1 - u0)) + bend_v * (v0 + f.z * (v1 - v0)),
+                               c.lo, c.hi);
+      }
+      (*out)[k] = std::exp(log_light);
+    }
+    if (channels == 1) out->y = out->z = out->x;
+    return true;
+  }
 };
 
 // The light-space lattice: optical depths along columns. Column (i, j) of
@@ -142,7 +182,7 @@ class FogColumnCache {
   // Sample indices kept.
   static constexpr int kMaxSample = 1 << 24;
   // Bytes a kept block takes at most.
-  static constexpr size_t kBlockSlotBytes = 480;
+  static constexpr size_t kBlockSlotBytes = 464;
 
   // The block of level `level` between columns i0..i0 + 1 and j0..j0 + 1
   // and samples m0..m0 + 1 (|i0|, |j0| < kMaxIndex - 2, 0 <= m0 <
@@ -184,19 +224,24 @@ class FogColumnCache {
       corner[c] = -d[0];
       corner[c + 4] = -d[1];
     }
-    b.inner.Set(corner);
+    LatticeBlock corners;
+    corners.Set(corner);
+    b.shape = corners.shape;
+    for (int k = 0; k < 3; ++k) b.dark[k] = corners.dark[k];
     bool alike = true;
     for (int c = 1; c < 8; ++c) alike = alike && corner[c] == corner[0];
-    b.curved = b.inner.shape != LatticeBlock::kSteep && !alike;
+    b.curved = b.shape != LatticeBlock::kSteep && !alike;
     // (one channel for three where the block is grey; the columns beside it
     // must be too)
-    const bool grey = b.inner.shape == LatticeBlock::kGrey;
+    const bool grey = b.shape == LatticeBlock::kGrey;
     const int channels = grey ? 1 : 3;
     for (int k = 0; k < channels; ++k) {
-      b.lo[k] = b.hi[k] = corner[0][k];
-      for (int c = 1; c < 8; ++c) {
-        b.lo[k] = std::min(b.lo[k], corner[c][k]);
-        b.hi[k] = std::max(b.hi[k], corner[c][k]);
+      ColumnBlock::Channel& ch = b.ch[k];
+      ch.lo = ch.hi = corner[0][k];
+      for (int c = 0; c < 8; ++c) {
+        ch.log_light[c] = corner[c][k];
+        ch.lo = std::min(ch.lo, corner[c][k]);
+        ch.hi = std::max(ch.hi, corner[c][k]);
       }
     }
     // Column r of side 0 or 1 across axis a (0: u, 1: v): the one beside
@@ -216,15 +261,16 @@ class FogColumnCache {
       // corner column next to beside_s.
       const int near = axis == 0 ? 2 * r + side : r + 2 * side;
       for (int k = 0; k < channels; ++k) {
+        ColumnBlock::Channel& ch = b.ch[k];
         for (int m = 0; m < 2; ++m) {
           const double beside = -d[m][k];
-          b.lo[k] = std::min(b.lo[k], beside);
-          b.hi[k] = std::max(b.hi[k], beside);
+          ch.lo = std::min(ch.lo, beside);
+          ch.hi = std::max(ch.hi, beside);
           const double share = 0.5 * (beside - corner[near + 4 * m][k]);
-          double& curve = axis == 0 ? b.curve_u[k][r + 2 * m] : b.curve_v[k][r + 2 * m];
+          double& curve = axis == 0 ? ch.curve_u[r + 2 * m] : ch.curve_v[r + 2 * m];
           curve = side == 0 ? share : curve + share;
         }
-        b.curved = b.curved && b.hi[k] - b.lo[k] <= kMaxLatticeLogRatio;
+        b.curved = b.curved && ch.hi - ch.lo <= kMaxLatticeLogRatio;
       }
     }
     slot.key = key;

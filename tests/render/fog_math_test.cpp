@@ -153,7 +153,7 @@ TEST(FogColumnCacheTest, AnswersDoNotDependOnWhatWasAskedBefore) {
   const ColumnBlock* b = cache.Block(1, -2, 5, 30, trace);
   ASSERT_NE(b, nullptr);
   for (int c = 0; c < 8; ++c)
-    EXPECT_NEAR(b->inner.log_light[0][c], -depth(-2 + (c & 1), 5 + ((c >> 1) & 1), 30 + (c >> 2)), 1e-12) << c;
+    EXPECT_NEAR(b->ch[0].log_light[c], -depth(-2 + (c & 1), 5 + ((c >> 1) & 1), 30 + (c >> 2)), 1e-12) << c;
   // A failing trace keeps nothing: the column is traced again next time.
   FogColumnCache failing;
   int calls = 0;
@@ -191,19 +191,19 @@ TEST(FogColumnCacheTest, BlocksMeasureTheCurvatureAcrossColumns) {
   for (int m = 0; m < 2; ++m)
     for (int r = 0; r < 2; ++r) {
       // (log-light: minus the depth; second differences of m (a i^2 + b j^2))
-      EXPECT_NEAR(blk->curve_u[0][r + 2 * m], -2 * a * (m0 + m), 1e-12) << r << " " << m;
-      EXPECT_NEAR(blk->curve_v[0][r + 2 * m], -2 * b * (m0 + m), 1e-12) << r << " " << m;
+      EXPECT_NEAR(blk->ch[0].curve_u[r + 2 * m], -2 * a * (m0 + m), 1e-12) << r << " " << m;
+      EXPECT_NEAR(blk->ch[0].curve_v[r + 2 * m], -2 * b * (m0 + m), 1e-12) << r << " " << m;
     }
   // (the range of the twelve columns' light: the deepest and shallowest)
-  EXPECT_NEAR(blk->lo[0], -depth(5, -4, m0 + 1), 1e-12);
-  EXPECT_NEAR(blk->hi[0], -depth(2, -3, m0), 1e-12);
+  EXPECT_NEAR(blk->ch[0].lo, -depth(5, -4, m0 + 1), 1e-12);
+  EXPECT_NEAR(blk->ch[0].hi, -depth(2, -3, m0), 1e-12);
   // A column beside the block across a shadow's edge: no curvature (a new
   // cache: the block is kept).
   steep_column = true;
   FogColumnCache other;
   const ColumnBlock* near_edge = other.Block(0, 0, j0, m0, trace);  // (column 2 is beside it)
   ASSERT_NE(near_edge, nullptr);
-  EXPECT_NE(near_edge->inner.shape, LatticeBlock::kSteep);
+  EXPECT_NE(near_edge->shape, LatticeBlock::kSteep);
   EXPECT_FALSE(near_edge->curved);
 }
 
