@@ -122,7 +122,7 @@ struct ColumnBlock {
     // The second difference of the log-light across the columns (per
     // spacing squared): curve_u along the block's edge j0 + r at sample m0
     // + m ([r + 2 m]), from columns i0 - 1..i0 + 2; curve_v along its edge
-    // i0 + r, from columns j0 - 1..j0 + 2 (0 where not curved).
+    // i0 + r, from columns j0 - 1..j0 + 2 (set only where curved).
     double curve_u[4], curve_v[4];
     double lo, hi;  // (the values' range)
   } ch[3];

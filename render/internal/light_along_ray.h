@@ -45,10 +45,12 @@ inline double& Channel(glm::dvec3& v, int k) { return v[k]; }
 inline double Channel(const glm::dvec3& v, int k) { return v[k]; }
 
 // The light reaching a primary ray through fog, sampled at points ta < tb
-// along it and interpolated in between: geometrically where both samples
-// have light (exact where the light is attenuated along the ray at a
-// constant rate, as behind fog of even density), linearly otherwise.
-// Integrate() gives a cell's in-scattered light exactly for that model, one
+// along it and interpolated in between: where both samples have light, its
+// logarithm along a parabola (the chord between them, exact where the
+// light is attenuated along the ray at a constant rate, as behind fog of
+// even density, bent by the light's curvature measured around it: Place),
+// linearly otherwise. Integrate() gives a cell's in-scattered light for
+// that model (exactly for the chord, to first order in the bend), one
 // sample interval at a time. Samples start where the ray enters the fog, and
 // again at the first cell after a gap longer than a step; an interval chosen
 // for thinner fog is cut short at the first cell of higher extinction (a ray
@@ -148,7 +150,8 @@ class LightAlongRay {
           const double x = Channel(piece_tau, k) + kappa * len, ex = Channel(piece_trans, k) * decay;
           Channel(in, k) = l_[k] * Channel(piece_tau, k) * ExpNegShareOf(x, ex);
           // The curve's share: curve/2 (s - t) (s - e) over the piece, to
-          // first order (it stays within a few hundredths: Place).
+          // first order (Place keeps the bend at the interval's middle
+          // within kMaxLightCurve).
           if (curve != 0)
             Channel(in, k) += l_[k] * Channel(st_rgb, k) * (0.5 * curve) * (len * len * len) * CurveShareOf(x, ex);
           l_[k] *= decay;
@@ -186,7 +189,8 @@ class LightAlongRay {
   // interpolation (halved while it errs: at the light's terminator the
   // light's depth grows as the square root of the distance). The tolerance
   // grows as the transmittance from the camera falls, as the spacing does
-  // (what errs is seen through it).
+  // (what errs is seen through it). The curvature measured is kept for the
+  // interval (curve_), whose interpolation it bends.
   void Place(double h) {
     SetB(ta_ + std::min(h, max_step_a_), h);
     if (!geometric_) return;
