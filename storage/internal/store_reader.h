@@ -107,7 +107,7 @@ class StoreImpl : public Store {
       // a prefetch may name but a pointer may not)
       const uintptr_t at = reinterpret_cast<uintptr_t>(values) +
                            ((b->flags & kAttrNormal) ? uintptr_t(4) * b->AttrCount() : 0) +
-                           uintptr_t(4) * hit.payload;
+                           uintptr_t(4) * b->AttrIndex(hit.payload);
       __builtin_prefetch(reinterpret_cast<const void*>(at - 64));
       __builtin_prefetch(reinterpret_cast<const void*>(at + 64));
       const uint8_t l =
