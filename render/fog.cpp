@@ -106,11 +106,7 @@ bool InterpolateLight(const render_internal::LatticeBlock& b, const glm::dvec3& 
       (*out)[k] = 0.0;
       continue;
     }
-    const double* v = b.log_light[k];
-    const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
-    const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
-    const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
-    (*out)[k] = std::exp(y0 + f.z * (y1 - y0));
+    (*out)[k] = std::exp(render_internal::Trilinear(b.log_light[k], f));
   }
   if (channels == 1) out->y = out->z = out->x;
   return true;

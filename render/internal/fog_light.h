@@ -92,6 +92,15 @@ struct LatticeBlock {
   }
 };
 
+// The trilinear interpolation of a block's eight corner values v (corner c
+// at offset (c & 1, c >> 1 & 1, c >> 2 & 1)) at offsets f (0..1 per axis).
+inline double Trilinear(const double* v, const glm::dvec3& f) {
+  const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
+  const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
+  const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
+  return y0 + f.z * (y1 - y0);
+}
+
 inline size_t LatticePointHash(const LatticePoint& p) {
   uint64_t h = uint64_t(int64_t(p.x)) * 0x9E3779B97F4A7C15ull;
   h ^= uint64_t(int64_t(p.y)) * 0xC2B2AE3D27D4EB4Full + (h << 6) + (h >> 2);
@@ -143,11 +152,7 @@ struct ColumnBlock {
         continue;
       }
       const Channel& c = ch[k];
-      const double* v = c.log_light;
-      const double x00 = v[0] + f.x * (v[1] - v[0]), x10 = v[2] + f.x * (v[3] - v[2]);
-      const double x01 = v[4] + f.x * (v[5] - v[4]), x11 = v[6] + f.x * (v[7] - v[6]);
-      const double y0 = x00 + f.y * (x10 - x00), y1 = x01 + f.y * (x11 - x01);
-      double log_light = y0 + f.z * (y1 - y0);
+      double log_light = Trilinear(c.log_light, f);
       if (curved) {
         const double* cu = c.curve_u;
         const double* cv = c.curve_v;

@@ -54,10 +54,14 @@ inline float DecodeCoverage(uint16_t q) { return float(q) / 65535.0f; }
 // A voxel's attributes from value arrays of `count` voxels.
 VoxelAttributes ReadAttributes(const uint8_t* values, uint32_t count, uint8_t flags,
                                uint32_t index);
+// Where the same voxel's density lies (with kAttrDensity).
+inline const uint8_t* DensityBytes(const uint8_t* values, uint32_t count, uint8_t flags, uint32_t index) {
+  return values + ((flags & kAttrNormal) ? size_t(4) * count : 0) + size_t(4) * index;
+}
 // The same voxel's density alone (0 without kAttrDensity).
 inline float ReadDensity(const uint8_t* values, uint32_t count, uint8_t flags, uint32_t index) {
   if (!(flags & kAttrDensity)) return 0.0f;
-  const uint8_t* p = values + ((flags & kAttrNormal) ? size_t(4) * count : 0) + size_t(4) * index;
+  const uint8_t* p = DensityBytes(values, count, flags, index);
   const uint32_t bits = uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
   return std::bit_cast<float>(bits);
 }

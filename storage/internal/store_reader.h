@@ -98,16 +98,16 @@ class StoreImpl : public Store {
       *uniform_levels = depth_;
     } else {
       const uint8_t* values = b->attr_values.data();
-      *density = ReadDensity(values, b->AttrCount(), b->flags, b->AttrIndex(hit.payload));
+      const uint32_t index = b->AttrIndex(hit.payload);
+      *density = ReadDensity(values, b->AttrCount(), b->flags, index);
       // The densities of the cache lines before and after this voxel's: a
       // walk's next voxels are its neighbours in the brick's octree order,
       // on either side as the ray runs (a fog's walk otherwise waits on
       // memory for a good share of its time).
       // (addresses as integers: the lines may lie outside the array, which
       // a prefetch may name but a pointer may not)
-      const uintptr_t at = reinterpret_cast<uintptr_t>(values) +
-                           ((b->flags & kAttrNormal) ? uintptr_t(4) * b->AttrCount() : 0) +
-                           uintptr_t(4) * b->AttrIndex(hit.payload);
+      const uintptr_t at =
+          reinterpret_cast<uintptr_t>(DensityBytes(values, b->AttrCount(), b->flags, index));
       __builtin_prefetch(reinterpret_cast<const void*>(at - 64));
       __builtin_prefetch(reinterpret_cast<const void*>(at + 64));
       const uint8_t l =
