@@ -71,21 +71,41 @@ void BufferPool::Unlink(uint64_t off, int order) {
 void* BufferPool::Allocate(size_t n) {
   const size_t bs = BlockSize(n);
   const int want = std::countr_zero(bs) - kMinShift;
-  std::lock_guard<std::mutex> lock(mu_);
-  if (retired_ || want > max_order_) return nullptr;
-  int k = want;
-  while (k <= max_order_ && heads_[k] == kNone) ++k;
-  if (k > max_order_) return nullptr;
-  const uint64_t off = heads_[k];
-  Unlink(off, k);
-  while (k > want) {  // split, keeping the lower half, freeing the upper
-    --k;
-    Push(off + (kMinBlock << k), k);
+  uint64_t off;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (retired_ || want > max_order_) return nullptr;
+    int k = want;
+    while (k <= max_order_ && heads_[k] == kNone) ++k;
+    if (k > max_order_) return nullptr;
+    off = heads_[k];
+    Unlink(off, k);
+    while (k > want) {  // split, keeping the lower half, freeing the upper
+      --k;
+      Push(off + (kMinBlock << k), k);
+    }
+    state_[off >> kMinShift] = uint8_t(want);
+    in_use_ += bs;
+    peak_ = std::max(peak_, in_use_);
   }
-  state_[off >> kMinShift] = uint8_t(want);
-  in_use_ += bs;
-  peak_ = std::max(peak_, in_use_);
+  PopulateForWrite(base_ + off, n);
   return reinterpret_cast<void*>(base_ + off);
+}
+
+void BufferPool::PopulateForWrite(uintptr_t at, size_t n) {
+#ifdef MADV_POPULATE_WRITE
+  // The pages the caller is about to write, made resident in one call: the
+  // kernel then zeroes and maps them in one pass instead of taking a page
+  // fault per 4 KiB as they are first written (about a third of that
+  // cost). Pages already resident cost a table walk; kernels without the
+  // advice (before Linux 5.14) refuse it, and the pages fault in as before.
+  constexpr uintptr_t kPage = 4096;
+  const uintptr_t lo = at & ~(kPage - 1), hi = (at + n + kPage - 1) & ~(kPage - 1);
+  if (n >= kPopulateMin) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_POPULATE_WRITE);
+#else
+  (void)at;
+  (void)n;
+#endif
 }
 
 void BufferPool::Free(void* p) {

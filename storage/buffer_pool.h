@@ -74,6 +74,10 @@ class BufferPool {
 
  private:
   BufferPool(uintptr_t base, uint64_t size);
+  // Makes [at, at + n) resident for writing, where the kernel can
+  // (blocks of at least kPopulateMin bytes).
+  static void PopulateForWrite(uintptr_t at, size_t n);
+  static constexpr size_t kPopulateMin = 16384;
   // Free-list links live in the free blocks themselves.
   struct Links {
     uint64_t next, prev;

@@ -403,11 +403,28 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
     b->cells[start[l] + count[l]++] = MakeCompactCell(first, masks[i]);
   }
   const uint8_t* planes = raw + kBrickHeaderSize + num_cells;
-  b->attr_values.resize(n - kBrickHeaderSize - num_cells);  // left uninitialised
-  UndeltaPlanes(planes, b->attr_values.data(), voxel_count, flags);
   b->voxel_count = voxel_count;
   b->flags = flags;
-  if (flags & kAttrDensity) FindUniformBlocks(b.get(), depth, start);
+  if (!(flags & kAttrDensity)) {
+    b->attr_values.resize(n - kBrickHeaderSize - num_cells);  // left uninitialised
+    UndeltaPlanes(planes, b->attr_values.data(), voxel_count, flags);
+    return b;
+  }
+  // With densities the values are decoded into a scratch first: the blocks
+  // of one density and the density most voxels share decide how the brick
+  // keeps them (KeepAttributes).
+  // (per thread, as the zstd scratch: at most one brick's values, given
+  // back past 64 MiB)
+  thread_local std::vector<uint8_t> values;
+  struct Trim {
+    ~Trim() {
+      if (values.capacity() > (size_t(64) << 20)) std::vector<uint8_t>().swap(values);
+    }
+  } trim;
+  if (values.size() < n - kBrickHeaderSize - num_cells) values.resize(n - kBrickHeaderSize - num_cells);
+  UndeltaPlanes(planes, values.data(), voxel_count, flags);
+  FindUniformBlocks(b.get(), depth, start, values.data());
+  KeepAttributes(b.get(), values.data());
   return b;
 }
 

@@ -1,6 +1,7 @@
 // Bricks and blocks of one density (brick_uniform.h).
 #include "storage/internal/brick_uniform.h"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -44,17 +45,17 @@ bool AllBytesAre(const uint8_t* p, size_t n, uint8_t byte) {
   return diff == 0;
 }
 
-void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) {
+void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start, const uint8_t* values) {
   const uint32_t n = uint32_t(b->cells.size());
   const size_t count = b->voxel_count;
   // The densities: `count` 4-byte values (the value arrays, brick_codec.h).
-  const uint8_t* d = b->attr_values.data() + ((b->flags & kAttrNormal) ? size_t(4) * count : 0);
+  const uint8_t* d = DensityBytes(values, b->voxel_count, b->flags, 0);
   // (A brick deeper than 10 levels cannot be full: its voxel count is 32-bit.)
   if (depth <= 10 && uint64_t(count) == uint64_t(1) << (3 * depth)) {
     // A full brick (the inside of a fog): of one density when the array
     // equals itself shifted by one value.
     const bool same = std::memcmp(d, d + 4, 4 * (count - 1)) == 0;
-    const float f = same ? ReadDensity(b->attr_values.data(), b->voxel_count, b->flags, 0) : -1.0f;
+    const float f = same ? ReadDensity(values, b->voxel_count, b->flags, 0) : -1.0f;
     if (f >= 0 && std::isfinite(f)) {
       b->uniform_density = f;
       return;
@@ -113,6 +114,60 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start) 
         std::memset(&b->uniform_levels[first], uint8_t(mine), 8);
       }
     }
+}
+
+void KeepAttributes(DecodedBrick* b, const uint8_t* values) {
+  const uint32_t count = b->voxel_count;
+  const size_t bytes = size_t(count) * AttrBytesPerVoxel(b->flags);
+  auto copy = [&] { b->attr_values.assign(values, values + bytes); };
+  if (b->flags != kAttrDensity || b->uniform_levels.empty() || b->uniform_density >= 0) return copy();
+  // The candidate: the density of the first voxel in a block of one density.
+  uint32_t first = 0;
+  while (first < count && b->uniform_levels[first] == DecodedBrick::kNotUniform) ++first;
+  if (first == count) return copy();
+  uint32_t want;
+  std::memcpy(&want, values + size_t(4) * first, 4);  // (little-endian hosts, as ReadDensity)
+  const size_t words = (size_t(count) + 63) / 64;
+  b->common_words.resize(words);
+  uint64_t others = 0;
+  for (size_t w = 0; w < words; ++w) {
+    const uint32_t p0 = uint32_t(w * 64), n = std::min<uint32_t>(64, count - p0);
+    const uint8_t* v = values + size_t(4) * p0;
+    uint64_t bits = 0;
+    uint32_t k = 0;
+#if defined(__SSE2__)
+    const __m128i cand = _mm_set1_epi32(int32_t(want));
+    for (; k + 4 <= n; k += 4) {
+      const __m128i x = _mm_loadu_si128(reinterpret_cast<const __m128i*>(v + size_t(4) * k));
+      bits |= uint64_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(x, cand)))) << k;
+    }
+#endif
+    for (; k < n; ++k) {
+      uint32_t x;
+      std::memcpy(&x, v + size_t(4) * k, 4);
+      bits |= uint64_t(x == want) << k;
+    }
+    b->common_words[w] = DecodedBrick::CommonWord{bits, others};
+    others += n - uint32_t(std::popcount(bits));
+  }
+  // Worth it where at least half the voxels are common and the two arrays
+  // fit the one block the plain form takes (DecodedBrick::MaxCharge).
+  if (2 * others > count ||
+      BufferPool::BlockSize(4 * others) + BufferPool::BlockSize(words * sizeof(DecodedBrick::CommonWord)) >
+          BufferPool::BlockSize(bytes)) {
+    decltype(b->common_words)().swap(b->common_words);
+    return copy();
+  }
+  b->common = true;
+  b->common_density = std::bit_cast<float>(want);
+  b->attr_values.resize(4 * others);  // (written whole below)
+  uint8_t* out = b->attr_values.data();
+  for (size_t w = 0; w < words; ++w) {
+    const uint32_t p0 = uint32_t(w * 64), n = std::min<uint32_t>(64, count - p0);
+    uint64_t rest = ~b->common_words[w].bits & (n == 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1);
+    for (; rest != 0; rest &= rest - 1, out += 4)
+      std::memcpy(out, values + size_t(4) * (p0 + uint32_t(std::countr_zero(rest))), 4);
+  }
 }
 
 std::span<const CompactCell> FullPool(int depth) {

@@ -28,8 +28,16 @@ std::shared_ptr<DecodedBrick> DecodeFullOfOne(const uint8_t* masks, uint32_t num
 // Sets b's uniform_density, or its uniform_levels: bottom-up, each full
 // cell's one density; top-down, each cell's largest block of one density
 // around it. `level_start[l]`: the first cell of level l (level order),
-// level_start[depth] the cell count. b's planes are decoded (not deltas).
-void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start);
+// level_start[depth] the cell count. `values`: b's value arrays (decoded
+// planes, not deltas), b->voxel_count voxels.
+void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start, const uint8_t* values);
+
+// Sets b's attributes from `values` (value arrays of b->voxel_count voxels
+// with b->flags): where density is the one attribute and at least half the
+// voxels share the density of a block FindUniformBlocks found, in the
+// common form (DecodedBrick::common) when that takes less memory; else a
+// copy in attr_values.
+void KeepAttributes(DecodedBrick* b, const uint8_t* values);
 
 }  // namespace vox::storage_internal
 

@@ -97,19 +97,22 @@ class StoreImpl : public Store {
       *density = b->uniform_density;
       *uniform_levels = depth_;
     } else {
-      const uint8_t* values = b->attr_values.data();
-      const uint32_t index = b->AttrIndex(hit.payload);
-      *density = ReadDensity(values, b->AttrCount(), b->flags, index);
-      // The densities of the cache lines before and after this voxel's: a
-      // walk's next voxels are its neighbours in the brick's octree order,
-      // on either side as the ray runs (a fog's walk otherwise waits on
-      // memory for a good share of its time).
-      // (addresses as integers: the lines may lie outside the array, which
-      // a prefetch may name but a pointer may not)
-      const uintptr_t at =
-          reinterpret_cast<uintptr_t>(DensityBytes(values, b->AttrCount(), b->flags, index));
-      __builtin_prefetch(reinterpret_cast<const void*>(at - 64));
-      __builtin_prefetch(reinterpret_cast<const void*>(at + 64));
+      const uint8_t* at = b->DensityPlace(hit.payload);
+      if (at == nullptr) {
+        *density = b->common_density;
+      } else {
+        *density = std::bit_cast<float>(uint32_t(at[0]) | uint32_t(at[1]) << 8 | uint32_t(at[2]) << 16 |
+                                        uint32_t(at[3]) << 24);
+        // The densities of the cache lines before and after this voxel's:
+        // a walk's next voxels are its neighbours in the brick's octree
+        // order, on either side as the ray runs (a fog's walk otherwise
+        // waits on memory for a good share of its time).
+        // (addresses as integers: the lines may lie outside the array,
+        // which a prefetch may name but a pointer may not)
+        const uintptr_t line = reinterpret_cast<uintptr_t>(at);
+        __builtin_prefetch(reinterpret_cast<const void*>(line - 64));
+        __builtin_prefetch(reinterpret_cast<const void*>(line + 64));
+      }
       const uint8_t l =
           b->uniform_levels.empty() ? DecodedBrick::kNotUniform : b->uniform_levels[hit.payload];
       *uniform_levels = l == DecodedBrick::kNotUniform ? -1 : int(l);
@@ -274,7 +277,7 @@ class StoreImpl : public Store {
       return InvalidArgumentError("payload " + std::to_string(payload) + " outside brick " +
                                   std::to_string(brick) + " (" + std::to_string(b.voxel_count) +
                                   " voxels) of store '" + dir_ + "'");
-    return ReadAttributes(b.attr_values.data(), b.AttrCount(), b.flags, b.AttrIndex(payload));
+    return b.AttributesOf(payload);
   }
 
   const std::string dir_;

@@ -296,6 +296,61 @@ TEST(BrickDecoder, FindsBlocksOfOneDensity) {
   }
 }
 
+// A brick of densities mostly of one value, with a rim of other values (the
+// inside of a fog beside its rim), keeps that value once and a bit per
+// voxel (DecodedBrick::common) and reads back every voxel's density and
+// attributes; a brick where fewer than half the voxels share it, or with a
+// second attribute, keeps the plain value arrays.
+TEST(BrickDecoder, KeepsTheCommonDensityOnce) {
+  const int depth = 4;  // 16^3
+  std::vector<LeafPoint> pts;
+  for (uint64_t z = 0; z < 16; ++z)
+    for (uint64_t y = 0; y < 16; ++y)
+      for (uint64_t x = 0; x < 16; ++x)
+        if (x + y + z < 36) pts.push_back(LeafPoint{x, y, z, kEmptyRef});  // a corner cut off
+  std::sort(pts.begin(), pts.end(), MortonLess);
+  for (size_t i = 0; i < pts.size(); ++i) pts[i].ref = MakeLeafRef(uint32_t(i));
+  const auto cells = BuildCells(pts, depth);
+  // rim: the voxels with x + y + z >= rim_from get their own densities
+  for (uint64_t rim_from : {uint64_t(30), uint64_t(12)}) {
+    for (uint8_t flags : {uint8_t(kAttrDensity), uint8_t(kAttrDensity | kAttrTemperature)}) {
+      std::vector<VoxelAttributes> attrs(pts.size());
+      size_t rim = 0;
+      for (size_t i = 0; i < pts.size(); ++i) {
+        const uint64_t sum = pts[i].x + pts[i].y + pts[i].z;
+        attrs[i].density = sum >= rim_from ? 0.001f * float(i + 1) : 1.0f;
+        attrs[i].temperature = 300.0f;
+        rim += sum >= rim_from;
+      }
+      const std::string raw = EncodeBrickRaw(cells, attrs, depth, flags);
+      BrickEntry e;
+      e.num_cells = uint32_t(cells.size());
+      e.voxel_count = uint32_t(pts.size());
+      auto d = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, depth, flags);
+      ASSERT_TRUE(d.ok()) << d.status().ToString();
+      const DecodedBrick& b = **d;
+      const bool expect_common = flags == kAttrDensity && 2 * rim <= pts.size();
+      ASSERT_EQ(2 * rim <= pts.size(), rim_from == 30) << rim;  // (both forms are tried)
+      EXPECT_EQ(b.common, expect_common) << "rim from " << rim_from << ", flags " << int(flags);
+      if (expect_common) {
+        EXPECT_EQ(b.common_density, 1.0f);
+        EXPECT_EQ(b.attr_values.size(), 4 * rim);
+        EXPECT_EQ(b.common_words.size(), (pts.size() + 63) / 64);
+      } else {
+        EXPECT_EQ(b.attr_values.size(), pts.size() * AttrBytesPerVoxel(flags));
+      }
+      for (uint32_t i = 0; i < pts.size(); ++i) {
+        ASSERT_EQ(b.DensityOf(i), attrs[i].density) << "voxel " << i << ", rim from " << rim_from;
+        const VoxelAttributes a = b.AttributesOf(i);
+        ASSERT_EQ(a.density, attrs[i].density) << "voxel " << i;
+        if (flags & kAttrTemperature) ASSERT_EQ(a.temperature, 300.0f) << "voxel " << i;
+        // (a common voxel has no place of its own)
+        EXPECT_EQ(b.DensityPlace(i) == nullptr, b.common && attrs[i].density == 1.0f) << "voxel " << i;
+      }
+    }
+  }
+}
+
 // A full brick whose voxels all have one value (the inside of a fog) decodes
 // to the shared full pool and one voxel's attributes, and reads back as the
 // brick it encodes: every payload's attributes, the pool LevelOrderPool

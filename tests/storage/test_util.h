@@ -83,6 +83,11 @@ inline std::string BrickBytes(const BrickView& v) {
   std::string out(reinterpret_cast<const char*>(v.cells), v.num_cells * sizeof(CompactCell));
   out.append(reinterpret_cast<const char*>(b->attr_values.data()), b->attr_values.size());
   out.append(reinterpret_cast<const char*>(&b->voxel_count), sizeof(b->voxel_count));
+  if (b->common) {  // (the common density and its bits)
+    out.append(reinterpret_cast<const char*>(&b->common_density), sizeof(b->common_density));
+    out.append(reinterpret_cast<const char*>(b->common_words.data()),
+               b->common_words.size() * sizeof(storage_internal::DecodedBrick::CommonWord));
+  }
   return out;
 }
 

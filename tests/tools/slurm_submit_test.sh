@@ -33,7 +33,10 @@ out=$(SBATCH_FAIL=1 PATH="$dir/bin:$PATH" "$submit" "$dir/store" "$dir/cam.json"
 [[ $code -eq 1 && $out == *"sbatch refused the render array"* && $out != *submitted* ]] || fail "refused: $code $out"
 out=$(SBATCH_FAIL=1 PATH="$dir/bin:$PATH" "$submit" --frames 3 "$dir/store" "$dir/f.%04d.exr" 2>&1); code=$?
 [[ $code -eq 1 && $out == *"sbatch refused the frames array"* && $out != *submitted* ]] || fail "frames refused: $code $out"
-# No sbatch at all.
-out=$(PATH=/usr/bin:/bin "$submit" --frames 3 "$dir/store" "$dir/f.%04d.exr" 2>&1); code=$?
+# No sbatch at all (a PATH of what the script runs before it looks for
+# sbatch: the machine's own PATH may hold a real one).
+mkdir "$dir/nosbatch"
+for tool in bash dirname; do ln -s "$(command -v "$tool")" "$dir/nosbatch/$tool"; done
+out=$(PATH=$dir/nosbatch "$submit" --frames 3 "$dir/store" "$dir/f.%04d.exr" 2>&1); code=$?
 [[ $code -eq 1 && $out == *"sbatch not found"* ]] || fail "missing sbatch: $code $out"
 echo "slurm_submit_test: ok"
