@@ -77,7 +77,7 @@ class BufferPool {
   // Makes [at, at + n) resident for writing, where the kernel can
   // (blocks of at least kPopulateMin bytes).
   static void PopulateForWrite(uintptr_t at, size_t n);
-  static constexpr size_t kPopulateMin = 16384;
+  static constexpr size_t kPopulateMin = 8192;
   // Free-list links live in the free blocks themselves.
   struct Links {
     uint64_t next, prev;

@@ -20,8 +20,10 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <glm/vec3.hpp>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "core/ray.h"
@@ -119,13 +121,15 @@ inline size_t LatticePointHash(const LatticePoint& p) {
 // corrects it (Interpolate). A channel's values lie together, so that a
 // grey block's are read from a few cache lines.
 struct ColumnBlock {
-  LatticeBlock::Shape shape = LatticeBlock::kSteep;
-  bool dark[3] = {false, false, false};  // (as LatticeBlock's)
+  // (no initialisers: FogColumnCache leaves a slot's bytes untouched until
+  // it builds a block there, and sets every field Interpolate reads)
+  LatticeBlock::Shape shape;
+  bool dark[3];  // (as LatticeBlock's)
   // Whether the curvature applies: the corners may be interpolated, they
   // are not all alike, and every column of the block and beside it is
   // within kMaxLatticeLogRatio of every other (none dark, none across a
   // shadow's edge).
-  bool curved = false;
+  bool curved;
   struct Channel {
     double log_light[8];  // corner c: column (i0 + (c & 1), j0 + (c >> 1 & 1)), sample m0 + (c >> 2)
     // The second difference of the log-light across the columns (per
@@ -201,17 +205,18 @@ class FogColumnCache {
   const ColumnBlock* Block(int level, int64_t i0, int64_t j0, int m0, Trace&& trace) {
     const LatticePoint key{int32_t(i0), int32_t(j0), int32_t(m0), level};
     const size_t hash = LatticePointHash(key);
-    if (!blocks_.empty()) {
-      const BlockSlot& slot = blocks_[hash & (blocks_.size() - 1)];
-      if (slot.key == key) return &slot.block;
+    if (!keys_.empty()) {
+      const size_t at = hash & (keys_.size() - 1);
+      if (keys_[at] == key) return &blocks_[at];
     }
     // (the table grows with the samples kept, so a cache that serves a few
-    // rays stays small)
+    // rays stays small; eightfold, so that a frame's few tables before the
+    // largest cost little)
     const size_t want = std::clamp<size_t>(std::bit_ceil(samples_ / 16 + 1), 16, kMaxBlocks);
-    if (blocks_.size() < want) blocks_.assign(want, BlockSlot{});
-    BlockSlot& slot = blocks_[hash & (blocks_.size() - 1)];
-    slot.key = LatticePoint{0, 0, 0, -1};
-    ColumnBlock& b = slot.block;
+    if (keys_.size() < want) GrowBlocks(std::min(kMaxBlocks, std::max(want, 8 * keys_.size())));
+    const size_t at = hash & (keys_.size() - 1);
+    keys_[at] = kNoBlock;
+    ColumnBlock& b = blocks_[at];
     // The block's own four columns first, then, where they may be
     // interpolated and are not all alike (above the fog, in its shadow),
     // the eight beside them.
@@ -278,8 +283,8 @@ class FogColumnCache {
         b.curved = b.curved && ch.hi - ch.lo <= kMaxLatticeLogRatio;
       }
     }
-    slot.key = key;
-    return &slot.block;
+    keys_[at] = key;
+    return &b;
   }
 
   // Samples 0..last of column (level, i, j), tracing missing chunks with
@@ -321,11 +326,23 @@ class FogColumnCache {
 
  private:
   static constexpr uint64_t kIndexMask = (uint64_t(1) << 30) - 1;
-  struct BlockSlot {
-    LatticePoint key{0, 0, 0, -1};  // (level -1: empty)
-    ColumnBlock block;
-  };
-  static_assert(sizeof(BlockSlot) <= kBlockSlotBytes);
+  static constexpr LatticePoint kNoBlock{0, 0, 0, -1};  // (level -1: an empty slot)
+  static_assert(sizeof(LatticePoint) + sizeof(ColumnBlock) <= kBlockSlotBytes);
+  // The block table at n slots (a power of two), keeping the blocks built:
+  // the new slots' bytes are not written until a block is built in them,
+  // so pages the table never uses are never touched.
+  void GrowBlocks(size_t n) {
+    std::vector<LatticePoint> keys(n, kNoBlock);
+    std::unique_ptr<ColumnBlock[]> blocks = std::make_unique_for_overwrite<ColumnBlock[]>(n);
+    for (size_t i = 0; i < keys_.size(); ++i)
+      if (!(keys_[i] == kNoBlock)) {
+        const size_t at = LatticePointHash(keys_[i]) & (n - 1);
+        keys[at] = keys_[i];
+        std::memcpy(&blocks[at], &blocks_[i], sizeof(ColumnBlock));  // (channels a grey block leaves unset too)
+      }
+    keys_.swap(keys);
+    blocks_ = std::move(blocks);
+  }
   // A column's samples (none: the slot is free), in an open-addressed
   // table at most half full (linear probing).
   struct ColumnSlot {
@@ -346,7 +363,8 @@ class FogColumnCache {
   }
   std::vector<ColumnSlot> columns_;  // a power of two of them (or none yet)
   size_t column_count_ = 0, samples_ = 0;
-  std::vector<BlockSlot> blocks_;  // a power of two of them (or none yet)
+  std::vector<LatticePoint> keys_;          // a power of two of them (or none yet)
+  std::unique_ptr<ColumnBlock[]> blocks_;  // block i belongs to keys_[i]
 };
 
 class FogLightCache {

@@ -148,12 +148,21 @@ struct DecodedBrick {
     for (int k = 0; k < 4; ++k) one[k] = uint8_t(bits >> (8 * k));
     return ReadAttributes(one, 1, flags, 0);
   }
-  // Otherwise, for bricks with densities: per voxel (payload order), the
+  // Otherwise, for bricks with densities: per voxel (payload order, half a
+  // byte each: voxel p in the low half of byte p / 2 when p is even), the
   // levels of the largest aligned block around it (2^levels voxels a side,
-  // within the brick) whose voxels are all occupied and of one density, or
+  // within the brick, at most kMaxUniformLevels: a block inside a larger
+  // one is as uniform) whose voxels are all occupied and of one density, or
   // kNotUniform; empty when the brick has no such block of 2^3 voxels.
   std::vector<uint8_t, BrickAllocator<uint8_t>> uniform_levels;
-  static constexpr uint8_t kNotUniform = 0xff;
+  static constexpr uint8_t kNotUniform = 0xf;
+  static constexpr int kMaxUniformLevels = 14;
+  // Payload p's levels (UniformLevelsOf: -1 where it is in no such block).
+  int UniformLevelsOf(uint32_t payload) const {
+    if (uniform_levels.empty()) return -1;
+    const uint8_t l = (uniform_levels[payload >> 1] >> ((payload & 1) * 4)) & 0xf;
+    return l == kNotUniform ? -1 : int(l);
+  }
   // What it costs in memory: this struct, its two blocks (a pool block's
   // whole size, or the heap block's capacity), and the shared_ptr control
   // block make_shared puts beside it. (The cache adds its own per-entry

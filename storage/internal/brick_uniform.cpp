@@ -102,7 +102,7 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start, 
   // Top-down: a cell in a block of one density takes the largest such
   // block's levels. Such a cell is full, as all its descendants are.
   levels.assign(n, -1);
-  b->uniform_levels.assign(count, DecodedBrick::kNotUniform);
+  b->uniform_levels.assign((count + 1) / 2, uint8_t(DecodedBrick::kNotUniform * 0x11));
   for (int l = 0; l < depth; ++l)
     for (uint32_t i = level_start[l]; i < level_start[l + 1]; ++i) {
       const int8_t mine = levels[i] >= 0 ? levels[i] : one[i] != kMixed ? int8_t(depth - l) : int8_t(-1);
@@ -111,7 +111,16 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start, 
       if (l < depth - 1) {
         std::memset(&levels[first], mine, 8);
       } else {
-        std::memset(&b->uniform_levels[first], uint8_t(mine), 8);
+        // (a last-level cell's 8 voxels, half a byte each, from payload first)
+        const uint8_t l = uint8_t(std::min<int>(mine, DecodedBrick::kMaxUniformLevels));
+        uint8_t* at = &b->uniform_levels[first >> 1];
+        if ((first & 1) == 0) {
+          std::memset(at, l * 0x11, 4);
+        } else {
+          at[0] = uint8_t((at[0] & 0x0f) | l << 4);
+          std::memset(at + 1, l * 0x11, 3);
+          at[4] = uint8_t((at[4] & 0xf0) | l);
+        }
       }
     }
 }
@@ -123,7 +132,7 @@ void KeepAttributes(DecodedBrick* b, const uint8_t* values) {
   if (b->flags != kAttrDensity || b->uniform_levels.empty() || b->uniform_density >= 0) return copy();
   // The candidate: the density of the first voxel in a block of one density.
   uint32_t first = 0;
-  while (first < count && b->uniform_levels[first] == DecodedBrick::kNotUniform) ++first;
+  while (first < count && b->UniformLevelsOf(first) < 0) ++first;
   if (first == count) return copy();
   uint32_t want;
   std::memcpy(&want, values + size_t(4) * first, 4);  // (little-endian hosts, as ReadDensity)

@@ -113,9 +113,7 @@ class StoreImpl : public Store {
         __builtin_prefetch(reinterpret_cast<const void*>(line - 64));
         __builtin_prefetch(reinterpret_cast<const void*>(line + 64));
       }
-      const uint8_t l =
-          b->uniform_levels.empty() ? DecodedBrick::kNotUniform : b->uniform_levels[hit.payload];
-      *uniform_levels = l == DecodedBrick::kNotUniform ? -1 : int(l);
+      *uniform_levels = b->UniformLevelsOf(hit.payload);
     }
     return true;
   }

@@ -3,7 +3,7 @@
 // cold, with shadows, exactly and with the default level of detail, inside a
 // tight limit. Fog bricks cost more than their cells and densities: decoding
 // finds their blocks of one density and keeps, per voxel, the size of its
-// block (up to one byte a voxel, DecodedBrick::uniform_levels), and the
+// block (up to half a byte a voxel, DecodedBrick::uniform_levels), and the
 // cache must charge it. The volume is a terraced ball, an integer field as a
 // scanner writes it (16 densities in shells), so that most bricks hold blocks
 // of one density without being of one density whole; it goes in through

@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <random>
+#include <tuple>
 
 #include "core/shapes.h"
 #include "storage/internal/brick_codec.h"
@@ -288,9 +290,9 @@ TEST(BrickDecoder, FindsBlocksOfOneDensity) {
         continue;
       }
       EXPECT_LT(b.uniform_density, 0.0f) << other << " at " << odd;
-      ASSERT_EQ(b.uniform_levels.size(), pts.size());
+      ASSERT_EQ(b.uniform_levels.size(), (pts.size() + 1) / 2);  // (half a byte a voxel)
       for (uint32_t i = 0; i < pts.size(); ++i)  // payloads of one leaf cell are 8 in a row
-        EXPECT_EQ(int(b.uniform_levels[i]), i / 8 == odd / 8 ? int(DecodedBrick::kNotUniform) : 1)
+        EXPECT_EQ(b.UniformLevelsOf(i), i / 8 == odd / 8 ? -1 : 1)
             << other << " at " << odd << ", voxel " << i;
     }
   }
@@ -346,6 +348,33 @@ TEST(BrickDecoder, KeepsTheCommonDensityOnce) {
         if (flags & kAttrTemperature) ASSERT_EQ(a.temperature, 300.0f) << "voxel " << i;
         // (a common voxel has no place of its own)
         EXPECT_EQ(b.DensityPlace(i) == nullptr, b.common && attrs[i].density == 1.0f) << "voxel " << i;
+      }
+      // Each voxel's block of one density (half a byte a voxel, cells of 8
+      // starting at odd payloads too), against a search: the voxel's
+      // aligned block of 2^L is full and of one density, that of 2^(L+1) is
+      // not (or is the brick).
+      std::map<std::tuple<uint64_t, uint64_t, uint64_t>, float> at;
+      for (size_t i = 0; i < pts.size(); ++i) at[{pts[i].x, pts[i].y, pts[i].z}] = attrs[i].density;
+      auto uniform = [&](const LeafPoint& q, int l) {
+        const uint64_t m = ~((uint64_t(1) << l) - 1), side = uint64_t(1) << l;
+        const auto d0 = at.find({q.x & m, q.y & m, q.z & m});
+        if (d0 == at.end()) return false;
+        for (uint64_t z = 0; z < side; ++z)
+          for (uint64_t y = 0; y < side; ++y)
+            for (uint64_t x = 0; x < side; ++x) {
+              const auto d = at.find({(q.x & m) + x, (q.y & m) + y, (q.z & m) + z});
+              if (d == at.end() || d->second != d0->second) return false;
+            }
+        return true;
+      };
+      for (uint32_t i = 0; i < pts.size(); i += 7) {
+        const int l = b.UniformLevelsOf(i);
+        if (l < 0) {
+          ASSERT_FALSE(uniform(pts[i], 1)) << "voxel " << i;
+          continue;
+        }
+        ASSERT_TRUE(uniform(pts[i], l)) << "voxel " << i << ", levels " << l;
+        if (l < depth) ASSERT_FALSE(uniform(pts[i], l + 1)) << "voxel " << i << ", levels " << l;
       }
     }
   }
