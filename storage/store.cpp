@@ -5,12 +5,14 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <array>
 #include <cstring>
 
 #include <zstd.h>
 
 #include "storage/internal/coding.h"
 #include "storage/internal/brick_codec.h"
+#include "storage/internal/brick_uniform.h"
 #include "storage/internal/format.h"
 #include "storage/internal/record_windows.h"
 #include "storage/internal/store_impl.h"
@@ -32,6 +34,51 @@ ZSTD_DCtx* ThreadDCtx() {
   thread_local std::unique_ptr<ZSTD_DCtx, DCtxDeleter> dctx(ZSTD_createDCtx());
   return dctx.get();
 }
+
+// The small records a thread decoded to bricks full of one value, and that
+// value: the inside of a fog is hundreds of bricks of one record, which
+// then decode without decompressing (a record's bytes and its table row
+// decide its brick).
+class RepeatedRecords {
+ public:
+  static constexpr uint32_t kMaxBytes = 128;
+  // The brick of a record seen before, or null.
+  std::shared_ptr<DecodedBrick> Find(const uint8_t* record, const BrickEntry& e, int depth,
+                                     uint8_t flags) const {
+    if (e.stored_size > kMaxBytes) return nullptr;
+    for (const Entry& k : entries_)
+      if (k.stored_size == e.stored_size && k.raw_size == e.raw_size && k.num_cells == e.num_cells &&
+          k.voxel_count == e.voxel_count && k.codec == e.codec && k.depth == depth && k.flags == flags &&
+          std::memcmp(k.record, record, e.stored_size) == 0)
+        return FullOfOneBrick(k.voxel, e.voxel_count, depth, flags);
+    return nullptr;
+  }
+  void Remember(const uint8_t* record, const BrickEntry& e, int depth, uint8_t flags, const DecodedBrick& b) {
+    if (e.stored_size > kMaxBytes || !b.full_of_one || b.attr_values.size() > kMaxAttrBytesPerVoxel) return;
+    Entry& k = entries_[next_++ % entries_.size()];
+    k.stored_size = e.stored_size;
+    k.raw_size = e.raw_size;
+    k.num_cells = e.num_cells;
+    k.voxel_count = e.voxel_count;
+    k.codec = e.codec;
+    k.depth = depth;
+    k.flags = flags;
+    std::memcpy(k.record, record, e.stored_size);
+    std::memcpy(k.voxel, b.attr_values.data(), b.attr_values.size());
+  }
+
+ private:
+  struct Entry {
+    uint64_t stored_size = ~uint64_t(0), raw_size = 0;
+    uint32_t num_cells = 0, voxel_count = 0;
+    uint8_t codec = 0, flags = 0;
+    int depth = 0;
+    uint8_t record[kMaxBytes];
+    uint8_t voxel[kMaxAttrBytesPerVoxel];
+  };
+  std::array<Entry, 8> entries_{};
+  size_t next_ = 0;
+};
 
 }  // namespace
 
@@ -91,6 +138,8 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id, con
   if (codec != e.codec)
     return CorruptionError(where() + ": codec " + std::to_string(codec) +
                            " differs from the brick table's " + std::to_string(e.codec));
+  thread_local RepeatedRecords repeated;
+  if (auto b = repeated.Find(record, e, depth_, flags_)) return b;
   const uint8_t* bytes = record;
   if (codec == kCodecZstd) {
     unsigned long long content = ZSTD_getFrameContentSize(record, e.stored_size);
@@ -122,6 +171,7 @@ StatusOr<std::shared_ptr<DecodedBrick>> StoreImpl::DecodeRecord(uint32_t id, con
   auto b = DecodeBrickRaw(bytes, e.raw_size, e, depth_, flags_);
   if (!b.ok()) return b.status().WithContext(where());
   bytes_decompressed_.fetch_add(e.raw_size, std::memory_order_relaxed);
+  repeated.Remember(record, e, depth_, flags_, **b);
   return b;
 }
 

@@ -205,12 +205,20 @@ std::shared_ptr<DecodedBrick> DecodeFullOfOne(const uint8_t* masks, uint32_t num
   const size_t bytes = AttrBytesPerVoxel(flags);
   for (size_t k = 0; k < bytes; ++k)
     if (!AllBytesAre(planes + k * voxel_count + 1, voxel_count - 1, 0)) return nullptr;
+  uint8_t voxel[kMaxAttrBytesPerVoxel];
+  for (size_t k = 0; k < bytes; ++k) voxel[k] = planes[k * voxel_count];  // (one voxel's planes are its value arrays)
+  return FullOfOneBrick(voxel, voxel_count, depth, flags);
+}
+
+std::shared_ptr<DecodedBrick> FullOfOneBrick(const uint8_t* voxel, uint32_t voxel_count, int depth,
+                                             uint8_t flags) {
+  const std::span<const CompactCell> pool = FullPool(depth);
+  const size_t bytes = AttrBytesPerVoxel(flags);
   auto b = std::make_shared<DecodedBrick>();
   b->full_of_one = true;
   b->shared_cells = pool.data();
   b->shared_cell_count = uint32_t(pool.size());
-  b->attr_values.resize(bytes);  // (one voxel's planes are its value arrays)
-  for (size_t k = 0; k < bytes; ++k) b->attr_values[k] = planes[k * voxel_count];
+  b->attr_values.assign(voxel, voxel + bytes);
   b->voxel_count = voxel_count;
   b->flags = flags;
   if (flags & kAttrDensity) {

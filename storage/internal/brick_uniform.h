@@ -25,6 +25,12 @@ std::shared_ptr<DecodedBrick> DecodeFullOfOne(const uint8_t* masks, uint32_t num
                                               const uint8_t* planes, uint32_t voxel_count,
                                               int depth, uint8_t flags);
 
+// A full_of_one DecodedBrick of `depth` levels whose voxels all hold the
+// attributes at `voxel` (one voxel's value arrays: AttrBytesPerVoxel(flags)
+// bytes).
+std::shared_ptr<DecodedBrick> FullOfOneBrick(const uint8_t* voxel, uint32_t voxel_count, int depth,
+                                             uint8_t flags);
+
 // Sets b's uniform_density, or its uniform_levels: bottom-up, each full
 // cell's one density; top-down, each cell's largest block of one density
 // around it. `level_start[l]`: the first cell of level l (level order),

@@ -50,6 +50,8 @@ inline constexpr uint8_t kAttrAll =
 uint8_t AttrFlags(const StoreMeta& meta);
 // Bytes per voxel of the attributes `flags` selects.
 size_t AttrBytesPerVoxel(uint8_t flags);
+// Its largest value (every attribute: AttrBytesPerVoxel(kAttrAll)).
+inline constexpr size_t kMaxAttrBytesPerVoxel = 20;
 
 // The 32-byte header both files open with.
 struct FileHeader {
