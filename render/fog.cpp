@@ -43,8 +43,10 @@ namespace {
 }  // namespace
 
 // The density of fog voxel `h` (stops the frame with the error on failure).
-[[gnu::always_inline]] inline bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume,
-                       double* temperature, int* uniform_levels) const {
+// (inlined into the walks' visitors, which call it for every cell)
+[[gnu::always_inline]] inline bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho,
+                                                     Volume* volume, double* temperature,
+                                                     int* uniform_levels) const {
   ++cx.c->attribute_lookups;
   Volume* v = volume != nullptr ? volume : volume_;
   float d;
@@ -68,11 +70,9 @@ namespace {
 // density (the inside of a fog volume; Volume::PinnedDensity finds them in
 // the brick) as one cell: the integral over the block is the same, and the
 // walk leaves the block without reporting its other voxels (SkipBlock,
-// core/ray.h). Returns where the ray leaves hit h's block of 2^levels cells
-// a side (level `level`'s cells, 2^level voxels a side; gr in voxels), at
-// most t_end.
-// The walk's ray with its direction's reciprocals, for the exits of its
-// cells and blocks: one multiplication per axis instead of a division.
+// core/ray.h). ExitRay gives where a walk's ray (gr, in voxels) leaves a
+// cell or such a block, from its direction's reciprocals: a multiplication
+// per axis instead of a division.
 struct ExitRay {
   explicit ExitRay(const Ray& gr) : o(gr.origin) {
     for (int a = 0; a < 3; ++a) {

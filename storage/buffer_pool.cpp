@@ -96,9 +96,9 @@ void BufferPool::PopulateForWrite(uintptr_t at, size_t n) {
 #ifdef MADV_POPULATE_WRITE
   // The pages the caller is about to write, made resident in one call: the
   // kernel then zeroes and maps them in one pass instead of taking a page
-  // fault per 4 KiB as they are first written (about a third of that
-  // cost). Pages already resident cost a table walk; kernels without the
-  // advice (before Linux 5.14) refuse it, and the pages fault in as before.
+  // fault per 4 KiB as they are first written. Pages already resident cost
+  // a table walk; kernels without the advice (before Linux 5.14) refuse it,
+  // and the pages fault in as before.
   constexpr uintptr_t kPage = 4096;
   const uintptr_t lo = at & ~(kPage - 1), hi = (at + n + kPage - 1) & ~(kPage - 1);
   if (n >= kPopulateMin) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_POPULATE_WRITE);

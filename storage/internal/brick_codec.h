@@ -106,7 +106,7 @@ struct DecodedBrick {
   // attr_values holds only the other voxels' densities, in payload order;
   // per 64 voxels (payload order), a bit for each voxel of the common
   // density and the count of the other voxels before them. A fog's rim
-  // bricks then take about a fifth of the memory, and the densities a ray
+  // bricks then take a fraction of the memory, and the densities a ray
   // reads there mostly come from the small bit array.
   struct CommonWord {
     uint64_t bits;    // voxel 64 w + k is of the common density when bit k is set

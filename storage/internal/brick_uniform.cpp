@@ -112,14 +112,14 @@ void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start, 
         std::memset(&levels[first], mine, 8);
       } else {
         // (a last-level cell's 8 voxels, half a byte each, from payload first)
-        const uint8_t l = uint8_t(std::min<int>(mine, DecodedBrick::kMaxUniformLevels));
+        const uint8_t half = uint8_t(std::min<int>(mine, DecodedBrick::kMaxUniformLevels));
         uint8_t* at = &b->uniform_levels[first >> 1];
         if ((first & 1) == 0) {
-          std::memset(at, l * 0x11, 4);
+          std::memset(at, half * 0x11, 4);
         } else {
-          at[0] = uint8_t((at[0] & 0x0f) | l << 4);
-          std::memset(at + 1, l * 0x11, 3);
-          at[4] = uint8_t((at[4] & 0xf0) | l);
+          at[0] = uint8_t((at[0] & 0x0f) | half << 4);
+          std::memset(at + 1, half * 0x11, 3);
+          at[4] = uint8_t((at[4] & 0xf0) | half);
         }
       }
     }
@@ -134,8 +134,8 @@ void KeepAttributes(DecodedBrick* b, const uint8_t* values) {
   uint32_t first = 0;
   while (first < count && b->UniformLevelsOf(first) < 0) ++first;
   if (first == count) return copy();
-  uint32_t want;
-  std::memcpy(&want, values + size_t(4) * first, 4);  // (little-endian hosts, as ReadDensity)
+  uint32_t want;  // (its bytes as the host reads them: only compared)
+  std::memcpy(&want, values + size_t(4) * first, 4);
   const size_t words = (size_t(count) + 63) / 64;
   b->common_words.resize(words);
   uint64_t others = 0;
@@ -168,7 +168,7 @@ void KeepAttributes(DecodedBrick* b, const uint8_t* values) {
     return copy();
   }
   b->common = true;
-  b->common_density = std::bit_cast<float>(want);
+  b->common_density = ReadDensity(values, count, b->flags, first);
   b->attr_values.resize(4 * others);  // (written whole below)
   uint8_t* out = b->attr_values.data();
   for (size_t w = 0; w < words; ++w) {

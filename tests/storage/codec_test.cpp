@@ -100,6 +100,17 @@ TEST(ValidatePool, RefusesBadPools) {
   EXPECT_FALSE(ValidatePool(nullptr, 0, 3, false, 1).ok());
 }
 
+// The brick a record of `cells` (a BuildCells pool) and `attrs` decodes to.
+StatusOr<std::shared_ptr<DecodedBrick>> EncodeAndDecode(const std::vector<Cell>& cells,
+                                                       const std::vector<VoxelAttributes>& attrs,
+                                                       int depth, uint8_t flags) {
+  const std::string raw = EncodeBrickRaw(cells, attrs, depth, flags);
+  BrickEntry e;
+  e.num_cells = uint32_t(cells.size());
+  e.voxel_count = uint32_t(attrs.size());
+  return DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, depth, flags);
+}
+
 // Rewrites the top block of a store's index (same size), with valid CRCs.
 std::string WithTop(const std::string& index, const std::vector<Cell>& top) {
   const uint8_t* p = reinterpret_cast<const uint8_t*>(index.data());
@@ -324,11 +335,7 @@ TEST(BrickDecoder, KeepsTheCommonDensityOnce) {
         attrs[i].temperature = 300.0f;
         rim += sum >= rim_from;
       }
-      const std::string raw = EncodeBrickRaw(cells, attrs, depth, flags);
-      BrickEntry e;
-      e.num_cells = uint32_t(cells.size());
-      e.voxel_count = uint32_t(pts.size());
-      auto d = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, depth, flags);
+      auto d = EncodeAndDecode(cells, attrs, depth, flags);
       ASSERT_TRUE(d.ok()) << d.status().ToString();
       const DecodedBrick& b = **d;
       const bool expect_common = flags == kAttrDensity && 2 * rim <= pts.size();
@@ -345,7 +352,9 @@ TEST(BrickDecoder, KeepsTheCommonDensityOnce) {
         ASSERT_EQ(b.DensityOf(i), attrs[i].density) << "voxel " << i << ", rim from " << rim_from;
         const VoxelAttributes a = b.AttributesOf(i);
         ASSERT_EQ(a.density, attrs[i].density) << "voxel " << i;
-        if (flags & kAttrTemperature) ASSERT_EQ(a.temperature, 300.0f) << "voxel " << i;
+        if (flags & kAttrTemperature) {
+          ASSERT_EQ(a.temperature, 300.0f) << "voxel " << i;
+        }
         // (a common voxel has no place of its own)
         EXPECT_EQ(b.DensityPlace(i) == nullptr, b.common && attrs[i].density == 1.0f) << "voxel " << i;
       }
@@ -374,7 +383,9 @@ TEST(BrickDecoder, KeepsTheCommonDensityOnce) {
           continue;
         }
         ASSERT_TRUE(uniform(pts[i], l)) << "voxel " << i << ", levels " << l;
-        if (l < depth) ASSERT_FALSE(uniform(pts[i], l + 1)) << "voxel " << i << ", levels " << l;
+        if (l < depth) {
+          ASSERT_FALSE(uniform(pts[i], l + 1)) << "voxel " << i << ", levels " << l;
+        }
       }
     }
   }
@@ -405,11 +416,7 @@ TEST(BrickDecoder, FullBrickOfOneValueSharesThePool) {
         a.color = glm::vec3(0.25f, 0.5f, 1.0f);
       }
       if (odd >= 0) attrs[size_t(odd)].temperature = 1501.0f;
-      const std::string raw = EncodeBrickRaw(cells, attrs, depth, flags);
-      BrickEntry e;
-      e.num_cells = uint32_t(cells.size());
-      e.voxel_count = uint32_t(pts.size());
-      auto d = DecodeBrickRaw(reinterpret_cast<const uint8_t*>(raw.data()), raw.size(), e, depth, flags);
+      auto d = EncodeAndDecode(cells, attrs, depth, flags);
       ASSERT_TRUE(d.ok()) << d.status().ToString();
       const DecodedBrick& b = **d;
       EXPECT_EQ(b.full_of_one, odd < 0) << "depth " << depth << ", odd " << odd;
