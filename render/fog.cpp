@@ -43,7 +43,6 @@ namespace {
 }  // namespace
 
 // The density of fog voxel `h` (stops the frame with the error on failure).
-// (inlined into the walks' visitors, which call it for every cell)
 [[gnu::always_inline]] inline bool Renderer::Density(const Hit& h, TraceContext& cx, double* rho,
                                                      Volume* volume, double* temperature,
                                                      int* uniform_levels) const {

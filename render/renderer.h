@@ -330,7 +330,8 @@ class Renderer {
                  const Cone* cone = nullptr, const StartPlane* start = nullptr) const;
   // The density (and, with `temperature`, the temperature) of fog voxel h;
   // *uniform_levels (when given): see Volume::PinnedDensity (-1: not known,
-  // always so with a temperature).
+  // always so with a temperature). Defined inline in fog.cpp, its only
+  // caller (the walks' visitors call it for every cell).
   bool Density(const Hit& h, TraceContext& cx, double* rho, Volume* volume = nullptr,
                double* temperature = nullptr, int* uniform_levels = nullptr) const;
   glm::dvec3 Transmittance(const Ray& gr, double t_max, TraceContext& cx,

@@ -405,14 +405,15 @@ StatusOr<std::shared_ptr<DecodedBrick>> DecodeBrickRaw(const uint8_t* raw, size_
   const uint8_t* planes = raw + kBrickHeaderSize + num_cells;
   b->voxel_count = voxel_count;
   b->flags = flags;
-  if (!(flags & kAttrDensity)) {
+  if (flags != kAttrDensity) {  // the value arrays, written straight
     b->attr_values.resize(n - kBrickHeaderSize - num_cells);  // left uninitialised
     UndeltaPlanes(planes, b->attr_values.data(), voxel_count, flags);
+    if (flags & kAttrDensity) FindUniformBlocks(b.get(), depth, start, b->attr_values.data());
     return b;
   }
-  // With densities the values are decoded into a scratch first: the blocks
-  // of one density and the density most voxels share decide how the brick
-  // keeps them (KeepAttributes).
+  // Densities alone are decoded into a scratch first: the blocks of one
+  // density and the density most voxels share decide how the brick keeps
+  // them (KeepAttributes).
   // (per thread, as the zstd scratch: at most one brick's values, given
   // back past 64 MiB)
   thread_local std::vector<uint8_t> values;

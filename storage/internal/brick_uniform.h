@@ -38,11 +38,11 @@ std::shared_ptr<DecodedBrick> FullOfOneBrick(const uint8_t* voxel, uint32_t voxe
 // planes, not deltas), b->voxel_count voxels.
 void FindUniformBlocks(DecodedBrick* b, int depth, const uint32_t* level_start, const uint8_t* values);
 
-// Sets b's attributes from `values` (value arrays of b->voxel_count voxels
-// with b->flags): where density is the one attribute and at least half the
-// voxels share the density of a block FindUniformBlocks found, in the
-// common form (DecodedBrick::common) when that takes less memory; else a
-// copy in attr_values.
+// Sets the attributes of b, whose one attribute is density, from `values`
+// (b->voxel_count densities): where at least half the voxels share the
+// density of a block FindUniformBlocks found, in the common form
+// (DecodedBrick::common) when that takes less memory; else a copy in
+// attr_values.
 void KeepAttributes(DecodedBrick* b, const uint8_t* values);
 
 }  // namespace vox::storage_internal
