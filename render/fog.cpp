@@ -73,9 +73,13 @@ namespace {
 // cell or such a block, from its direction's reciprocals: a multiplication
 // per axis instead of a division.
 struct ExitRay {
-  explicit ExitRay(const Ray& gr) : o(gr.origin) {
+  explicit ExitRay(const Ray& gr) {
     for (int a = 0; a < 3; ++a) {
-      inv[a] = gr.dir[a] != 0 ? 1.0 / gr.dir[a] : 0.0;
+      // (an axis the ray does not move along exits at +inf: its origin at
+      // -inf and reciprocal +inf, so no branch per axis)
+      const bool moves = gr.dir[a] != 0;
+      o[a] = moves ? gr.origin[a] : -kInf;
+      inv[a] = moves ? 1.0 / gr.dir[a] : kInf;
       far[a] = gr.dir[a] > 0 ? 1.0 : 0.0;
     }
   }
@@ -85,13 +89,12 @@ struct ExitRay {
   double BlockExit(const glm::i64vec3& v, int level, int levels, double t_end) const {
     const int k = std::max(levels, 0);
     const double size = Pow2(level + k);
-    double t = t_end;
-    for (int a = 0; a < 3; ++a)
-      if (inv[a] != 0) t = std::min(t, ((double(v[a] >> k) + far[a]) * size - o[a]) * inv[a]);
-    return t;
+    const double tx = ((double(v.x >> k) + far[0]) * size - o[0]) * inv[0];
+    const double ty = ((double(v.y >> k) + far[1]) * size - o[1]) * inv[1];
+    const double tz = ((double(v.z >> k) + far[2]) * size - o[2]) * inv[2];
+    return std::min({t_end, tx, ty, tz});
   }
-  glm::dvec3 o;
-  double inv[3], far[3];
+  double o[3], inv[3], far[3];
 };
 
 // floor(log2(x)) and whether x is a power of two, for a positive x: from

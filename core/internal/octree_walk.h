@@ -179,6 +179,7 @@ Flow WalkStep(const StepLayout& layout, uint64_t xyz, Dda& dda, CompactCell root
               BrickPinner& pinner, Occupied&& occupied, WalkStats* stats) {
   const int w = layout.w;
   const uint64_t unit = layout.unit, carry = layout.carry;
+  const int y_shift = w - 1, z_shift = 2 * w - 2;
   uint64_t prev = xyz;
   uint64_t skips = 0, cells = 0;
   Flow flow = Flow::kLeft;
@@ -193,8 +194,9 @@ Flow WalkStep(const StepLayout& layout, uint64_t xyz, Dda& dda, CompactCell root
     // Loop 3: descend until an empty octant or the step's last level.
     CompactCell cell = cell_stack[depth];
     for (;;) {
-      unsigned digit = unsigned((xyz >> bit) & 1) | unsigned(((xyz >> (w + bit)) & 1) << 1) |
-                       unsigned(((xyz >> (2 * w + bit)) & 1) << 2);
+      // (the octant's x, y, z bits at 0, w, 2w, then at 0, 1, 2)
+      const uint64_t at = (xyz >> bit) & unit;
+      const unsigned digit = unsigned((at & 1) | ((at >> y_shift) & 2) | ((at >> z_shift) & 4));
       ++cells;
       if (!HasChild(cell, digit)) break;
       const uint32_t child = ChildIndex(cell, digit);
