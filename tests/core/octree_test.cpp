@@ -168,6 +168,26 @@ TEST(Octree, LevelOrderPoolAnswersLikeThePreOrderPool) {
   EXPECT_EQ(ChildMask((*empty)[0]), 0u);
 }
 
+// A compact cell's child index counts the mask's bits below the digit: by
+// POPCNT on x86-64-v2 builds, by table on the baseline; either against
+// counting bit by bit, for every mask and digit.
+TEST(Octree, ChildIndexCountsTheBitsBelowTheDigit) {
+  for (uint32_t mask = 0; mask < 256; ++mask) {
+    uint32_t bits = 0;
+    for (int i = 0; i < 8; ++i) bits += (mask >> i) & 1u;
+    ASSERT_EQ(Popcount8(mask), bits) << mask;
+    ASSERT_EQ(Popcount8(mask | 0xa500u), bits) << "only the low 8 bits count, " << mask;
+    uint32_t below = 0;
+    for (unsigned d = 0; d < 8; ++d) {
+      const CompactCell c = MakeCompactCell(1000, mask);
+      if (HasChild(c, d)) {
+        EXPECT_EQ(ChildIndex(c, d), 1000 + below) << mask << " digit " << d;
+      }
+      below += (mask >> d) & 1u;
+    }
+  }
+}
+
 TEST(Octree, LevelOrderPoolRefusesNonConsecutiveLastLevelRefs) {
   Rng rng(9);
   std::vector<Cell> pre = RandomPool(rng, 5, 500, true);
